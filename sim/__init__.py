@@ -1,0 +1,13 @@
+"""Everything that only exists in simulation: worlds, the robot, the Kinect model, runs.
+
+Headless rendering defaults to EGL (Mesa on CPU machines); set ``MUJOCO_GL`` before
+importing ``sim`` to choose another backend. Where no GL context can be made, the
+depth camera falls back to ray casting (:mod:`sim.kinect`).
+"""
+
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"] if os.environ["MUJOCO_GL"] in ("egl", "osmesa") else "")
+if not os.environ["PYOPENGL_PLATFORM"]:
+    del os.environ["PYOPENGL_PLATFORM"]

@@ -1,0 +1,227 @@
+"""The Kinect-model depth camera: MuJoCo depth rendering (EGL) or ray casting, plus noise.
+
+Clean depth comes from the OpenGL depth buffer of the ``kinect`` camera (planar depth,
+i.e. distance along the optical axis, in metres; background -> 0), converted in one numba
+pass. Where no GL context can be made, :class:`RaycastDepth` casts one ray per pixel
+with ``mujoco.mj_multiRay`` instead (same geometry, same output, much slower). The noise
+model is :mod:`sim.kinect_noise`. The robot's own geoms (group 3) are hidden.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+
+import mujoco
+import numba
+import numpy as np
+
+from autonomy.camera import CameraIntrinsics, CameraMount, pixel_rays
+from autonomy.errors import InputError
+from sim.kinect_noise import KinectNoiseConfig, apply_kinect_noise
+from sim.robot import ROBOT_GEOM_GROUP
+
+BACKENDS = ("auto", "gl", "raycast")
+
+
+@dataclass(frozen=True)
+class KinectConfig:
+    """The depth camera: intrinsics, mount, rate, noise and rendering backend."""
+
+    intrinsics: CameraIntrinsics = field(default_factory=CameraIntrinsics)
+    """Pinhole intrinsics (640 x 480, f = 580 px)."""
+    mount: CameraMount = field(default_factory=CameraMount)
+    """Pose on the robot (0.7 m high, 0.22 m forward, 17 deg down)."""
+    rate_hz: float = 30.0
+    """Frame rate."""
+    noise: KinectNoiseConfig = field(default_factory=KinectNoiseConfig)
+    """Noise model; every term switchable."""
+    backend: str = "auto"
+    """auto (GL if a context can be made, else ray casting), gl, or raycast."""
+
+    def __post_init__(self) -> None:
+        if self.backend not in BACKENDS:
+            raise InputError(f"kinect.backend {self.backend!r}: expected one of {', '.join(BACKENDS)}")
+        if not (math.isfinite(self.rate_hz) and self.rate_hz > 0):
+            raise InputError(f"kinect.rate_hz: expected a positive number, got {self.rate_hz!r}")
+
+
+@numba.njit(cache=True)
+def _linearize_flip(raw, c_coef, d_coef, out):  # pragma: no cover - numba
+    """Reversed-Z window depth -> planar metres, flipped to image row order; far -> 0."""
+    h, w = raw.shape
+    for v in range(h):
+        src = raw[h - 1 - v]
+        for u in range(w):
+            r = src[u]
+            if r <= 0.0:
+                out[v, u] = 0.0
+            else:
+                out[v, u] = np.float32(d_coef / (np.float64(r) + c_coef))
+
+
+class GLDepth:
+    """Depth rendering through a headless OpenGL context (EGL / OSMesa / GLFW).
+
+    Only the depth buffer is read back; shadows, reflections, skybox and fog are off.
+    """
+
+    def __init__(self, model: mujoco.MjModel, camera_id: int, intr: CameraIntrinsics) -> None:
+        from mujoco import gl_context
+
+        if gl_context.GLContext is None:
+            raise RuntimeError("no OpenGL context class available")
+        self.model = model
+        self.intr = intr
+        self._ctx = gl_context.GLContext(intr.width, intr.height)
+        self._ctx.make_current()
+        self._con = mujoco.MjrContext(model, mujoco.mjtFontScale.mjFONTSCALE_100.value)
+        mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN.value, self._con)
+        self._con.readDepthMap = mujoco.mjtDepthMap.mjDEPTH_ZEROFAR
+        self._scene = mujoco.MjvScene(model, maxgeom=model.ngeom + 100)
+        for flag in ("mjRND_SHADOW", "mjRND_REFLECTION", "mjRND_SKYBOX", "mjRND_FOG", "mjRND_HAZE"):
+            self._scene.flags[getattr(mujoco.mjtRndFlag, flag)] = False
+        self._opt = mujoco.MjvOption()
+        self._opt.geomgroup[ROBOT_GEOM_GROUP] = 0
+        self._cam = mujoco.MjvCamera()
+        self._cam.type = mujoco.mjtCamera.mjCAMERA_FIXED
+        self._cam.fixedcamid = camera_id
+        self._rect = mujoco.MjrRect(0, 0, intr.width, intr.height)
+        self._raw = np.empty((intr.height, intr.width), dtype=np.float32)
+        extent = model.stat.extent
+        near = np.float32(model.vis.map.znear * extent)
+        far = np.float32(model.vis.map.zfar * extent)
+        c = -(far + near) / (far - near)
+        d = -(np.float32(2) * far * near) / (far - near)
+        # Reversed-Z projection, as mujoco.Renderer undoes it.
+        self._c = float(np.float32(-0.5) * c - np.float32(0.5))
+        self._d = float(np.float32(-0.5) * d)
+
+    def render(self, data: mujoco.MjData, out: np.ndarray | None = None) -> np.ndarray:
+        """Clean planar depth (float32, metres, 0 = background)."""
+        if out is None:
+            out = np.empty((self.intr.height, self.intr.width), dtype=np.float32)
+        self._ctx.make_current()
+        mujoco.mjv_updateScene(
+            self.model, data, self._opt, None, self._cam, mujoco.mjtCatBit.mjCAT_ALL.value, self._scene
+        )
+        mujoco.mjr_render(self._rect, self._scene, self._con)
+        mujoco.mjr_readPixels(None, self._raw, self._rect, self._con)
+        _linearize_flip(self._raw, self._c, self._d, out)
+        return out
+
+    def close(self) -> None:
+        if self._con is not None:
+            self._ctx.make_current()
+            self._con.free()
+            self._con = None
+        if self._ctx is not None:
+            self._ctx.free()
+            self._ctx = None
+
+    def __del__(self) -> None:  # pragma: no cover - best effort
+        try:
+            self.close()
+        except Exception:
+            pass
+
+
+class RaycastDepth:
+    """Depth by casting one ray per pixel with ``mujoco.mj_multiRay`` (no GL needed)."""
+
+    def __init__(self, model: mujoco.MjModel, camera_id: int, intr: CameraIntrinsics, max_range_m: float = 20.0):
+        self.model = model
+        self.camera_id = camera_id
+        self.intr = intr
+        self.max_range_m = max_range_m
+        rays = pixel_rays(intr).reshape(-1, 3)
+        self._norm = np.linalg.norm(rays, axis=1)
+        # Optical -> MuJoCo camera axes (y and z flipped), unit length.
+        self._dirs_cam = (rays * np.array([1.0, -1.0, -1.0])) / self._norm[:, None]
+        self._group = np.ones(6, dtype=np.uint8)
+        self._group[ROBOT_GEOM_GROUP] = 0
+        n = len(rays)
+        self._geomid = np.empty(n, dtype=np.int32)
+        self._dist = np.empty(n, dtype=np.float64)
+        self._robot_body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "robot")
+
+    def render(self, data: mujoco.MjData, out: np.ndarray | None = None) -> np.ndarray:
+        if out is None:
+            out = np.empty((self.intr.height, self.intr.width), dtype=np.float32)
+        rot = data.cam_xmat[self.camera_id].reshape(3, 3)
+        pos = data.cam_xpos[self.camera_id].copy()
+        vec = np.ascontiguousarray((self._dirs_cam @ rot.T).reshape(-1))
+        mujoco.mj_multiRay(
+            self.model,
+            data,
+            pos,
+            vec,
+            self._group,
+            1,
+            self._robot_body,
+            self._geomid,
+            self._dist,
+            None,
+            len(self._dist),
+            self.max_range_m,
+        )
+        z = np.where(self._geomid >= 0, self._dist / self._norm, 0.0)
+        out[:] = z.reshape(out.shape)
+        return out
+
+    def close(self) -> None:
+        pass
+
+
+def make_depth_backend(model: mujoco.MjModel, camera_id: int, intr: CameraIntrinsics, backend: str = "auto"):
+    """The GL depth renderer, or the ray-cast fallback when no GL context can be made."""
+    if backend not in BACKENDS:
+        raise InputError(f"kinect.backend {backend!r}: expected one of {', '.join(BACKENDS)}")
+    if backend in ("auto", "gl"):
+        try:
+            return GLDepth(model, camera_id, intr)
+        except Exception as exc:  # no EGL/OSMesa/display: fall back
+            if backend == "gl":
+                raise RuntimeError(f"OpenGL depth rendering unavailable (MUJOCO_GL={os.environ.get('MUJOCO_GL')}): {exc}") from exc
+    return RaycastDepth(model, camera_id, intr)
+
+
+class KinectCamera:
+    """A simulated Kinect on a world's robot: ``capture`` gives the noisy depth frame.
+
+    The renderer is created lazily on first use, so a camera can be built (and pickled
+    with its owner) before any GL context exists.
+    """
+
+    def __init__(self, model: mujoco.MjModel, camera_id: int, cfg: KinectConfig) -> None:
+        self.model = model
+        self.camera_id = camera_id
+        self.cfg = cfg
+        self._backend = None
+        self._clean = np.zeros((cfg.intrinsics.height, cfg.intrinsics.width), dtype=np.float32)
+
+    @property
+    def backend_name(self) -> str:
+        b = self.backend
+        return "gl" if isinstance(b, GLDepth) else "raycast"
+
+    @property
+    def backend(self):
+        if self._backend is None:
+            self._backend = make_depth_backend(self.model, self.camera_id, self.cfg.intrinsics, self.cfg.backend)
+        return self._backend
+
+    def render_clean(self, data: mujoco.MjData) -> np.ndarray:
+        """Noise-free planar depth (a view of an internal buffer: copy to keep)."""
+        return self.backend.render(data, self._clean)
+
+    def capture(self, data: mujoco.MjData, seed: int, out: np.ndarray | None = None) -> np.ndarray:
+        """A Kinect frame: clean render followed by the noise model, seeded."""
+        clean = self.render_clean(data)
+        return apply_kinect_noise(clean, self.cfg.intrinsics, self.cfg.noise, seed, out=out)
+
+    def close(self) -> None:
+        if self._backend is not None:
+            self._backend.close()
+            self._backend = None

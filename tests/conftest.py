@@ -1,0 +1,39 @@
+"""Shared fixtures: small synthetic worlds built from explicit segments."""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import numpy as np
+import pytest
+
+from autonomy.vectormap import VectorMap
+
+
+def box_room(w: float = 10.0, h: float = 6.0) -> VectorMap:
+    """A closed w x h room with its corner at the origin."""
+    return VectorMap.from_segments(
+        np.array([[0, 0, w, 0], [w, 0, w, h], [w, h, 0, h], [0, h, 0, 0]], dtype=np.float64), name="room"
+    )
+
+
+@pytest.fixture
+def room() -> VectorMap:
+    return box_room()
+
+
+def gl_available() -> bool:
+    """True when an EGL/OSMesa context can be made on this machine."""
+    try:
+        from mujoco import gl_context
+
+        ctx = gl_context.GLContext(64, 64)
+        ctx.free()
+        return True
+    except Exception:
+        return False
+
+
+GL = gl_available()

@@ -1,0 +1,1016 @@
+"""Office-building blueprints: a vector map of thin walls, a matching nav graph, and zones.
+
+A :class:`Blueprint` is what the simulator builds a world from: walls as 2D segments
+(:class:`autonomy.vectormap.VectorMap`), a UT AMRL-style navigation graph, and the boxes
+of the offices, open areas (atria) and corridors, so scenarios can place furniture and
+people.
+
+:func:`generate_building` draws a seeded corridor-loop / grid office floor: a ring of
+offices along the exterior walls, a corridor loop, and blocks of double-loaded offices
+between internal corridors, some of them (partly) replaced by open atria with pillars.
+Doorways are gaps in the walls. Nav-graph edges keep at least
+``config.min_clearance_m`` from every wall.
+
+Two fixed buildings ship in ``sim/assets`` (``python -m sim.blueprints`` regenerates
+them): :func:`corridor_loop` (about 60 x 40 m) and :func:`small_floor` (16 x 10 m).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+from collections import defaultdict
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from autonomy.errors import InputError
+from autonomy.vectormap import (
+    MapFormatError,
+    NavEdge,
+    NavGraph,
+    NavNode,
+    VectorMap,
+    load_navgraph,
+    load_vectormap,
+    save_navgraph,
+    save_vectormap,
+)
+
+__all__ = [
+    "Box",
+    "Blueprint",
+    "BuildingConfig",
+    "generate_building",
+    "corridor_loop",
+    "small_floor",
+    "SHIPPED",
+    "ASSETS_DIR",
+    "load_blueprint",
+    "save_blueprint",
+    "nav_edge_clearances",
+    "segment_distances",
+    "main",
+]
+
+Box = tuple[float, float, float, float]
+"""Axis-aligned box ``(xmin, ymin, xmax, ymax)`` in metres."""
+
+ASSETS_DIR = Path(__file__).resolve().parent / "assets"
+"""Where the shipped blueprints live."""
+
+_DOOR_INNER_M = 0.75
+"""Distance of the just-inside-the-door node from the door's wall."""
+_DOOR_JAMB_MARGIN_M = 0.45
+"""Extra distance from a door's edge to the room's side wall."""
+
+
+def _q(x: float) -> float:
+    """Quantise a coordinate to the millimetre (and turn -0.0 into 0.0)."""
+    return round(float(x), 3) + 0.0
+
+
+# --------------------------------------------------------------------------- Blueprint
+
+
+@dataclass(frozen=True, eq=False)
+class Blueprint:
+    """A floor: walls, nav graph and zones (all in world metres)."""
+
+    vectormap: VectorMap
+    """Thin walls as line segments."""
+    navgraph: NavGraph
+    """Navigation graph; every edge keeps the robot clear of the walls."""
+    rooms: tuple[Box, ...]
+    """Office boxes (each reachable through a doorway)."""
+    open_areas: tuple[Box, ...]
+    """Atria / open spaces (furniture and people go here)."""
+    corridors: tuple[Box, ...]
+    """Corridor boxes (they overlap at junctions)."""
+    name: str = ""
+    """Blueprint name (the asset file stem)."""
+
+    def extent(self) -> Box:
+        """Bounding box of the walls."""
+        return self.vectormap.extent()
+
+    def __repr__(self) -> str:
+        return (
+            f"Blueprint(name={self.name!r}, n_segments={self.vectormap.n_segments}, "
+            f"n_nodes={self.navgraph.n_nodes}, rooms={len(self.rooms)}, "
+            f"open_areas={len(self.open_areas)}, corridors={len(self.corridors)})"
+        )
+
+
+# --------------------------------------------------------------------------- geometry checks
+
+
+def _point_seg_dist(p: np.ndarray, s: np.ndarray) -> np.ndarray:
+    a, b = s[:, 0:2], s[:, 2:4]
+    ab = b - a
+    den = np.einsum("ij,ij->i", ab, ab)
+    t = np.einsum("ij,ij->i", p - a, ab) / np.where(den > 0, den, 1.0)
+    t = np.clip(t, 0.0, 1.0)
+    c = a + t[:, None] * ab
+    return np.hypot(p[:, 0] - c[:, 0], p[:, 1] - c[:, 1])
+
+
+def segment_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Exact Euclidean distance between paired 2D segments ``a[i]`` and ``b[i]`` (M x 4 each)."""
+    a = np.asarray(a, dtype=np.float64).reshape(-1, 4)
+    b = np.asarray(b, dtype=np.float64).reshape(-1, 4)
+    d = np.minimum(
+        np.minimum(_point_seg_dist(a[:, 0:2], b), _point_seg_dist(a[:, 2:4], b)),
+        np.minimum(_point_seg_dist(b[:, 0:2], a), _point_seg_dist(b[:, 2:4], a)),
+    )
+
+    def cross(o: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return (u[:, 0] - o[:, 0]) * (v[:, 1] - o[:, 1]) - (u[:, 1] - o[:, 1]) * (v[:, 0] - o[:, 0])
+
+    p, p2, q, q2 = a[:, 0:2], a[:, 2:4], b[:, 0:2], b[:, 2:4]
+    o1, o2 = cross(p, p2, q), cross(p, p2, q2)
+    o3, o4 = cross(q, q2, p), cross(q, q2, p2)
+    crossing = (o1 * o2 < 0) & (o3 * o4 < 0)
+    d[crossing] = 0.0
+    return d
+
+
+def nav_edge_clearances(bp: Blueprint, cutoff_m: float = 5.0) -> np.ndarray:
+    """(E,) exact distance from each nav-graph edge to the nearest wall, capped at ``cutoff_m``."""
+    edges = bp.navgraph.edge_segments()
+    walls = bp.vectormap.segments
+    out = np.full(edges.shape[0], float(cutoff_m))
+    if edges.shape[0] == 0:
+        return out
+    ebox = np.stack(
+        [
+            np.minimum(edges[:, 0], edges[:, 2]) - cutoff_m,
+            np.minimum(edges[:, 1], edges[:, 3]) - cutoff_m,
+            np.maximum(edges[:, 0], edges[:, 2]) + cutoff_m,
+            np.maximum(edges[:, 1], edges[:, 3]) + cutoff_m,
+        ],
+        axis=1,
+    )
+    wx0 = np.minimum(walls[:, 0], walls[:, 2])
+    wy0 = np.minimum(walls[:, 1], walls[:, 3])
+    wx1 = np.maximum(walls[:, 0], walls[:, 2])
+    wy1 = np.maximum(walls[:, 1], walls[:, 3])
+    chunk = max(1, 2_000_000 // max(1, walls.shape[0]))
+    for s in range(0, edges.shape[0], chunk):
+        eb = ebox[s : s + chunk]
+        near = (
+            (wx1[None, :] >= eb[:, 0:1])
+            & (wx0[None, :] <= eb[:, 2:3])
+            & (wy1[None, :] >= eb[:, 1:2])
+            & (wy0[None, :] <= eb[:, 3:4])
+        )
+        ei, wi = np.nonzero(near)
+        if ei.size == 0:
+            continue
+        d = segment_distances(edges[s + ei], walls[wi])
+        np.minimum.at(out, s + ei, d)
+    return out
+
+
+# --------------------------------------------------------------------------- builders
+
+
+class _Walls:
+    """Axis-aligned thin walls on lines, unioned per line, with door gaps cut out."""
+
+    def __init__(self) -> None:
+        self.h: dict[float, list[tuple[float, float]]] = defaultdict(list)
+        self.v: dict[float, list[tuple[float, float]]] = defaultdict(list)
+        self.gaps_h: dict[float, list[tuple[float, float]]] = defaultdict(list)
+        self.gaps_v: dict[float, list[tuple[float, float]]] = defaultdict(list)
+        self.extra: list[tuple[float, float, float, float]] = []
+
+    @staticmethod
+    def _add(store: dict[float, list[tuple[float, float]]], c: float, a: float, b: float) -> None:
+        c, a, b = _q(c), _q(a), _q(b)
+        if b < a:
+            a, b = b, a
+        if b > a:
+            store[c].append((a, b))
+
+    def hline(self, y: float, x0: float, x1: float) -> None:
+        self._add(self.h, y, x0, x1)
+
+    def vline(self, x: float, y0: float, y1: float) -> None:
+        self._add(self.v, x, y0, y1)
+
+    def gap_h(self, y: float, x0: float, x1: float) -> None:
+        self._add(self.gaps_h, y, x0, x1)
+
+    def gap_v(self, x: float, y0: float, y1: float) -> None:
+        self._add(self.gaps_v, x, y0, y1)
+
+    def rect(self, r: Box) -> None:
+        x0, y0, x1, y1 = r
+        self.hline(y0, x0, x1)
+        self.hline(y1, x0, x1)
+        self.vline(x0, y0, y1)
+        self.vline(x1, y0, y1)
+
+    def polygon(self, pts: Sequence[tuple[float, float]]) -> None:
+        """A closed polygon of free-standing (non-axis-aligned allowed) segments."""
+        n = len(pts)
+        for i in range(n):
+            (x0, y0), (x1, y1) = pts[i], pts[(i + 1) % n]
+            self.extra.append((_q(x0), _q(y0), _q(x1), _q(y1)))
+
+    @staticmethod
+    def _pieces(
+        ivs: list[tuple[float, float]], gaps: list[tuple[float, float]]
+    ) -> list[tuple[float, float]]:
+        merged: list[list[float]] = []
+        for a, b in sorted(ivs):
+            if merged and a <= merged[-1][1]:
+                merged[-1][1] = max(merged[-1][1], b)
+            else:
+                merged.append([a, b])
+        gaps = sorted(gaps)
+        out: list[tuple[float, float]] = []
+        for a, b in merged:
+            cur = a
+            for ga, gb in gaps:
+                if gb <= cur or ga >= b:
+                    continue
+                if ga > cur:
+                    out.append((cur, ga))
+                cur = max(cur, gb)
+            if b > cur:
+                out.append((cur, b))
+        return [(a, b) for a, b in out if b - a > 1e-6]
+
+    @staticmethod
+    def _split(a: float, b: float, max_seg: float | None) -> list[float]:
+        if max_seg is None or b - a <= max_seg:
+            return [a, b]
+        n = math.ceil((b - a) / max_seg - 1e-9)
+        pts = [a] + [_q(a + (b - a) * k / n) for k in range(1, n)] + [b]
+        return pts
+
+    def build(self, max_segment_m: float | None) -> np.ndarray:
+        rows: list[tuple[float, float, float, float]] = []
+        for y in sorted(self.h):
+            for a, b in self._pieces(self.h[y], self.gaps_h.get(y, [])):
+                pts = self._split(a, b, max_segment_m)
+                rows.extend((pts[k], y, pts[k + 1], y) for k in range(len(pts) - 1))
+        for x in sorted(self.v):
+            for a, b in self._pieces(self.v[x], self.gaps_v.get(x, [])):
+                pts = self._split(a, b, max_segment_m)
+                rows.extend((x, pts[k], x, pts[k + 1]) for k in range(len(pts) - 1))
+        rows.extend(self.extra)
+        return np.array(rows, dtype=np.float64).reshape(-1, 4)
+
+
+class _Graph:
+    """Nav-graph builder: nodes deduplicated by (mm-quantised) position."""
+
+    def __init__(self) -> None:
+        self.ids: dict[tuple[float, float], int] = {}
+        self.nodes: list[NavNode] = []
+        self.edges: dict[tuple[int, int], NavEdge] = {}
+
+    def node(self, x: float, y: float) -> int:
+        key = (_q(x), _q(y))
+        nid = self.ids.get(key)
+        if nid is None:
+            nid = len(self.nodes)
+            self.ids[key] = nid
+            self.nodes.append(NavNode(nid, key[0], key[1]))
+        return nid
+
+    def edge(self, a: int, b: int, **kw: Any) -> None:
+        if a == b:
+            return
+        key = (min(a, b), max(a, b))
+        if key not in self.edges:
+            self.edges[key] = NavEdge(a, b, **kw)
+
+    def build(self) -> NavGraph:
+        return NavGraph(tuple(self.nodes), tuple(self.edges.values()))
+
+
+@dataclass
+class _Corridor:
+    """A straight corridor: its box and its centreline, with the stops that need nodes."""
+
+    horizontal: bool
+    box: Box
+    lo: float
+    hi: float
+    stops: set[float] = field(default_factory=set)
+
+    @property
+    def c(self) -> float:
+        """Centreline coordinate (y of a horizontal corridor, x of a vertical one)."""
+        x0, y0, x1, y1 = self.box
+        return _q((y0 + y1) / 2) if self.horizontal else _q((x0 + x1) / 2)
+
+    @property
+    def half_width(self) -> float:
+        x0, y0, x1, y1 = self.box
+        return (y1 - y0) / 2 if self.horizontal else (x1 - x0) / 2
+
+    @property
+    def span(self) -> tuple[float, float]:
+        """Extent of the box along the corridor."""
+        x0, y0, x1, y1 = self.box
+        return (x0, x1) if self.horizontal else (y0, y1)
+
+    def at(self, t: float) -> tuple[float, float]:
+        """World point on the centreline at coordinate ``t`` along the corridor."""
+        return (t, self.c) if self.horizontal else (self.c, t)
+
+    def chain(self, g: _Graph, spacing_m: float) -> None:
+        """Nodes at every stop (and at most ``spacing_m`` apart) joined along the centreline."""
+        ts = sorted({_q(t) for t in self.stops} | {_q(self.lo), _q(self.hi)})
+        full: list[float] = []
+        for a, b in zip(ts[:-1], ts[1:], strict=True):
+            full.append(a)
+            n = math.ceil((b - a) / spacing_m - 1e-9)
+            full.extend(_q(a + (b - a) * k / n) for k in range(1, n))
+        full.append(ts[-1])
+        ids = [g.node(*self.at(t)) for t in full]
+        clearance = _q(self.half_width)
+        for a, b in zip(ids[:-1], ids[1:], strict=True):
+            g.edge(a, b, max_clearance=clearance)
+
+
+def _add_room(
+    walls: _Walls,
+    g: _Graph,
+    rooms: list[Box],
+    room: Box,
+    side: str,
+    corr: _Corridor,
+    door_w: float,
+    rng: np.random.Generator | None = None,
+    door_t: float | None = None,
+) -> None:
+    """A rectangular office with one door on ``side`` ('S', 'N', 'W', 'E') facing ``corr``.
+
+    Nav nodes: the corridor centreline at the door, the doorway, just inside, the centre.
+    """
+    x0, y0, x1, y1 = room
+    walls.rect(room)
+    rooms.append(room)
+    m = door_w / 2 + _DOOR_JAMB_MARGIN_M
+    along = (x0, x1) if side in "SN" else (y0, y1)
+    s0, s1 = corr.span
+    a, b = max(along[0], s0) + m, min(along[1], s1) - m
+    if b < a:
+        raise InputError(f"room {room} has no {door_w:.2f} m door on side {side} facing its corridor")
+    if door_t is None:
+        assert rng is not None
+        u = float(rng.uniform(0.0, min(0.4, b - a)))
+        door_t = a + u if rng.random() < 0.5 else b - u
+        if along[1] - along[0] > 6.0:  # big rooms: door near the middle of the facing part
+            door_t = (a + b) / 2 + float(rng.uniform(-0.5, 0.5)) * min(1.0, (b - a) / 2)
+    t = _q(min(max(door_t, a), b))
+    lo, hi = _q(t - door_w / 2), _q(t + door_w / 2)
+    if side == "S":
+        wall, inward = y0, 1.0
+    elif side == "N":
+        wall, inward = y1, -1.0
+    elif side == "W":
+        wall, inward = x0, 1.0
+    else:
+        wall, inward = x1, -1.0
+    if side in "SN":
+        walls.gap_h(wall, lo, hi)
+        pts = [(t, corr.c), (t, wall), (t, wall + inward * _DOOR_INNER_M)]
+    else:
+        walls.gap_v(wall, lo, hi)
+        pts = [(corr.c, t), (wall, t), (wall + inward * _DOOR_INNER_M, t)]
+    corr.stops.add(t)
+    ids = [g.node(*p) for p in pts]
+    centre = g.node((x0 + x1) / 2, (y0 + y1) / 2)
+    half_door = _q(door_w / 2)
+    g.edge(ids[0], ids[1], has_door=True, max_speed=0.5, max_clearance=half_door)
+    g.edge(ids[1], ids[2], has_door=True, max_speed=0.5, max_clearance=half_door)
+    g.edge(ids[2], centre, max_clearance=_q(min(x1 - x0, y1 - y0) / 2 - 0.5))
+
+
+def _add_open_area(
+    walls: _Walls,
+    g: _Graph,
+    areas: list[Box],
+    box: Box,
+    connect: dict[str, _Corridor],
+    spacing_m: float,
+    inset_m: float,
+    pillars: bool,
+    pillar_size_m: float,
+    pillar_sides: int,
+) -> None:
+    """An open area: a grid of nav nodes, optional pillars between them, and edges out to
+    the corridors in ``connect`` (keyed by the side 'S', 'N', 'W', 'E' they lie on)."""
+    x0, y0, x1, y1 = box
+    areas.append(box)
+
+    def grid(a: float, b: float) -> list[float]:
+        a, b = a + inset_m, b - inset_m
+        if b - a < 1e-6:
+            return [_q((a + b) / 2)]
+        n = max(1, round((b - a) / spacing_m))
+        return [_q(a + (b - a) * k / n) for k in range(n + 1)]
+
+    xs, ys = grid(x0, x1), grid(y0, y1)
+    ids = [[g.node(x, y) for x in xs] for y in ys]
+    for j in range(len(ys)):
+        for i in range(len(xs)):
+            if i + 1 < len(xs):
+                g.edge(ids[j][i], ids[j][i + 1], max_clearance=1.0)
+            if j + 1 < len(ys):
+                g.edge(ids[j][i], ids[j + 1][i], max_clearance=1.0)
+    for side, corr in sorted(connect.items()):
+        if side in "SN":
+            row = 0 if side == "S" else len(ys) - 1
+            for i, x in enumerate(xs):
+                corr.stops.add(x)
+                g.edge(ids[row][i], g.node(x, corr.c), max_clearance=1.0)
+        else:
+            col = 0 if side == "W" else len(xs) - 1
+            for j, y in enumerate(ys):
+                corr.stops.add(y)
+                g.edge(ids[j][col], g.node(corr.c, y), max_clearance=1.0)
+    if not pillars or len(xs) < 2 or len(ys) < 2:
+        return
+    h = pillar_size_m / 2
+    r = h if pillar_sides == 4 else h / math.cos(math.pi / pillar_sides)  # polygon circumradius
+    reach = h * math.sqrt(2) if pillar_sides == 4 else r
+    for j in range(len(ys) - 1):
+        for i in range(len(xs) - 1):
+            if (i + j) % 2:
+                continue  # a checkerboard of columns between the nav nodes
+            cx, cy = (xs[i] + xs[i + 1]) / 2, (ys[j] + ys[j + 1]) / 2
+            half_cell = min(xs[i + 1] - xs[i], ys[j + 1] - ys[j]) / 2
+            if half_cell - reach < 0.6:
+                continue
+            if pillar_sides == 4:
+                walls.rect((_q(cx - h), _q(cy - h), _q(cx + h), _q(cy + h)))
+            else:
+                a0 = math.pi / pillar_sides
+                walls.polygon(
+                    [
+                        (cx + r * math.cos(a0 + 2 * math.pi * k / pillar_sides),
+                         cy + r * math.sin(a0 + 2 * math.pi * k / pillar_sides))
+                        for k in range(pillar_sides)
+                    ]
+                )
+
+
+# --------------------------------------------------------------------------- generator
+
+
+@dataclass(frozen=True)
+class BuildingConfig:
+    """Parameters of the procedural corridor-loop / grid office floor (metres)."""
+
+    width_m: float = 60.0
+    """Footprint size along x."""
+    height_m: float = 40.0
+    """Footprint size along y."""
+    corridor_width_range_m: tuple[float, float] = (2.0, 2.5)
+    """Width of each corridor, drawn per corridor."""
+    outer_room_depth_range_m: tuple[float, float] = (4.0, 6.0)
+    """Depth of the offices between the exterior walls and the corridor loop (per side)."""
+    room_depth_range_m: tuple[float, float] = (4.0, 6.0)
+    """Depth of the offices in the blocks inside the loop (per row)."""
+    room_width_range_m: tuple[float, float] = (2.8, 4.5)
+    """Width of an office along its corridor."""
+    large_room_prob: float = 0.1
+    """Chance that two neighbouring offices merge into one (meeting rooms)."""
+    door_width_range_m: tuple[float, float] = (0.9, 1.0)
+    """Doorway width."""
+    block_width_m: float = 13.0
+    """Target size of a block inside the loop along x (between vertical corridors)."""
+    block_length_m: float = 26.0
+    """Target size of a block inside the loop along y (between horizontal corridors)."""
+    min_core_m: float = 2.0
+    """A block deeper than two rows of offices plus this gets a closed service core."""
+    core_partition_range_m: tuple[float, float] = (4.0, 8.0)
+    """Spacing of the cross walls inside a service core."""
+    n_atria: int = 1
+    """Number of blocks that hold an open atrium."""
+    atrium_length_range_m: tuple[float, float] = (11.0, 15.0)
+    """A block longer than this (plus a row of offices) keeps offices beside its atrium."""
+    atrium_node_spacing_m: float = 3.5
+    """Spacing of the nav-node grid in an atrium."""
+    atrium_pillars: bool = True
+    """Put pillars between the atrium's nav nodes."""
+    pillar_size_m: float = 0.5
+    """Pillar width."""
+    pillar_sides: int = 4
+    """Pillar polygon sides (4: square, 8: octagonal 'round' column)."""
+    pilaster_spacing_m: float | None = None
+    """Spacing of structural pilasters (jogs) along the exterior walls; None for none."""
+    node_spacing_m: float = 3.0
+    """Largest gap between nav nodes along a corridor."""
+    max_segment_m: float | None = None
+    """Split walls into collinear pieces at most this long (as mapped walls are)."""
+    min_clearance_m: float = 0.35
+    """Nav edges keep at least this from every wall (robot radius 0.3 m plus margin)."""
+    name: str = "generated"
+    """Blueprint name."""
+
+    def __post_init__(self) -> None:
+        def bad(name: str, what: str) -> InputError:
+            return InputError(f"BuildingConfig.{name}: expected {what}, got {getattr(self, name)!r}")
+
+        for name in (
+            "corridor_width_range_m",
+            "outer_room_depth_range_m",
+            "room_depth_range_m",
+            "room_width_range_m",
+            "door_width_range_m",
+            "core_partition_range_m",
+            "atrium_length_range_m",
+        ):
+            v = getattr(self, name)
+            if not (len(v) == 2 and 0 < v[0] <= v[1] and math.isfinite(v[1])):
+                raise bad(name, "a range (lo, hi) with 0 < lo <= hi")
+        for name in ("width_m", "height_m", "block_width_m", "block_length_m", "pillar_size_m",
+                     "node_spacing_m", "atrium_node_spacing_m", "min_core_m"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
+                raise bad(name, "a positive number")
+        if self.max_segment_m is not None and not self.max_segment_m > 0:
+            raise bad("max_segment_m", "None or a positive number")
+        if self.pilaster_spacing_m is not None and not self.pilaster_spacing_m >= 2.0:
+            raise bad("pilaster_spacing_m", "None or a number >= 2.0")
+        if not 0 <= self.large_room_prob <= 1:
+            raise bad("large_room_prob", "a probability in [0, 1]")
+        if self.n_atria < 0:
+            raise bad("n_atria", "an integer >= 0")
+        if self.pillar_sides < 3:
+            raise bad("pillar_sides", "an integer >= 3")
+        if self.corridor_width_range_m[0] / 2 < self.min_clearance_m + 0.3:
+            raise bad("corridor_width_range_m", f"corridors at least {2 * (self.min_clearance_m + 0.3):.2f} m wide")
+        if self.door_width_range_m[0] / 2 < self.min_clearance_m:
+            raise bad("door_width_range_m", f"doors at least {2 * self.min_clearance_m:.2f} m wide")
+        need = self.door_width_range_m[1] + 2 * _DOOR_JAMB_MARGIN_M + 0.2
+        if self.room_width_range_m[0] < need:
+            raise bad("room_width_range_m", f"rooms at least {need:.2f} m wide (door plus jambs)")
+        if self.room_depth_range_m[0] < 2 * _DOOR_INNER_M + 0.5 or self.outer_room_depth_range_m[0] < 2 * _DOOR_INNER_M + 0.5:
+            raise bad("room_depth_range_m", f"rooms at least {2 * _DOOR_INNER_M + 0.5:.2f} m deep")
+        inner_w = self.width_m - 2 * (self.outer_room_depth_range_m[1] + self.corridor_width_range_m[1])
+        inner_h = self.height_m - 2 * (self.outer_room_depth_range_m[1] + self.corridor_width_range_m[1])
+        if min(inner_w, inner_h) < self.room_depth_range_m[0]:
+            raise InputError(
+                f"BuildingConfig: a {self.width_m} x {self.height_m} m footprint leaves no room inside "
+                "the corridor loop; make it larger or the outer offices / corridors smaller"
+            )
+
+    @classmethod
+    def large(cls, **overrides: Any) -> BuildingConfig:
+        """A realistic 100 x 100 m floor of about 9,000+ wall segments (real mapped buildings
+        hold 1,000-9,000): fine collinear wall pieces, exterior pilasters, octagonal pillars."""
+        base = cls(
+            width_m=100.0,
+            height_m=100.0,
+            n_atria=3,
+            block_width_m=14.0,
+            block_length_m=28.0,
+            pillar_sides=8,
+            pilaster_spacing_m=4.0,
+            max_segment_m=0.4,
+            name="large_floor",
+        )
+        return replace(base, **overrides)
+
+
+def _partition(
+    length: float, wmin: float, wmax: float, merge_prob: float, rng: np.random.Generator
+) -> list[float]:
+    """Cut ``length`` into office widths (>= wmin unless the whole is shorter); returns the
+    interior cut offsets from 0, quantised."""
+    if length < 2 * wmin:
+        return []
+    n_max = math.floor(length / wmin)
+    n = min(n_max, max(1, round(length / ((wmin + wmax) / 2))))
+    w = rng.uniform(0.6, 1.4, n)
+    widths = wmin + (length - n * wmin) * w / w.sum()
+    merged: list[float] = []
+    i = 0
+    while i < n:
+        if i + 1 < n and rng.random() < merge_prob:
+            merged.append(float(widths[i] + widths[i + 1]))
+            i += 2
+        else:
+            merged.append(float(widths[i]))
+            i += 1
+    cuts = np.cumsum(merged)[:-1]
+    return [_q(c) for c in cuts]
+
+
+def _split_range(
+    lo: float, hi: float, n: int, gaps: Sequence[float], rng: np.random.Generator
+) -> list[tuple[float, float]]:
+    """Split [lo, hi] into n jittered parts separated by the given gap widths."""
+    avail = hi - lo - sum(gaps)
+    w = rng.uniform(0.85, 1.15, n)
+    sizes = avail * w / w.sum()
+    out = []
+    t = lo
+    for k in range(n):
+        a = _q(t)
+        t += sizes[k]
+        b = _q(t) if k < n - 1 else _q(hi)
+        out.append((a, b))
+        if k < n - 1:
+            t = b + gaps[k]
+    return out
+
+
+def generate_building(config: BuildingConfig, rng: np.random.Generator | int) -> Blueprint:
+    """Draw a corridor-loop / grid office floor (same config and seed -> same floor)."""
+    cfg = config
+    if not isinstance(rng, np.random.Generator):
+        rng = np.random.default_rng(rng)
+    W, H = _q(cfg.width_m), _q(cfg.height_m)
+
+    def uni(r: tuple[float, float]) -> float:
+        return _q(rng.uniform(r[0], r[1]))
+
+    walls, g = _Walls(), _Graph()
+    rooms: list[Box] = []
+    areas: list[Box] = []
+
+    d_b, d_t, d_l, d_r = (uni(cfg.outer_room_depth_range_m) for _ in range(4))
+    cw_b, cw_t, cw_l, cw_r = (uni(cfg.corridor_width_range_m) for _ in range(4))
+    ix0, ix1 = _q(d_l + cw_l), _q(W - d_r - cw_r)
+    iy0, iy1 = _q(d_b + cw_b), _q(H - d_t - cw_t)
+    left = _Corridor(False, (d_l, d_b, ix0, _q(H - d_t)), 0.0, 0.0)
+    right = _Corridor(False, (ix1, d_b, _q(W - d_r), _q(H - d_t)), 0.0, 0.0)
+    bottom = _Corridor(True, (d_l, d_b, _q(W - d_r), iy0), left.c, right.c)
+    top = _Corridor(True, (d_l, iy1, _q(W - d_r), _q(H - d_t)), left.c, right.c)
+    left.lo, left.hi = bottom.c, top.c
+    right.lo, right.hi = bottom.c, top.c
+
+    # Blocks inside the loop, between internal corridors.
+    cw_mean = sum(cfg.corridor_width_range_m) / 2
+    dmin = cfg.room_depth_range_m[0]
+    iw, ih = ix1 - ix0, iy1 - iy0
+    n_cols = max(1, round((iw + cw_mean) / (cfg.block_width_m + cw_mean)))
+    while n_cols > 1 and (iw - (n_cols - 1) * cfg.corridor_width_range_m[1]) / n_cols * 0.85 < 2 * dmin:
+        n_cols -= 1
+    n_rows = max(1, round((ih + cw_mean) / (cfg.block_length_m + cw_mean)))
+    while n_rows > 1 and (ih - (n_rows - 1) * cfg.corridor_width_range_m[1]) / n_rows * 0.85 < 2 * dmin:
+        n_rows -= 1
+    vgaps = [uni(cfg.corridor_width_range_m) for _ in range(n_cols - 1)]
+    hgaps = [uni(cfg.corridor_width_range_m) for _ in range(n_rows - 1)]
+    cols = _split_range(ix0, ix1, n_cols, vgaps, rng)
+    rows_ = _split_range(iy0, iy1, n_rows, hgaps, rng)
+    vcorrs = [left]
+    for k in range(n_cols - 1):
+        vcorrs.append(_Corridor(False, (cols[k][1], iy0, cols[k + 1][0], iy1), bottom.c, top.c))
+    vcorrs.append(right)
+    hcorrs = [bottom]
+    for k in range(n_rows - 1):
+        hcorrs.append(_Corridor(True, (ix0, rows_[k][1], ix1, rows_[k + 1][0]), left.c, right.c))
+    hcorrs.append(top)
+    for vc in vcorrs:
+        for hc in hcorrs:
+            vc.stops.add(hc.c)
+            hc.stops.add(vc.c)
+
+    wmin, wmax = cfg.room_width_range_m
+
+    def door_w() -> float:
+        return uni(cfg.door_width_range_m)
+
+    # Outer ring of offices along the exterior walls (corner offices take the corners).
+    exterior_joints: dict[str, list[float]] = {}
+    for side in "SNWE":
+        lo, hi = (d_l, _q(W - d_r)) if side in "SN" else (d_b, _q(H - d_t))
+        cuts = [_q(lo + c) for c in _partition(hi - lo, wmin, wmax, cfg.large_room_prob, rng)]
+        if side in "SN":
+            bounds = [0.0] + cuts + [W]
+        else:
+            bounds = [lo] + cuts + [hi]
+        exterior_joints[side] = bounds
+        for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+            if side == "S":
+                room, corr, dside = (a, 0.0, b, d_b), bottom, "N"
+            elif side == "N":
+                room, corr, dside = (a, _q(H - d_t), b, H), top, "S"
+            elif side == "W":
+                room, corr, dside = (0.0, a, d_l, b), left, "E"
+            else:
+                room, corr, dside = (_q(W - d_r), a, W, b), right, "W"
+            _add_room(walls, g, rooms, room, dside, corr, door_w(), rng)
+    walls.rect((0.0, 0.0, W, H))
+
+    # Blocks: offices back to back, facing the corridors on their long sides; some atria.
+    n_blocks = n_cols * n_rows
+    if cfg.n_atria > n_blocks:
+        raise InputError(
+            f"BuildingConfig.n_atria: {cfg.n_atria} atria do not fit in {n_blocks} blocks inside the loop"
+        )
+    atria = set(rng.choice(n_blocks, size=cfg.n_atria, replace=False).tolist()) if cfg.n_atria else set()
+    dmax = cfg.room_depth_range_m[1]
+
+    def fill_rooms(box: Box, vertical: bool, lo_c: _Corridor, hi_c: _Corridor) -> None:
+        """Offices in ``box``: rows along y facing W/E corridors (vertical) or along x facing S/N."""
+        x0, y0, x1, y1 = box
+        v0, v1, u0, u1 = (x0, x1, y0, y1) if vertical else (y0, y1, x0, x1)
+
+        def mk(ua: float, ub: float, va: float, vb: float) -> Box:
+            return (va, ua, vb, ub) if vertical else (ua, va, ub, vb)
+
+        span = v1 - v0
+        if span < 2 * dmin:
+            row_specs = [(v0, v1, lo_c, "W" if vertical else "S")]
+        else:
+            if span <= 2 * dmax + cfg.min_core_m:
+                da = _q(span * rng.uniform(0.45, 0.55))
+                db = _q(span - da)
+            else:
+                da, db = uni(cfg.room_depth_range_m), uni(cfg.room_depth_range_m)
+                core = mk(u0, u1, _q(v0 + da), _q(v1 - db))
+                walls.rect(core)
+                t = u0 + uni(cfg.core_partition_range_m)
+                while t < u1 - 2.0:
+                    if vertical:
+                        walls.hline(t, core[0], core[2])
+                    else:
+                        walls.vline(t, core[1], core[3])
+                    t += uni(cfg.core_partition_range_m)
+            row_specs = [
+                (v0, _q(v0 + da), lo_c, "W" if vertical else "S"),
+                (_q(v1 - db), v1, hi_c, "E" if vertical else "N"),
+            ]
+        for va, vb, corr, dside in row_specs:
+            cuts = _partition(u1 - u0, wmin, wmax, cfg.large_room_prob, rng)
+            bounds = [u0] + [_q(u0 + c) for c in cuts] + [u1]
+            for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+                _add_room(walls, g, rooms, mk(a, b, va, vb), dside, corr, door_w(), rng)
+
+    for j in range(n_rows):
+        for i in range(n_cols):
+            box = (cols[i][0], rows_[j][0], cols[i][1], rows_[j][1])
+            x0, y0, x1, y1 = box
+            vertical = (y1 - y0) >= (x1 - x0)
+            side_c = {"W": vcorrs[i], "E": vcorrs[i + 1], "S": hcorrs[j], "N": hcorrs[j + 1]}
+            lo_c, hi_c = (side_c["W"], side_c["E"]) if vertical else (side_c["S"], side_c["N"])
+            if j * n_cols + i not in atria:
+                fill_rooms(box, vertical, lo_c, hi_c)
+                continue
+            long_len = (y1 - y0) if vertical else (x1 - x0)
+            a_len = uni(cfg.atrium_length_range_m)
+            connect = dict(side_c)
+            if long_len - a_len >= 2 * wmin + 1.0:
+                at_low = rng.random() < 0.5
+                if vertical:
+                    cut = _q(y0 + a_len) if at_low else _q(y1 - a_len)
+                    abox, rbox = ((x0, y0, x1, cut), (x0, cut, x1, y1)) if at_low else ((x0, cut, x1, y1), (x0, y0, x1, cut))
+                    connect.pop("N" if at_low else "S")
+                else:
+                    cut = _q(x0 + a_len) if at_low else _q(x1 - a_len)
+                    abox, rbox = ((x0, y0, cut, y1), (cut, y0, x1, y1)) if at_low else ((cut, y0, x1, y1), (x0, y0, cut, y1))
+                    connect.pop("E" if at_low else "W")
+                fill_rooms(rbox, vertical, lo_c, hi_c)
+            else:
+                abox = box
+            _add_open_area(
+                walls, g, areas, abox, connect, cfg.atrium_node_spacing_m, 1.25,
+                cfg.atrium_pillars, cfg.pillar_size_m, cfg.pillar_sides,
+            )
+
+    if cfg.pilaster_spacing_m is not None:
+        _add_pilasters(walls, W, H, exterior_joints, cfg.pilaster_spacing_m)
+
+    for corr in vcorrs + hcorrs:
+        corr.chain(g, cfg.node_spacing_m)
+    segs = walls.build(cfg.max_segment_m)
+    return Blueprint(
+        vectormap=VectorMap(segs, name=cfg.name),
+        navgraph=g.build(),
+        rooms=tuple(rooms),
+        open_areas=tuple(areas),
+        corridors=tuple(c.box for c in vcorrs + hcorrs),
+        name=cfg.name,
+    )
+
+
+def _add_pilasters(
+    walls: _Walls, W: float, H: float, joints: dict[str, list[float]], spacing: float
+) -> None:
+    """Pilasters (0.4 m wide, 0.3 m deep jogs) along the inside of the exterior walls."""
+    half, depth = 0.2, 0.3
+    for side in "SNWE":
+        length = W if side in "SN" else H
+        js = list(joints[side]) + [0.0, length]
+        t = spacing / 2
+        while t < length:
+            p = _q(t)
+            t += spacing
+            if min(abs(p - j) for j in js) < half + 0.6:
+                continue
+            a, b = _q(p - half), _q(p + half)
+            if side == "S":
+                walls.gap_h(0.0, a, b)
+                walls.hline(depth, a, b)
+                walls.vline(a, 0.0, depth)
+                walls.vline(b, 0.0, depth)
+            elif side == "N":
+                walls.gap_h(H, a, b)
+                walls.hline(_q(H - depth), a, b)
+                walls.vline(a, _q(H - depth), H)
+                walls.vline(b, _q(H - depth), H)
+            elif side == "W":
+                walls.gap_v(0.0, a, b)
+                walls.vline(depth, a, b)
+                walls.hline(a, 0.0, depth)
+                walls.hline(b, 0.0, depth)
+            else:
+                walls.gap_v(W, a, b)
+                walls.vline(_q(W - depth), a, b)
+                walls.hline(a, _q(W - depth), W)
+                walls.hline(b, _q(W - depth), W)
+
+
+# --------------------------------------------------------------------------- shipped floors
+
+
+def corridor_loop() -> Blueprint:
+    """About 60 x 40 m: a corridor loop, offices inside and outside it, and an atrium."""
+    cfg = BuildingConfig(
+        width_m=60.0,
+        height_m=40.0,
+        n_atria=1,
+        block_width_m=13.0,
+        block_length_m=26.0,
+        atrium_length_range_m=(12.0, 14.0),
+        max_segment_m=1.0,
+        name="corridor_loop",
+    )
+    return generate_building(cfg, 7)
+
+
+def small_floor() -> Blueprint:
+    """16 x 10 m: a short corridor, four offices and a small open area with a pillar."""
+    walls, g = _Walls(), _Graph()
+    rooms: list[Box] = []
+    areas: list[Box] = []
+    corr = _Corridor(True, (0.0, 4.0, 10.0, 6.2), 1.1, 10.0)
+    walls.rect((0.0, 0.0, 16.0, 10.0))
+    _add_room(walls, g, rooms, (0.0, 6.2, 5.0, 10.0), "S", corr, 0.95, door_t=3.9)
+    _add_room(walls, g, rooms, (5.0, 6.2, 10.0, 10.0), "S", corr, 0.95, door_t=6.2)
+    _add_room(walls, g, rooms, (0.0, 0.0, 5.5, 4.0), "N", corr, 0.95, door_t=4.2)
+    _add_room(walls, g, rooms, (5.5, 0.0, 10.0, 4.0), "N", corr, 0.95, door_t=6.8)
+    box = (10.0, 0.0, 16.0, 10.0)
+    areas.append(box)
+    xs, ys = (11.5, 14.5), (1.5, 5.1, 8.5)
+    ids = [[g.node(x, y) for x in xs] for y in ys]
+    for j in range(len(ys)):
+        for i in range(len(xs)):
+            if i + 1 < len(xs):
+                g.edge(ids[j][i], ids[j][i + 1], max_clearance=1.0)
+            if j + 1 < len(ys):
+                g.edge(ids[j][i], ids[j + 1][i], max_clearance=1.0)
+    corr.chain(g, 3.0)
+    g.edge(g.node(10.0, 5.1), ids[1][0], max_clearance=1.0)
+    walls.rect((12.8, 3.1, 13.2, 3.5))  # one pillar between the open area's nodes
+    segs = walls.build(2.0)
+    return Blueprint(
+        vectormap=VectorMap(segs, name="small_floor"),
+        navgraph=g.build(),
+        rooms=tuple(rooms),
+        open_areas=tuple(areas),
+        corridors=(corr.box,),
+        name="small_floor",
+    )
+
+
+SHIPPED = {"corridor_loop": corridor_loop, "small_floor": small_floor}
+"""The shipped blueprints by name (their files live in :data:`ASSETS_DIR`)."""
+
+
+# --------------------------------------------------------------------------- files
+
+_VM_SUFFIX = ".vectormap.txt"
+_NAV_SUFFIX = ".navigation.json"
+_ZONES_SUFFIX = ".zones.json"
+_ZONE_KEYS = ("rooms", "open_areas", "corridors")
+
+
+def _stem(path: str | os.PathLike[str]) -> str:
+    s = os.fspath(path)
+    for suf in (_VM_SUFFIX, _NAV_SUFFIX, _ZONES_SUFFIX):
+        if s.endswith(suf):
+            return s[: -len(suf)]
+    return s
+
+
+def _format_zones(bp: Blueprint) -> str:
+    def boxes(bs: tuple[Box, ...]) -> str:
+        if not bs:
+            return "[]"
+        return "[\n    " + ",\n    ".join(json.dumps([float(v) for v in b]) for b in bs) + "\n  ]"
+
+    parts = [f'  "name": {json.dumps(bp.name)}'] + [
+        f'  "{k}": {boxes(getattr(bp, k))}' for k in _ZONE_KEYS
+    ]
+    return "{\n" + ",\n".join(parts) + "\n}\n"
+
+
+def _parse_zones(text: str, source: str) -> tuple[str, dict[str, tuple[Box, ...]]]:
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as e:
+        raise MapFormatError(f"{source}:{e.lineno}:{e.colno}: invalid JSON: {e.msg}", source=source, line=e.lineno) from None
+    if not isinstance(data, dict):
+        raise MapFormatError(f'{source}: expected an object {{"name", "rooms", "open_areas", "corridors"}}', source=source)
+    name = data.get("name", "")
+    if not isinstance(name, str):
+        raise MapFormatError(f"{source}: name: expected a string, got {name!r}", source=source)
+    out: dict[str, tuple[Box, ...]] = {}
+    for k in _ZONE_KEYS:
+        v = data.get(k, [])
+        if not isinstance(v, list):
+            raise MapFormatError(f"{source}: {k}: expected an array of boxes, got {v!r}", source=source)
+        boxes = []
+        for i, b in enumerate(v):
+            ok = (
+                isinstance(b, list)
+                and len(b) == 4
+                and all(isinstance(c, int | float) and not isinstance(c, bool) and math.isfinite(c) for c in b)
+            )
+            if not ok or not (b[0] <= b[2] and b[1] <= b[3]):
+                raise MapFormatError(
+                    f"{source}: {k}[{i}]: expected a box [xmin, ymin, xmax, ymax] of finite numbers, got {b!r}",
+                    source=source,
+                )
+            boxes.append(tuple(float(c) for c in b))
+        out[k] = tuple(boxes)
+    return name, out
+
+
+def save_blueprint(bp: Blueprint, stem_path: str | os.PathLike[str]) -> list[Path]:
+    """Write ``<stem>.vectormap.txt``, ``<stem>.navigation.json`` and ``<stem>.zones.json``."""
+    stem = _stem(stem_path)
+    Path(stem).parent.mkdir(parents=True, exist_ok=True)
+    vm = save_vectormap(bp.vectormap, stem + _VM_SUFFIX)
+    nav = save_navgraph(bp.navgraph, stem + _NAV_SUFFIX)
+    zones = Path(stem + _ZONES_SUFFIX)
+    zones.write_text(_format_zones(bp), encoding="utf-8")
+    return [vm, nav, zones]
+
+
+def load_blueprint(stem_path: str | os.PathLike[str]) -> Blueprint:
+    """Read a blueprint back from its three files (``stem_path`` may name any of them).
+
+    A bare shipped name (``"corridor_loop"``) is looked up in :data:`ASSETS_DIR`.
+    """
+    stem = _stem(stem_path)
+    if os.sep not in stem and "/" not in stem and not Path(stem + _VM_SUFFIX).exists():
+        if Path(ASSETS_DIR / (stem + _VM_SUFFIX)).exists():
+            stem = str(ASSETS_DIR / stem)
+    vm = load_vectormap(stem + _VM_SUFFIX)
+    nav = load_navgraph(stem + _NAV_SUFFIX)
+    zpath = stem + _ZONES_SUFFIX
+    try:
+        text = Path(zpath).read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise MapFormatError(f"{zpath}: file not found", source=zpath) from None
+    name, zones = _parse_zones(text, zpath)
+    name = name or Path(stem).name
+    return Blueprint(
+        vectormap=VectorMap(vm.segments, name=name),
+        navgraph=nav,
+        rooms=zones["rooms"],
+        open_areas=zones["open_areas"],
+        corridors=zones["corridors"],
+        name=name,
+    )
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Regenerate the shipped blueprints' files (``python -m sim.blueprints``)."""
+    ap = argparse.ArgumentParser(prog="python -m sim.blueprints", description=main.__doc__)
+    ap.add_argument("--out", type=Path, default=ASSETS_DIR, help="output directory (default: sim/assets)")
+    args = ap.parse_args(argv)
+    for name, fn in SHIPPED.items():
+        bp = fn()
+        paths = save_blueprint(bp, args.out / name)
+        x0, y0, x1, y1 = bp.extent()
+        print(
+            f"{name}: {bp.vectormap.n_segments} segments, {x1 - x0:.1f} x {y1 - y0:.1f} m, "
+            f"{bp.navgraph.n_nodes} nodes, {bp.navgraph.n_edges} edges, {len(bp.rooms)} rooms -> "
+            + ", ".join(str(p) for p in paths)
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

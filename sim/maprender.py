@@ -1,0 +1,105 @@
+"""Top-down PNG renders of a vector map, its nav graph, trajectories and markers.
+
+Uses matplotlib's object API with the Agg canvas (no pyplot, no global figure state), and
+a LineCollection for the walls so maps of 9,000+ segments render in well under a second.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import matplotlib
+import numpy as np
+
+matplotlib.use("Agg")
+
+from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: E402
+from matplotlib.collections import LineCollection  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+
+from autonomy.errors import InputError  # noqa: E402
+from autonomy.vectormap import NavGraph, VectorMap  # noqa: E402
+
+__all__ = ["render_map"]
+
+_TRAJ_COLORS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
+_MARKER_COLORS = ("#d62728", "#ff7f0e", "#9467bd", "#2ca02c", "#1f77b4", "#8c564b")
+
+
+def _xy(name: str, a: np.ndarray, what: str) -> np.ndarray:
+    arr = np.asarray(a, dtype=np.float64)
+    if arr.size == 0:
+        return np.zeros((0, 2))
+    if arr.ndim == 1 and arr.size in (2, 3):
+        arr = arr[None, :]
+    if arr.ndim != 2 or arr.shape[1] < 2:
+        raise InputError(f"render_map: {what} {name!r} must be an (N, 2+) array of x, y, got shape {arr.shape}")
+    return arr[:, :2]
+
+
+def render_map(
+    vm: VectorMap,
+    out_png: str | os.PathLike[str],
+    graph: NavGraph | None = None,
+    *,
+    trajectories: dict[str, np.ndarray] | None = None,
+    markers: dict[str, np.ndarray] | None = None,
+    title: str | None = None,
+    dpi: int = 150,
+) -> Path:
+    """Draw walls (black), the nav graph (light), trajectories (lines with a legend) and
+    markers (crosses) to ``out_png``; equal aspect, metres on the axes. Returns the path.
+
+    ``trajectories`` / ``markers`` map a legend label to an (N, 2) (or (N, 3) x, y, theta)
+    array of world positions.
+    """
+    out = Path(out_png)
+    segs = vm.segments
+    if vm.n_segments:
+        x0, y0, x1, y1 = vm.extent()
+    else:
+        x0 = y0 = 0.0
+        x1 = y1 = 1.0
+    w, h = max(x1 - x0, 1.0), max(y1 - y0, 1.0)
+    fig_w = 10.0
+    fig_h = min(max(fig_w * h / w + 0.8, 3.0), 16.0)
+    fig = Figure(figsize=(fig_w, fig_h), dpi=dpi)
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot(1, 1, 1)
+
+    lw = 0.8 if vm.n_segments < 3000 else 0.5
+    ax.add_collection(
+        LineCollection(segs.reshape(-1, 2, 2), colors="black", linewidths=lw, zorder=2, label="walls")
+    )
+    if graph is not None:
+        es = graph.edge_segments()
+        if es.shape[0]:
+            ax.add_collection(
+                LineCollection(es.reshape(-1, 2, 2), colors="#9ecae1", linewidths=0.6, zorder=1)
+            )
+        xy = graph.node_xy()
+        ax.plot(xy[:, 0], xy[:, 1], linestyle="none", marker="o", markersize=1.5,
+                color="#6baed6", zorder=1, label="nav graph")
+    for k, (name, traj) in enumerate((trajectories or {}).items()):
+        p = _xy(name, traj, "trajectory")
+        ax.plot(p[:, 0], p[:, 1], color=_TRAJ_COLORS[k % len(_TRAJ_COLORS)], linewidth=1.2,
+                zorder=3, label=name)
+    for k, (name, pts) in enumerate((markers or {}).items()):
+        p = _xy(name, pts, "marker set")
+        ax.plot(p[:, 0], p[:, 1], linestyle="none", marker="x", markersize=6, markeredgewidth=1.5,
+                color=_MARKER_COLORS[k % len(_MARKER_COLORS)], zorder=4, label=name)
+
+    pad = 0.02 * max(w, h)
+    ax.set_xlim(x0 - pad, x1 + pad)
+    ax.set_ylim(y0 - pad, y1 + pad)
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title(title if title is not None else (vm.name or "vector map"))
+    if graph is not None or trajectories or markers:
+        ax.legend(loc="upper right", fontsize=7, framealpha=0.8)
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=dpi, format="png")
+    return out

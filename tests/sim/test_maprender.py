@@ -1,0 +1,62 @@
+"""PNG map renders: valid files, markers/trajectories, speed on a 9,000-segment map."""
+
+from __future__ import annotations
+
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from autonomy.errors import InputError
+from sim.blueprints import BuildingConfig, generate_building, small_floor
+from sim.maprender import render_map
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+def _png_size(path) -> tuple[int, int]:
+    data = path.read_bytes()
+    assert data[:8] == PNG_MAGIC and data[12:16] == b"IHDR"
+    return int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
+
+
+def test_render_small_floor_with_everything(tmp_path):
+    bp = small_floor()
+    traj = np.column_stack([np.linspace(1, 14, 50), np.full(50, 5.1), np.zeros(50)])
+    out = render_map(
+        bp.vectormap,
+        tmp_path / "deep" / "small.png",
+        bp.navgraph,
+        trajectories={"truth": traj, "estimate": traj[:, :2] + 0.1},
+        markers={"resets": np.array([[3.0, 5.0], [8.0, 5.2]]), "goal": np.array([14.5, 8.5]), "none": np.zeros((0, 2))},
+        title="small floor",
+        dpi=100,
+    )
+    assert out == tmp_path / "deep" / "small.png"
+    w, h = _png_size(out)
+    assert w >= 600 and h >= 300
+    assert out.stat().st_size > 10_000
+
+
+def test_render_map_only_and_no_pyplot_state(tmp_path):
+    had_pyplot = "matplotlib.pyplot" in sys.modules
+    out = render_map(small_floor().vectormap, str(tmp_path / "walls.png"))
+    assert _png_size(out)[0] > 0
+    if not had_pyplot:
+        assert "matplotlib.pyplot" not in sys.modules
+
+
+def test_render_bad_trajectory(tmp_path):
+    with pytest.raises(InputError, match="trajectory 'x'"):
+        render_map(small_floor().vectormap, tmp_path / "bad.png", trajectories={"x": np.zeros((3, 1))})
+
+
+def test_render_9000_segments_fast(tmp_path):
+    bp = generate_building(BuildingConfig.large(), 0)
+    assert bp.vectormap.n_segments >= 9000
+    t0 = time.perf_counter()
+    out = render_map(bp.vectormap, tmp_path / "large.png", bp.navgraph, dpi=120)
+    dt = time.perf_counter() - t0
+    assert dt < 5.0, f"rendering took {dt:.2f} s"
+    assert out.stat().st_size > 50_000

@@ -7,7 +7,7 @@ obstacle avoidance they are obstacles: exactly the paper's setting (seed 000, VI
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import mujoco
 import numpy as np
@@ -150,61 +150,126 @@ def add_people(spec: mujoco.MjSpec, people: tuple[Person, ...]) -> None:
         )
 
 
-@dataclass
+def point_segment_distance(p: np.ndarray, segs: np.ndarray) -> np.ndarray:
+    """Distance from point p (2,) to each segment (N, 4)."""
+    a, b = segs[:, :2], segs[:, 2:]
+    d = b - a
+    L2 = np.einsum("ij,ij->i", d, d)
+    t = np.clip(np.einsum("ij,ij->i", p - a, d) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
+    q = a + t[:, None] * d
+    return np.hypot(p[0] - q[:, 0], p[1] - q[:, 1])
+
+
 class PeopleController:
-    """Moves the people's mocap bodies along their routes as simulated time passes."""
+    """Moves the people's mocap bodies along their routes as simulated time passes.
 
-    people: tuple[Person, ...]
-    mocap_ids: np.ndarray
-    _cum: list[np.ndarray] = field(default_factory=list)
-    _pts: list[np.ndarray] = field(default_factory=list)
+    People are polite pedestrians: when the robot is ahead of a person within
+    ``notice_m``, the person steps up to ``step_aside_m`` to the right of the route
+    (never closer than 5 cm to a wall), and waits while the robot is within ``pause_m``
+    in front. Otherwise they walk their route at constant speed, back and forth or looped.
+    """
 
-    @classmethod
-    def from_model(cls, model: mujoco.MjModel, people: tuple[Person, ...]) -> PeopleController:
-        ids = []
-        for i in range(len(people)):
-            bid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, f"person_{i}")
-            ids.append(model.body_mocapid[bid])
-        ctl = cls(people=people, mocap_ids=np.array(ids, dtype=int))
+    notice_m = 2.5
+    step_aside_m = 0.6
+    pause_m = 1.0
+    side_speed_mps = 0.8
+
+    def __init__(self, people: tuple[Person, ...], mocap_ids: np.ndarray, walls: np.ndarray | None = None) -> None:
+        self.people = people
+        self.mocap_ids = mocap_ids
+        self.walls = np.zeros((0, 4)) if walls is None else np.asarray(walls, dtype=np.float64)
+        self._pts: list[np.ndarray] = []
+        self._cum: list[np.ndarray] = []
         for p in people:
             pts = np.asarray(p.route, dtype=np.float64)
             if p.loop:
                 pts = np.vstack([pts, pts[:1]])
             seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
-            ctl._pts.append(pts)
-            ctl._cum.append(np.concatenate([[0.0], np.cumsum(seg)]))
-        return ctl
+            self._pts.append(pts)
+            self._cum.append(np.concatenate([[0.0], np.cumsum(seg)]))
+        self.reset()
 
-    def positions(self, t: float) -> np.ndarray:
-        """(n, 3) array of x, y, heading of each person at time t."""
-        out = np.zeros((len(self.people), 3))
+    def reset(self) -> None:
+        """People back at their start offsets."""
+        self._s = np.array([p.start_offset_m for p in self.people], dtype=np.float64)
+        self._side = np.zeros(len(self.people))
+        self._t = 0.0
+        self._state = np.zeros((len(self.people), 3))
+        for i in range(len(self.people)):
+            self._state[i] = self._place(i)
+
+    @classmethod
+    def from_model(cls, model: mujoco.MjModel, people: tuple[Person, ...], walls: np.ndarray | None = None) -> PeopleController:
+        ids = []
+        for i in range(len(people)):
+            bid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, f"person_{i}")
+            ids.append(model.body_mocapid[bid])
+        return cls(people, np.array(ids, dtype=int), walls)
+
+    def _route_point(self, i: int, s: float) -> tuple[np.ndarray, np.ndarray]:
+        """Position and unit walking direction at arc length s (ping-pong or loop)."""
+        p, pts, cum = self.people[i], self._pts[i], self._cum[i]
+        total = cum[-1]
+        if total <= 0:
+            return pts[0].copy(), np.array([1.0, 0.0])
+        direction = 1.0
+        if p.loop:
+            s = s % total
+        else:
+            s = s % (2 * total)
+            if s > total:
+                s, direction = 2 * total - s, -1.0
+        k = int(np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(cum) - 2))
+        seg_len = cum[k + 1] - cum[k]
+        a = (s - cum[k]) / seg_len if seg_len > 0 else 0.0
+        d = pts[k + 1] - pts[k]
+        n = float(np.hypot(d[0], d[1]))
+        return pts[k] + a * d, (direction * d / n if n > 0 else np.array([1.0, 0.0]))
+
+    def _place(self, i: int) -> np.ndarray:
+        pos, d = self._route_point(i, self._s[i])
+        right = np.array([d[1], -d[0]])
+        return np.array([*(pos + self._side[i] * right), math.atan2(d[1], d[0])])
+
+    def _side_is_clear(self, i: int, pos: np.ndarray) -> bool:
+        if not len(self.walls):
+            return True
+        return float(point_segment_distance(pos, self.walls).min()) > self.people[i].radius_m + 0.05
+
+    def advance(self, t: float, robot_xy: np.ndarray | None = None) -> np.ndarray:
+        """Move everyone to time t (reacting to the robot); returns (n, 3) x, y, heading."""
+        dt = max(0.0, t - self._t)
+        self._t = t
         for i, p in enumerate(self.people):
-            pts, cum = self._pts[i], self._cum[i]
-            total = cum[-1]
-            if total <= 0:
-                out[i, :2] = pts[0]
-                continue
-            s = p.start_offset_m + p.speed_mps * t
-            direction = 1.0
-            if p.loop:
-                s = s % total
-            else:
-                s = s % (2 * total)
-                if s > total:
-                    s, direction = 2 * total - s, -1.0
-            k = int(np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(cum) - 2))
-            seg_len = cum[k + 1] - cum[k]
-            a = (s - cum[k]) / seg_len if seg_len > 0 else 0.0
-            d = pts[k + 1] - pts[k]
-            out[i, :2] = pts[k] + a * d
-            out[i, 2] = math.atan2(direction * d[1], direction * d[0])
-        return out
+            pos, d = self._route_point(i, self._s[i])
+            target_side, walk = 0.0, True
+            if robot_xy is not None:
+                rel = np.asarray(robot_xy[:2]) - pos
+                ahead = float(rel @ d)
+                across = float(rel[0] * d[1] - rel[1] * d[0])  # > 0: robot to the person's right
+                if 0.0 < ahead < self.notice_m and abs(across - self._side[i]) < 1.0:
+                    target_side = self.step_aside_m if across <= 0 else -self.step_aside_m
+                    walk = ahead > self.pause_m or abs(across - self._side[i]) > 0.7
+            step = float(np.clip(target_side - self._side[i], -self.side_speed_mps * dt, self.side_speed_mps * dt))
+            if step:
+                right = np.array([d[1], -d[0]])
+                new_side = self._side[i] + step
+                if self._side_is_clear(i, pos + new_side * right) or abs(new_side) < abs(self._side[i]):
+                    self._side[i] = new_side
+            if walk:
+                self._s[i] += p.speed_mps * dt
+            self._state[i] = self._place(i)
+        return self._state.copy()
 
-    def update(self, data: mujoco.MjData, t: float) -> None:
-        """Place every person at time t."""
+    def positions(self, t: float | None = None) -> np.ndarray:
+        """(n, 3) x, y, heading of each person (as of the last update)."""
+        return self._state.copy()
+
+    def update(self, data: mujoco.MjData, t: float, robot_xy: np.ndarray | None = None) -> None:
+        """Advance to time t and write the mocap poses."""
         if not len(self.people):
             return
-        pos = self.positions(t)
+        pos = self.advance(t, robot_xy)
         for i, mid in enumerate(self.mocap_ids):
             data.mocap_pos[mid, :2] = pos[i, :2]
             data.mocap_quat[mid] = _yaw_quat(pos[i, 2])

@@ -64,7 +64,9 @@ def _linearize_flip(raw, c_coef, d_coef, out):  # pragma: no cover - numba
 class GLDepth:
     """Depth rendering through a headless OpenGL context (EGL / OSMesa / GLFW).
 
-    Only the depth buffer is read back; shadows, reflections, skybox and fog are off.
+    Only the depth buffer is read back; lights, shadows, reflections, skybox and fog are
+    off, and MSAA is off in the model (a resolved multisample depth buffer holds one
+    sub-sample, ~0.4 px off the pixel centre).
     """
 
     def __init__(self, model: mujoco.MjModel, camera_id: int, intr: CameraIntrinsics) -> None:
@@ -106,6 +108,7 @@ class GLDepth:
         mujoco.mjv_updateScene(
             self.model, data, self._opt, None, self._cam, mujoco.mjtCatBit.mjCAT_ALL.value, self._scene
         )
+        self._scene.nlight = 0  # depth needs no lighting; it costs the CPU rasteriser most
         mujoco.mjr_render(self._rect, self._scene, self._con)
         mujoco.mjr_readPixels(None, self._raw, self._rect, self._con)
         _linearize_flip(self._raw, self._c, self._d, out)

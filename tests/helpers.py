@@ -1,4 +1,4 @@
-"""Shared fixtures: small synthetic worlds built from explicit segments."""
+"""Shared test helpers: small synthetic worlds built from explicit segments, GL detection."""
 
 from __future__ import annotations
 

@@ -11,7 +11,7 @@ from autonomy.camera import CameraIntrinsics, CameraMount
 from autonomy.vectormap import VectorMap
 from sim.kinect import GLDepth, KinectCamera, KinectConfig, RaycastDepth, make_depth_backend
 from sim.world import WorldConfig, build_world
-from tests.conftest import GL
+from tests.helpers import GL
 
 LEVEL = CameraMount(pitch_down_rad=0.0)
 SMALL = CameraIntrinsics().scaled(160, 120)  # the ray-cast backend is slow at full size

@@ -12,7 +12,7 @@ from autonomy.errors import InputError
 from autonomy.vectormap import VectorMap
 from sim.actors import Furniture, Person
 from sim.world import WorldConfig, build_world
-from tests.conftest import box_room
+from tests.helpers import box_room
 
 
 def test_every_segment_becomes_a_wall_box() -> None:

@@ -1,0 +1,78 @@
+"""Global planning on a navigation graph: A* between nodes, nearest reachable node.
+
+Edge costs are Euclidean lengths; the heuristic is the straight-line distance to the goal
+(admissible, so A* returns a shortest path). Edges flagged ``has_stairs`` are excluded by
+default (a wheeled base cannot take them).
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+
+import numpy as np
+
+from autonomy.errors import InputError
+from autonomy.vectormap import NavGraph
+
+
+class NoPathError(InputError):
+    """Start and goal are not connected in the (filtered) graph."""
+
+
+def adjacency(graph: NavGraph, exclude_stairs: bool = True) -> list[list[tuple[int, float]]]:
+    """Adjacency lists by node index: (neighbour index, edge length)."""
+    xy = graph.node_xy()
+    adj: list[list[tuple[int, float]]] = [[] for _ in range(len(xy))]
+    for e in graph.edges:
+        if exclude_stairs and e.has_stairs:
+            continue
+        a, b = graph.index_of(e.s0_id), graph.index_of(e.s1_id)
+        d = float(math.hypot(*(xy[a] - xy[b])))
+        adj[a].append((b, d))
+        adj[b].append((a, d))
+    return adj
+
+
+def astar(graph: NavGraph, start_id: int, goal_id: int, *, exclude_stairs: bool = True) -> list[int]:
+    """Node ids of a shortest path from start to goal (both included)."""
+    xy = graph.node_xy()
+    s, g = graph.index_of(start_id), graph.index_of(goal_id)
+    adj = adjacency(graph, exclude_stairs)
+    gx, gy = xy[g]
+    cost = {s: 0.0}
+    parent = {s: -1}
+    heap = [(math.hypot(xy[s, 0] - gx, xy[s, 1] - gy), 0.0, s)]
+    closed = set()
+    while heap:
+        _, c, u = heapq.heappop(heap)
+        if u in closed:
+            continue
+        if u == g:
+            path = []
+            while u != -1:
+                path.append(graph.nodes[u].id)
+                u = parent[u]
+            return path[::-1]
+        closed.add(u)
+        for v, d in adj[u]:
+            nc = c + d
+            if nc < cost.get(v, math.inf):
+                cost[v] = nc
+                parent[v] = u
+                heapq.heappush(heap, (nc + math.hypot(xy[v, 0] - gx, xy[v, 1] - gy), nc, v))
+    raise NoPathError(f"no path from node {start_id} to node {goal_id} in the navigation graph")
+
+
+def path_length(graph: NavGraph, path: list[int]) -> float:
+    """Length of a node path in metres."""
+    if len(path) < 2:
+        return 0.0
+    xy = np.array([graph.node_xy()[graph.index_of(i)] for i in path])
+    return float(np.sum(np.hypot(*np.diff(xy, axis=0).T)))
+
+
+def path_points(graph: NavGraph, path: list[int]) -> np.ndarray:
+    """(n, 2) coordinates of a node path."""
+    xy = graph.node_xy()
+    return np.array([xy[graph.index_of(i)] for i in path], dtype=np.float64).reshape(-1, 2)

@@ -1,0 +1,155 @@
+"""depthnav benchmarks: ``make bench`` prints a table and writes bench/results.json.
+
+Each entry is timed over repeated runs after a warm-up (JIT compilation excluded) on this
+machine, and stored as ``{name: {median_ms, min_ms, max_ms, target_ms, paper_ms}}``.
+Targets come from the issues; paper figures from the seeds where one exists.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import numpy as np  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from autonomy.vectormap import load_vectormap, save_vectormap  # noqa: E402
+from sim import blueprints  # noqa: E402
+from sim.actors import Furniture  # noqa: E402
+from sim.kinect import KinectCamera, KinectConfig  # noqa: E402
+from sim.kinect_noise import apply_kinect_noise  # noqa: E402
+from sim.runner import random_people  # noqa: E402
+from sim.world import build_world  # noqa: E402
+
+Result = dict[str, float | None]
+
+
+def timeit(fn: Callable[[], object], repeat: int, warmup: int = 1) -> list[float]:
+    for _ in range(warmup):
+        fn()
+    out = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        fn()
+        out.append((time.perf_counter() - t) * 1e3)
+    return out
+
+
+def entry(samples: list[float], target: float | None = None, paper: float | None = None) -> Result:
+    return {
+        "median_ms": round(float(np.median(samples)), 4),
+        "min_ms": round(float(np.min(samples)), 4),
+        "max_ms": round(float(np.max(samples)), 4),
+        "target_ms": target,
+        "paper_ms": paper,
+    }
+
+
+def bench_maps(results: dict[str, Result], quick: bool) -> None:
+    bp = blueprints.generate_building(blueprints.BuildingConfig.large(), 0)
+    vm = bp.vectormap
+    print(f"  large generated map: {vm.n_segments} segments", file=sys.stderr)
+    if vm.n_segments < 9000:
+        raise SystemExit(f"bench: the large building has {vm.n_segments} < 9000 segments")
+    with tempfile.TemporaryDirectory() as d:
+        p = Path(d) / "large.vectormap.txt"
+        save_vectormap(vm, p)
+        results["map_load_9000"] = entry(timeit(lambda: load_vectormap(p), 3 if quick else 10), target=500.0)
+    results["world_compile_9000"] = entry(timeit(lambda: build_world(vm), 1 if quick else 3, warmup=0), target=5000.0)
+
+
+def _corridor_world():
+    bp = blueprints.load_blueprint(ROOT / "sim" / "assets" / "corridor_loop")
+    rng = np.random.default_rng(0)
+    people = random_people(bp.navgraph, 4, rng)
+    cx = [(a[0] + a[2]) / 2 for a in bp.open_areas] or [0.0]
+    cy = [(a[1] + a[3]) / 2 for a in bp.open_areas] or [0.0]
+    furniture = (Furniture("table", cx[0] + 1.5, cy[0]), Furniture("box", cx[0] - 1.5, cy[0] + 1.0))
+    node = bp.navgraph.node_xy()[0]
+    nbr = bp.navgraph.node_xy()[bp.navgraph.index_of(bp.navgraph.neighbors(bp.navgraph.nodes[0].id)[0])]
+    yaw = float(np.arctan2(nbr[1] - node[1], nbr[0] - node[0]))
+    world = build_world(bp.vectormap, furniture=furniture, people=people, start_pose=(node[0], node[1], yaw))
+    return world
+
+
+def bench_sim(results: dict[str, Result], quick: bool) -> None:
+    world = _corridor_world()
+    cfg = KinectConfig()
+    cam = KinectCamera(world.model, world.camera_id, cfg)
+    n = 30 if quick else 200
+    results["render_depth"] = entry(timeit(lambda: cam.render_clean(world.data), n, warmup=3))
+    clean = cam.render_clean(world.data).copy()
+    seeds = iter(range(10**6))
+    results["kinect_noise"] = entry(
+        timeit(lambda: apply_kinect_noise(clean, cfg.intrinsics, cfg.noise, next(seeds)), n, warmup=3), target=3.0
+    )
+    results["kinect_frame"] = entry(timeit(lambda: cam.capture(world.data, next(seeds)), n, warmup=3), target=15.0)
+    n_sub = round((1 / 30) / world.config.timestep_s)
+    t = [0.0]
+
+    def physics_frame() -> None:
+        world.robot.command(world.data, np.array([0.5, 0.0, 0.3]), 1 / 30)
+        t[0] += 1 / 30
+        world.people.update(world.data, t[0])
+        world.step_frame(n_sub)
+
+    results["sim_step_frame"] = entry(timeit(physics_frame, n, warmup=3))
+
+    def closed_frame() -> None:
+        physics_frame()
+        cam.capture(world.data, next(seeds))
+
+    # Real-time factor >= 2 at 30 Hz: physics + render + noise <= 16.7 ms a frame.
+    results["demo_frame"] = entry(timeit(closed_frame, n, warmup=3), target=round(1000 / 30 / 2, 2))
+    cam.close()
+
+
+def print_table(results: dict[str, Result]) -> None:
+    print(f"{'benchmark':<22}{'median ms':>11}{'min ms':>10}{'max ms':>10}{'target':>10}{'paper':>10}  ok")
+    for name, r in results.items():
+        tgt = r["target_ms"]
+        ok = "" if tgt is None else ("yes" if r["median_ms"] <= tgt else "NO")
+        fmt = lambda v: "-" if v is None else f"{v:.2f}"  # noqa: E731
+        print(
+            f"{name:<22}{r['median_ms']:>11.3f}{r['min_ms']:>10.3f}{r['max_ms']:>10.3f}"
+            f"{fmt(tgt):>10}{fmt(r['paper_ms']):>10}  {ok}"
+        )
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--out", default=str(ROOT / "bench" / "results.json"))
+    ap.add_argument("--quick", action="store_true", help="fewer repetitions (smoke test)")
+    ap.add_argument("--only", nargs="*", choices=["maps", "sim"], help="run only these groups")
+    args = ap.parse_args(argv)
+    groups = {"maps": bench_maps, "sim": bench_sim}
+    results: dict[str, Result] = {}
+    for name, fn in groups.items():
+        if args.only and name not in args.only:
+            continue
+        print(f"bench: {name} ...", file=sys.stderr)
+        fn(results, args.quick)
+    print_table(results)
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    old = json.loads(out.read_text()) if out.exists() and args.only else {}
+    old.update(results)
+    out.write_text(json.dumps(old, indent=2) + "\n")
+    print(f"machine: Python {platform.python_version()}, {os.cpu_count()} cores, {platform.platform()}")
+    print(f"wrote {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

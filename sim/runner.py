@@ -1,0 +1,436 @@
+"""Closed-loop runs of scenarios: world, robot, Kinect, mission, metrics and reports.
+
+One control tick is one Kinect frame (1/30 s): people move, the controller sets the
+velocity command, physics advances, the depth frame is rendered and noised, odometry
+integrates. Every stage is timed. A run writes ``report.json`` (the contract in the
+README), a trajectory figure, the ground-truth trajectory in TUM format and, on request,
+a rerun recording. Ctrl-C stops a run early and still writes what it measured.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from autonomy.errors import InputError
+from autonomy.planner import astar, path_points
+from autonomy.vectormap import NavGraph, VectorMap, load_navgraph, load_vectormap
+from sim.actors import Furniture, Person, point_segment_distance
+from sim.config import to_dict
+from sim.kinect import KinectCamera
+from sim.kinect_noise import apply_kinect_noise
+from sim.robot import Odometry
+from sim.scenario import ASSETS_DIR, Scenario
+from sim.world import World, build_world
+
+#: Report schema version (bump when keys change meaning).
+REPORT_VERSION = 1
+
+
+@dataclass
+class Building:
+    """A map with its graph and (if known) its zones."""
+
+    vectormap: VectorMap
+    navgraph: NavGraph
+    open_areas: tuple[tuple[float, float, float, float], ...] = ()
+    rooms: tuple[tuple[float, float, float, float], ...] = ()
+
+
+def load_building(scn: Scenario) -> Building:
+    """The building a scenario names (shipped asset, files, or a generated one)."""
+    from sim import blueprints
+
+    m = scn.map
+    if m.generate_seed >= 0:
+        bp = blueprints.generate_building(blueprints.BuildingConfig(), m.generate_seed)
+        return Building(bp.vectormap, bp.navgraph, tuple(bp.open_areas), tuple(bp.rooms))
+    if m.name:
+        bp = blueprints.load_blueprint(ASSETS_DIR / m.name)
+        return Building(bp.vectormap, bp.navgraph, tuple(bp.open_areas), tuple(bp.rooms))
+    return Building(load_vectormap(scn.resolve(m.vectormap)), load_navgraph(scn.resolve(m.navgraph)))
+
+
+def random_furniture(
+    building: Building, n: int, rng: np.random.Generator, robot_radius_m: float = 0.3
+) -> tuple[Furniture, ...]:
+    """Furniture dropped in open areas (or rooms), clear of walls and of nav-graph edges.
+
+    Each piece keeps its half-diagonal plus the robot radius plus 15 cm from every graph
+    edge, so the graph stays drivable, and 5 cm from every wall.
+    """
+    zones = building.open_areas or building.rooms
+    if n == 0:
+        return ()
+    if not zones:
+        raise InputError("actors.random_furniture: the map has no open areas or rooms to place furniture in")
+    edges = building.navgraph.edge_segments()
+    walls = np.asarray(building.vectormap.segments)
+    kinds = ("table", "chair", "box", "cabinet")
+    out: list[Furniture] = []
+    for _ in range(500 * n):
+        if len(out) == n:
+            break
+        z = zones[rng.integers(len(zones))]
+        kind = str(kinds[rng.integers(len(kinds))])
+        f = Furniture(kind=kind, x=float(rng.uniform(z[0], z[2])), y=float(rng.uniform(z[1], z[3])), yaw=float(rng.uniform(-math.pi, math.pi)))
+        half_diag = 0.5 * math.hypot(f.dims[0], f.dims[1])
+        p = np.array([f.x, f.y])
+        if len(edges) and point_segment_distance(p, edges).min() < half_diag + robot_radius_m + 0.15:
+            continue
+        if len(walls) and point_segment_distance(p, walls).min() < half_diag + 0.05:
+            continue
+        if any(math.hypot(o.x - f.x, o.y - f.y) < half_diag + 0.5 * math.hypot(*o.dims[:2]) + 0.1 for o in out):
+            continue
+        out.append(f)
+    if len(out) < n:
+        raise InputError(f"actors.random_furniture: only {len(out)} of {n} pieces fit in the map's open areas clear of the nav graph")
+    return tuple(out)
+
+
+def random_people(graph: NavGraph, n: int, rng: np.random.Generator) -> tuple[Person, ...]:
+    """People walking back and forth along random shortest paths of the nav graph."""
+    out = []
+    ids = graph.node_ids()
+    for _ in range(n):
+        for _attempt in range(20):
+            a, b = (int(v) for v in rng.choice(ids, 2, replace=False))
+            try:
+                path = astar(graph, a, b)
+            except InputError:
+                continue
+            pts = path_points(graph, path)
+            if len(pts) >= 2 and np.sum(np.hypot(*np.diff(pts, axis=0).T)) > 3.0:
+                # Walk slightly right of the centreline so robots and people can pass.
+                route = tuple((float(x), float(y)) for x, y in pts)
+                out.append(Person(route=route, speed_mps=float(rng.uniform(0.9, 1.4)), start_offset_m=float(rng.uniform(0, 20))))
+                break
+    return tuple(out)
+
+
+@dataclass
+class Mission:
+    """Waypoint sequence and the follower's state."""
+
+    waypoints: list[int]
+    start_pose: np.ndarray
+    path_xy: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    current: int = 0
+    started_at: float = 0.0
+
+
+def plan_mission(scn: Scenario, graph: NavGraph, rng: np.random.Generator) -> Mission:
+    """Waypoints (given or random) and the start pose on the first path edge."""
+    m = scn.mission
+    ids = [int(i) for i in graph.node_ids()]
+    known = set(ids)
+    for w in m.waypoints:
+        if w not in known:
+            raise InputError(f"mission.waypoints: node id {w} is not in the navigation graph")
+    if m.start_node >= 0 and m.start_node not in known:
+        raise InputError(f"mission.start_node: node id {m.start_node} is not in the navigation graph")
+    if m.waypoints:
+        wps = list(m.waypoints)
+    else:
+        wps = []
+        prev = m.start_node if m.start_node >= 0 else None
+        while len(wps) < m.n_random_waypoints:
+            c = int(rng.choice(ids))
+            if c != prev:
+                wps.append(c)
+                prev = c
+    start = m.start_node if m.start_node >= 0 else None
+    if start is None:
+        nbrs = graph.neighbors(wps[0])
+        start = int(nbrs[0]) if nbrs else wps[0]
+        if len(wps) == 1 and start == wps[0]:
+            raise InputError("mission: a single waypoint with no graph neighbour; give mission.start_node")
+    xy = graph.node_xy()
+    p = xy[graph.index_of(start)]
+    q = xy[graph.index_of(wps[0])]
+    heading = math.atan2(q[1] - p[1], q[0] - p[0]) if np.hypot(*(q - p)) > 1e-6 else 0.0
+    mission = Mission(waypoints=wps, start_pose=np.array([p[0], p[1], heading]))
+    return mission
+
+
+class GroundTruthFollower:
+    """Carrot following on the true pose along the nav-graph path to each waypoint.
+
+    The carrot is ``lookahead_m`` ahead along the path from the closest path point; the
+    body-frame velocity points at the carrot at cruise speed (slowing into the final
+    point), and the heading turns towards the direction of travel so the camera looks
+    where the robot goes.
+    """
+
+    def __init__(self, graph: NavGraph, cruise_mps: float, lookahead_m: float = 0.8) -> None:
+        self.graph = graph
+        self.cruise = cruise_mps
+        self.lookahead = lookahead_m
+        self.path = np.zeros((0, 2))
+        self._cum = np.zeros(0)
+
+    def set_path(self, pts: np.ndarray) -> None:
+        self.path = np.asarray(pts, dtype=np.float64)
+        seg = np.hypot(*np.diff(self.path, axis=0).T) if len(self.path) > 1 else np.zeros(0)
+        self._cum = np.concatenate([[0.0], np.cumsum(seg)])
+
+    def _project(self, xy: np.ndarray) -> float:
+        best, best_s = math.inf, 0.0
+        for k in range(len(self.path) - 1):
+            a, b = self.path[k], self.path[k + 1]
+            d = b - a
+            L2 = float(d @ d)
+            t = 0.0 if L2 == 0 else float(np.clip((xy - a) @ d / L2, 0.0, 1.0))
+            p = a + t * d
+            dist = float(np.hypot(*(xy - p)))
+            if dist < best:
+                best, best_s = dist, self._cum[k] + t * math.sqrt(L2)
+        return best_s
+
+    def _point_at(self, s: float) -> np.ndarray:
+        s = min(max(s, 0.0), self._cum[-1])
+        k = int(np.clip(np.searchsorted(self._cum, s, side="right") - 1, 0, len(self.path) - 2))
+        L = self._cum[k + 1] - self._cum[k]
+        t = 0.0 if L == 0 else (s - self._cum[k]) / L
+        return self.path[k] + t * (self.path[k + 1] - self.path[k])
+
+    def command(self, pose: np.ndarray) -> np.ndarray:
+        if len(self.path) < 2:
+            return np.zeros(3)
+        xy = pose[:2]
+        s = self._project(xy)
+        carrot = self._point_at(s + self.lookahead)
+        to_goal = float(np.hypot(*(self.path[-1] - xy)))
+        d = carrot - xy
+        dist = float(np.hypot(*d))
+        speed = min(self.cruise, 0.8 * to_goal + 0.05)
+        v_world = d / dist * speed if dist > 1e-6 else np.zeros(2)
+        c, sn = math.cos(pose[2]), math.sin(pose[2])
+        vx, vy = c * v_world[0] + sn * v_world[1], -sn * v_world[0] + c * v_world[1]
+        desired = math.atan2(d[1], d[0]) if dist > 0.1 else pose[2]
+        err = math.atan2(math.sin(desired - pose[2]), math.cos(desired - pose[2]))
+        # Slow down translation while the heading is far off, so the camera leads.
+        scale = max(0.2, math.cos(err)) if abs(err) < math.pi / 2 else 0.2
+        return np.array([vx * scale, vy * scale, 2.0 * err])
+
+
+def write_tum(path: Path, t: np.ndarray, poses: np.ndarray) -> None:
+    """Trajectory in TUM format: ``timestamp x y z qx qy qz qw`` per line."""
+    with open(path, "w", encoding="utf-8") as f:
+        f.write("# timestamp x y z qx qy qz qw\n")
+        for ti, p in zip(t, poses, strict=True):
+            f.write(f"{ti:.6f} {p[0]:.6f} {p[1]:.6f} 0.000000 0.000000 0.000000 {math.sin(p[2] / 2):.9f} {math.cos(p[2] / 2):.9f}\n")
+
+
+def _median_ms(xs: list[float]) -> float:
+    return float(np.median(xs) * 1000.0) if xs else 0.0
+
+
+def run_scenario(
+    scn: Scenario,
+    out_dir: str | Path,
+    *,
+    seed: int | None = None,
+    rrd: str | Path | None = None,
+    spawn: bool = False,
+    progress: bool | None = None,
+) -> dict:
+    """Run a scenario headless and write its report; returns the report dict."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    seed = scn.seed if seed is None else int(seed)
+    ss = np.random.SeedSequence(seed)
+    rng_actors, rng_mission, rng_odom, rng_noise = (np.random.default_rng(s) for s in ss.spawn(4))
+    noise_base = int(rng_noise.integers(0, 2**31))
+
+    building = load_building(scn)
+    vm, graph = building.vectormap, building.navgraph
+    furniture = tuple(scn.actors.furniture) + random_furniture(building, scn.actors.random_furniture, rng_actors, scn.robot.radius_m)
+    people = tuple(scn.actors.people) + random_people(graph, scn.actors.random_people, rng_actors)
+    mission = plan_mission(scn, graph, rng_mission)
+    world: World = build_world(
+        vm,
+        world=scn.world,
+        robot=scn.robot,
+        intrinsics=scn.kinect.intrinsics,
+        mount=scn.kinect.mount,
+        furniture=furniture,
+        people=people,
+        start_pose=tuple(mission.start_pose),
+    )
+    camera = KinectCamera(world.model, world.camera_id, scn.kinect)
+    odom = Odometry(scn.odometry, rng_odom, mission.start_pose)
+    follower = GroundTruthFollower(graph, scn.mission.cruise_speed_mps)
+
+    frame_dt = 1.0 / scn.kinect.rate_hz
+    n_sub = max(1, round(frame_dt / scn.world.timestep_s))
+    start_node = graph.nearest_node(*mission.start_pose[:2])
+
+    recorder = None
+    if rrd or spawn:
+        from sim.viz import Recorder
+
+        recorder = Recorder(
+            rrd,
+            spawn=spawn,
+            every=scn.report.rrd_every,
+            depth_downsample=scn.report.rrd_depth_downsample,
+            recording_id=f"{scn.name}-{seed}",
+        )
+        recorder.log_map(vm, graph, scn.world.wall_height_m)
+        recorder.log_camera_model(scn.kinect.intrinsics, scn.kinect.mount)
+        recorder.log_robot_shape(scn.robot.radius_m, scn.robot.height_m)
+        recorder.log_furniture(
+            [(np.array([f.x, f.y, f.dims[2] / 2]), np.array(f.dims) / 2, f.yaw) for f in furniture]
+        )
+        recorder.log_waypoints(path_points(graph, mission.waypoints))
+
+    timing: dict[str, list[float]] = {k: [] for k in ("physics", "render", "noise", "control", "viz")}
+    times: list[float] = []
+    truth: list[np.ndarray] = []
+    collisions = 0
+    reached = failed = 0
+    distance = 0.0
+    frame = 0
+    interrupted = False
+    prev_node = start_node
+    follower.set_path(path_points(graph, astar(graph, prev_node, mission.waypoints[0])))
+    mission.started_at = 0.0
+    max_frames = int(math.ceil(scn.mission.max_duration_s / frame_dt))
+
+    show = progress if progress is not None else (scn.report.progress and sys.stderr.isatty())
+    bar = None
+    if show:
+        from tqdm import tqdm
+
+        bar = tqdm(total=max_frames, unit="frame", desc=scn.name, leave=False)
+    wall_start = time.perf_counter()
+    pose = world.robot.pose(world.data)
+    truth.append(pose)
+    times.append(0.0)
+    try:
+        while frame < max_frames and mission.current < len(mission.waypoints):
+            t = world.data.time
+            t0 = time.perf_counter()
+            pose = world.robot.pose(world.data)
+            goal_xy = graph.node_xy()[graph.index_of(mission.waypoints[mission.current])]
+            if np.hypot(*(goal_xy - pose[:2])) < scn.mission.arrival_radius_m or (
+                t - mission.started_at > scn.mission.waypoint_timeout_s
+            ):
+                if np.hypot(*(goal_xy - pose[:2])) < scn.mission.arrival_radius_m:
+                    reached += 1
+                    prev_node = mission.waypoints[mission.current]
+                else:
+                    failed += 1
+                    prev_node = graph.nearest_node(*pose[:2])
+                mission.current += 1
+                mission.started_at = t
+                if mission.current >= len(mission.waypoints):
+                    break
+                follower.set_path(
+                    np.vstack([pose[:2], path_points(graph, astar(graph, prev_node, mission.waypoints[mission.current]))])
+                )
+            cmd = follower.command(pose)
+            world.robot.command(world.data, cmd, frame_dt)
+            t1 = time.perf_counter()
+            world.people.update(world.data, t + frame_dt, pose[:2])
+            collisions += world.step_frame(n_sub)
+            t2 = time.perf_counter()
+            clean = camera.render_clean(world.data)
+            t3 = time.perf_counter()
+            depth = apply_kinect_noise(clean, scn.kinect.intrinsics, scn.kinect.noise, (noise_base + frame) % (2**31))
+            t4 = time.perf_counter()
+            new_pose = world.robot.pose(world.data)
+            odom.update(new_pose)
+            distance += float(np.hypot(*(new_pose[:2] - pose[:2])))
+            truth.append(new_pose)
+            times.append(world.data.time)
+            frame += 1
+            if recorder is not None:
+                recorder.set_time(frame, world.data.time)
+                recorder.log_pose(frame, new_pose)
+                if recorder.heavy(frame):
+                    recorder.log_depth(depth)
+                    recorder.log_people(world.people.positions(world.data.time))
+                    recorder.log_scalars(
+                        {
+                            "speed_mps": float(np.hypot(*world.robot.velocity_body(world.data)[:2])),
+                            "timing_ms/render": (t3 - t2) * 1e3,
+                            "timing_ms/noise": (t4 - t3) * 1e3,
+                            "timing_ms/physics": (t2 - t1) * 1e3,
+                            "collisions": float(collisions),
+                        }
+                    )
+            t5 = time.perf_counter()
+            timing["control"].append(t1 - t0)
+            timing["physics"].append(t2 - t1)
+            timing["render"].append(t3 - t2)
+            timing["noise"].append(t4 - t3)
+            timing["viz"].append(t5 - t4)
+            if bar is not None:
+                bar.update(1)
+                if frame % 30 == 0:
+                    bar.set_postfix(dist=f"{distance:.0f}m", wp=f"{reached}/{len(mission.waypoints)}", coll=collisions)
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        if bar is not None:
+            bar.close()
+    wall = time.perf_counter() - wall_start
+    sim_time = float(world.data.time)
+    unvisited = len(mission.waypoints) - mission.current  # not attempted to the end (time ran out)
+    truth_arr = np.array(truth)
+    metrics = {
+        "frames": frame,
+        "distance_m": round(distance, 4),
+        "duration_s": round(sim_time, 4),
+        "collisions": collisions,
+        "waypoints_reached": reached,
+        "waypoints_failed": failed,
+        "waypoints_unvisited": unvisited,
+        "realtime_factor": round(sim_time / wall, 4) if wall > 0 else 0.0,
+        "wall_time_s": round(wall, 3),
+    }
+    files = {"report": "report.json", "trajectory_truth": "trajectory_truth.tum"}
+    write_tum(out / files["trajectory_truth"], np.array(times), truth_arr)
+    if scn.report.figures:
+        from sim.maprender import render_map
+
+        render_map(
+            vm,
+            out / "trajectory.png",
+            graph,
+            trajectories={"ground truth": truth_arr[:, :2]},
+            markers={"waypoints": path_points(graph, mission.waypoints)},
+            title=f"{scn.name} (seed {seed}): {distance:.0f} m, {collisions} collisions",
+        )
+        files["trajectory_figure"] = "trajectory.png"
+    if recorder is not None:
+        recorder.close()
+        if rrd:
+            files["recording"] = str(Path(rrd).resolve().relative_to(out.resolve())) if Path(rrd).resolve().is_relative_to(out.resolve()) else str(rrd)
+    backend = camera.backend_name if camera._backend is not None else "none"
+    camera.close()
+    report = {
+        "version": REPORT_VERSION,
+        "scenario": scn.name,
+        "seed": seed,
+        "interrupted": interrupted,
+        "metrics": metrics,
+        "paper": {},
+        "timing_ms": {k: round(_median_ms(v), 4) for k, v in timing.items()},
+        "render_backend": backend,
+        "map": {"segments": vm.n_segments, "nodes": len(graph.nodes), "edges": len(graph.edges)},
+        "actors": {"furniture": len(furniture), "people": len(people)},
+        "waypoints": mission.waypoints,
+        "files": files,
+        "config": {k: v for k, v in to_dict(scn).items() if k != "base_dir"},
+    }
+    (out / "report.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    return report

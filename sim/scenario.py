@@ -1,0 +1,186 @@
+"""Scenario files: one TOML per runnable experiment, parsed strictly into dataclasses.
+
+A scenario names a map, the robot and sensor configuration, actors, a mission, a seed
+and what to report. Paths in a scenario are relative to the scenario file; a map given
+by ``name`` is one of the buildings shipped in ``sim/assets``.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from autonomy.errors import InputError
+from sim.actors import Furniture, Person
+from sim.config import apply_overrides, from_dict
+from sim.kinect import KinectConfig
+from sim.robot import OdometryConfig, RobotConfig
+from sim.world import WorldConfig
+
+ASSETS_DIR = Path(__file__).resolve().parent / "assets"
+#: Scenario files shipped with the project (the repo's scenarios/ folder).
+SCENARIOS_DIR = Path(__file__).resolve().parent.parent / "scenarios"
+
+MISSION_KINDS = ("waypoints",)
+FOLLOWERS = ("ground_truth",)
+
+
+@dataclass(frozen=True)
+class MapConfig:
+    """Which building: a shipped asset by name, explicit files, or a generated one."""
+
+    name: str = ""
+    """A building in sim/assets (e.g. corridor_loop, small_floor)."""
+    vectormap: str = ""
+    """Path to a *.vectormap.txt / *.vectormap.json (relative to the scenario file)."""
+    navgraph: str = ""
+    """Path to a *.navigation.json (relative to the scenario file)."""
+    generate_seed: int = -1
+    """>= 0: draw a procedural building with this seed instead (sim.blueprints)."""
+
+    def __post_init__(self) -> None:
+        given = sum([bool(self.name), bool(self.vectormap), self.generate_seed >= 0])
+        if given != 1:
+            raise InputError("map: give exactly one of 'name', 'vectormap' (with 'navgraph') or 'generate_seed'")
+
+
+@dataclass(frozen=True)
+class ActorsConfig:
+    """Unmapped furniture and walking people."""
+
+    furniture: tuple[Furniture, ...] = ()
+    """Explicit furniture pieces."""
+    people: tuple[Person, ...] = ()
+    """Explicit people with routes."""
+    random_furniture: int = 0
+    """Extra furniture pieces placed at random in the map's open areas."""
+    random_people: int = 0
+    """Extra people walking random nav-graph routes."""
+
+    def __post_init__(self) -> None:
+        if self.random_furniture < 0 or self.random_people < 0:
+            raise InputError("actors: random_furniture and random_people must be >= 0")
+
+
+@dataclass(frozen=True)
+class MissionConfig:
+    """What the robot does."""
+
+    kind: str = "waypoints"
+    """waypoints: drive through nav-graph nodes in sequence."""
+    waypoints: tuple[int, ...] = ()
+    """Nav-graph node ids to visit; empty = draw ``n_random_waypoints`` at random."""
+    n_random_waypoints: int = 4
+    """How many random waypoints when none are given."""
+    start_node: int = -1
+    """Node id to start at; -1 = the first waypoint's graph neighbour / a random node."""
+    follower: str = "ground_truth"
+    """Controller: ground_truth (carrot following on the true pose)."""
+    max_duration_s: float = 120.0
+    """Stop after this much simulated time."""
+    target_distance_m: float = 0.0
+    """Stop once the robot has driven this far (0 = no target)."""
+    arrival_radius_m: float = 0.35
+    """A waypoint counts as reached within this distance."""
+    waypoint_timeout_s: float = 90.0
+    """A waypoint not reached within this time counts as failed."""
+    cruise_speed_mps: float = 0.75
+    """Follower's cruise speed."""
+
+    def __post_init__(self) -> None:
+        if self.kind not in MISSION_KINDS:
+            raise InputError(f"mission.kind {self.kind!r}: expected one of {', '.join(MISSION_KINDS)}")
+        if self.follower not in FOLLOWERS:
+            raise InputError(f"mission.follower {self.follower!r}: expected one of {', '.join(FOLLOWERS)}")
+        if self.max_duration_s <= 0:
+            raise InputError("mission.max_duration_s: expected a positive number")
+        if self.n_random_waypoints < 1 and not self.waypoints:
+            raise InputError("mission.n_random_waypoints: expected >= 1 when no waypoints are given")
+
+
+@dataclass(frozen=True)
+class ReportConfig:
+    """What a run writes besides report.json."""
+
+    figures: bool = True
+    """Write PNG figures (trajectory over the map)."""
+    rrd_every: int = 15
+    """Log heavy items (depth, point clouds) to rerun every Nth frame."""
+    rrd_depth_downsample: int = 2
+    """Log depth to rerun at 1/k of the camera resolution."""
+    progress: bool = True
+    """Show a progress bar on a terminal."""
+
+    def __post_init__(self) -> None:
+        if self.rrd_every < 1 or self.rrd_depth_downsample < 1:
+            raise InputError("report: rrd_every and rrd_depth_downsample must be >= 1")
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A runnable scenario (see scenarios/*.toml)."""
+
+    name: str
+    """Short name used in reports."""
+    description: str = ""
+    """One line shown by ``depthnav scenarios``."""
+    seed: int = 0
+    """Master seed: every random draw of the run derives from it."""
+    map: MapConfig = field(default_factory=lambda: MapConfig(name="small_floor"))
+    world: WorldConfig = field(default_factory=WorldConfig)
+    robot: RobotConfig = field(default_factory=RobotConfig)
+    odometry: OdometryConfig = field(default_factory=OdometryConfig)
+    kinect: KinectConfig = field(default_factory=KinectConfig)
+    actors: ActorsConfig = field(default_factory=ActorsConfig)
+    mission: MissionConfig = field(default_factory=MissionConfig)
+    report: ReportConfig = field(default_factory=ReportConfig)
+    base_dir: str = ""
+    """Directory that relative paths resolve against (set by the loader)."""
+
+    def resolve(self, path: str) -> Path:
+        p = Path(path)
+        return p if p.is_absolute() else Path(self.base_dir or ".") / p
+
+
+def load_scenario(path: str | Path, overrides: list[str] | None = None) -> Scenario:
+    """Read and strictly parse a scenario file, applying ``--set`` overrides."""
+    path = Path(path)
+    src = str(path)
+    if not path.is_file():
+        raise InputError(f"{src}: scenario file not found")
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{src}: invalid TOML: {exc}") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{src}: not a UTF-8 text file") from None
+    if "base_dir" in data:
+        raise InputError(f"{src}: unknown key 'base_dir' (it is set from the file's location)")
+    data = apply_overrides(data, overrides or [])
+    data["base_dir"] = str(path.resolve().parent)
+    scn = from_dict(Scenario, data, source=src)
+    # Map files must exist now, not halfway through a run.
+    if scn.map.vectormap:
+        for key in ("vectormap", "navgraph"):
+            value = getattr(scn.map, key)
+            if not value:
+                raise InputError(f"{src}: key 'map.{key}' is required when 'map.vectormap' is given")
+            if not scn.resolve(value).is_file():
+                raise InputError(f"{src}: key 'map.{key}': file not found: {scn.resolve(value)}")
+    if scn.map.name and not (ASSETS_DIR / f"{scn.map.name}.vectormap.txt").is_file():
+        names = ", ".join(sorted(p.name.removesuffix(".vectormap.txt") for p in ASSETS_DIR.glob("*.vectormap.txt")))
+        raise InputError(f"{src}: key 'map.name': no building {scn.map.name!r} in sim/assets (have: {names})")
+    return scn
+
+
+def list_scenarios(directory: Path = SCENARIOS_DIR) -> list[tuple[Path, str]]:
+    """(path, description) of every scenario file in a directory."""
+    out = []
+    for p in sorted(directory.glob("*.toml")):
+        try:
+            desc = tomllib.loads(p.read_text(encoding="utf-8")).get("description", "")
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError):
+            desc = "(unreadable TOML)"
+        out.append((p, str(desc)))
+    return out

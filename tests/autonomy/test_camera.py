@@ -1,0 +1,66 @@
+"""Camera model: back-projection against closed form, mount transform, rescaling."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from autonomy.camera import CameraIntrinsics, CameraMount, backproject, pixel_rays, transform_points
+from autonomy.errors import InputError
+
+
+def test_backproject_matches_pinhole_closed_form() -> None:
+    intr = CameraIntrinsics()
+    rng = np.random.default_rng(0)
+    depth = rng.uniform(0.5, 4.0, size=(intr.height, intr.width)).astype(np.float32)
+    pts = backproject(depth, intr)
+    for u, v in [(0, 0), (639, 479), (320, 100), (17, 401)]:
+        z = float(depth[v, u])
+        np.testing.assert_allclose(pts[v, u], [(u - 319.5) * z / 580, (v - 239.5) * z / 580, z], rtol=1e-6)
+    # Projecting back gives the pixel.
+    u = pts[..., 0] / pts[..., 2] * intr.fx + intr.cx
+    np.testing.assert_allclose(u[5], np.arange(intr.width), atol=1e-4)
+
+
+def test_field_of_view_of_the_kinect() -> None:
+    intr = CameraIntrinsics()
+    assert math.degrees(intr.fov_h_rad) == pytest.approx(57.8, abs=0.1)
+    assert math.degrees(intr.fov_v_rad) == pytest.approx(44.9, abs=0.1)
+
+
+def test_mount_looks_forward_and_down() -> None:
+    m = CameraMount()
+    t = m.robot_from_camera()
+    axis = t[:3, :3] @ np.array([0.0, 0.0, 1.0])
+    np.testing.assert_allclose(axis, [math.cos(math.radians(17)), 0.0, -math.sin(math.radians(17))], atol=1e-12)
+    right = t[:3, :3] @ np.array([1.0, 0.0, 0.0])
+    np.testing.assert_allclose(right, [0.0, -1.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(t[:3, 3], [0.22, 0.0, 0.7])
+    # The optical axis meets the floor 0.7 / tan(17 deg) ahead of the camera.
+    z = 0.7 / math.sin(math.radians(17))
+    p = transform_points(t, np.array([[0.0, 0.0, z]]))[0]
+    assert p[2] == pytest.approx(0.0, abs=1e-12)
+    assert p[0] == pytest.approx(0.22 + 0.7 / math.tan(math.radians(17)))
+
+
+@given(st.integers(8, 1280), st.integers(8, 960))
+def test_scaled_intrinsics_keep_the_field_of_view(w: int, h: int) -> None:
+    intr = CameraIntrinsics()
+    s = intr.scaled(w, h)
+    assert math.atan((s.width / 2) / s.fx) == pytest.approx(math.atan((intr.width / 2) / intr.fx))
+    # The image's outer edges (pixel -0.5 and width - 0.5) map to the same rays.
+    for a, b in ((intr, s),):
+        assert (-0.5 - a.cx) / a.fx == pytest.approx((-0.5 - b.cx) / b.fx)
+        assert (a.height - 0.5 - a.cy) / a.fy == pytest.approx((b.height - 0.5 - b.cy) / b.fy)
+    assert pixel_rays(s).shape == (h, w, 3)
+
+
+def test_bad_shapes_and_intrinsics_are_errors() -> None:
+    with pytest.raises(InputError, match="does not match"):
+        backproject(np.zeros((10, 10), np.float32), CameraIntrinsics())
+    with pytest.raises(InputError, match="fx"):
+        CameraIntrinsics(fx=0.0)

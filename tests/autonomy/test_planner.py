@@ -1,0 +1,61 @@
+"""A* on navigation graphs against brute-force shortest paths."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from autonomy.planner import NoPathError, astar, path_length
+from autonomy.vectormap import NavEdge, NavGraph, NavNode
+
+
+def _graph(xy: np.ndarray, edges: list[tuple[int, int]], stairs: set[int] = frozenset()) -> NavGraph:
+    nodes = tuple(NavNode(id=int(10 + i), x=float(p[0]), y=float(p[1])) for i, p in enumerate(xy))
+    es = tuple(NavEdge(s0_id=10 + a, s1_id=10 + b, has_stairs=(k in stairs)) for k, (a, b) in enumerate(edges))
+    return NavGraph(nodes=nodes, edges=es)
+
+
+def _floyd(xy: np.ndarray, edges, stairs=frozenset()) -> np.ndarray:
+    n = len(xy)
+    d = np.full((n, n), math.inf)
+    np.fill_diagonal(d, 0)
+    for k, (a, b) in enumerate(edges):
+        if k in stairs:
+            continue
+        L = float(np.hypot(*(xy[a] - xy[b])))
+        d[a, b] = d[b, a] = min(d[a, b], L)
+    for k in range(n):
+        d = np.minimum(d, d[:, k : k + 1] + d[k : k + 1, :])
+    return d
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 10**6), st.integers(3, 12))
+def test_astar_is_a_shortest_path(seed: int, n: int) -> None:
+    rng = np.random.default_rng(seed)
+    xy = rng.uniform(0, 20, size=(n, 2))
+    pairs = list(itertools.combinations(range(n), 2))
+    edges = [pairs[i] for i in rng.choice(len(pairs), size=min(len(pairs), 2 * n), replace=False)]
+    stairs = {int(k) for k in rng.choice(len(edges), size=len(edges) // 5, replace=False)}
+    g = _graph(xy, edges, stairs)
+    dist = _floyd(xy, edges, stairs)
+    for a, b in [(0, n - 1), (1, n // 2)]:
+        if math.isinf(dist[a, b]):
+            with pytest.raises(NoPathError):
+                astar(g, 10 + a, 10 + b)
+        else:
+            p = astar(g, 10 + a, 10 + b)
+            assert p[0] == 10 + a and p[-1] == 10 + b
+            assert path_length(g, p) == pytest.approx(dist[a, b])
+
+
+def test_stairs_are_excluded_unless_allowed() -> None:
+    xy = np.array([[0, 0], [10, 0], [5, 5]], float)
+    g = _graph(xy, [(0, 1), (0, 2), (2, 1)], stairs={0})
+    assert astar(g, 10, 11) == [10, 12, 11]
+    assert astar(g, 10, 11, exclude_stairs=False) == [10, 11]

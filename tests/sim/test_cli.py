@@ -1,0 +1,119 @@
+"""The CLI contract: exit 0 on success, 2 with one stderr line (no traceback) on user error."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sim.cli import main
+from sim.scenario import ASSETS_DIR
+from tests.helpers import GL
+
+SMALL = ASSETS_DIR / "small_floor.vectormap.txt"
+
+
+def _err_line(capsys) -> str:
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1, err
+    assert "Traceback" not in err
+    return lines[0]
+
+
+def test_map_check_prints_summary(capsys) -> None:
+    assert main(["map", "check", str(SMALL)]) == 0
+    out = capsys.readouterr().out
+    assert "segments" in out and "extent" in out and "total wall length" in out
+
+
+@pytest.mark.parametrize(
+    "content, pattern",
+    [
+        ("0, 0, 1\n", ":1:"),
+        ("0, 0, 1, 1\n1, 2, x, 4\n", ":2:"),
+        ("0, 0, nan, 1\n", ":1:"),
+        ("", "no wall segments"),
+    ],
+)
+def test_map_check_bad_file_exits_2(tmp_path: Path, capsys, content: str, pattern: str) -> None:
+    p = tmp_path / "bad.vectormap.txt"
+    p.write_text(content)
+    assert main(["map", "check", str(p)]) == 2
+    line = _err_line(capsys)
+    assert "bad.vectormap.txt" in line and pattern in line
+
+
+def test_map_convert_round_trip(tmp_path: Path, capsys) -> None:
+    from autonomy.vectormap import load_vectormap
+
+    j = tmp_path / "m.vectormap.json"
+    t = tmp_path / "m.vectormap.txt"
+    assert main(["map", "convert", str(SMALL), str(j)]) == 0
+    assert main(["map", "convert", str(j), str(t)]) == 0
+    np.testing.assert_array_equal(load_vectormap(SMALL).segments, load_vectormap(t).segments)
+
+
+def test_map_render(tmp_path: Path) -> None:
+    out = tmp_path / "m.png"
+    graph = ASSETS_DIR / "small_floor.navigation.json"
+    assert main(["map", "render", str(SMALL), "--graph", str(graph), "--out", str(out)]) == 0
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_snapshot_writes_depth(tmp_path: Path) -> None:
+    from autonomy.vectormap import load_navgraph
+
+    g = load_navgraph(ASSETS_DIR / "small_floor.navigation.json")
+    x, y = g.node_xy()[0]
+    backend = "gl" if GL else "raycast"
+    rc = main(["snapshot", "small_floor", "--pose", f"{x},{y},0.0", "--no-noise", "--backend", backend, "--out", str(tmp_path)])
+    assert rc == 0
+    d = np.load(tmp_path / "depth.npy")
+    assert d.shape == (480, 640) and d.dtype == np.float32 and np.isfinite(d).all()
+    assert (d > 0).mean() > 0.5
+    assert (tmp_path / "depth.png").stat().st_size > 1000
+
+
+@pytest.mark.parametrize(
+    "argv, pattern",
+    [
+        (["snapshot", "small_floor", "--pose", "1,2", "--out", "x"], "expected X,Y,THETA"),
+        (["snapshot", "small_floor", "--pose", "1e6,2,0", "--out", "x"], "outside the map"),
+        (["snapshot", "nowhere.txt", "--pose", "1,2,0", "--out", "x"], "map file not found"),
+        (["run", "missing.toml"], "scenario file not found"),
+        (["map", "check", "missing.vectormap.txt"], "not found"),
+        (["map", "convert", str(SMALL), "out.svg"], "svg"),
+        (["map"], "required"),
+        (["frobnicate"], "invalid choice"),
+    ],
+)
+def test_user_errors_exit_2_with_one_line(capsys, argv, pattern) -> None:
+    assert main(argv) == 2
+    assert pattern in _err_line(capsys)
+
+
+def test_run_with_bad_set_exits_2(capsys) -> None:
+    assert main(["run", "scenarios/demo.toml", "--set", "robot.bogus=1"]) == 2
+    assert "unknown key 'robot.bogus'" in _err_line(capsys)
+
+
+def test_scenarios_lists_each_file(capsys) -> None:
+    assert main(["scenarios"]) == 0
+    out = capsys.readouterr().out
+    assert "demo.toml" in out
+
+
+def test_console_script_exit_code_and_no_traceback(tmp_path: Path) -> None:
+    bad = tmp_path / "x.vectormap.txt"
+    bad.write_text("1, 2, 3\n")
+    r = subprocess.run([sys.executable, "-m", "sim.cli", "map", "check", str(bad)], capture_output=True, text=True)
+    assert r.returncode == 2
+    assert r.stderr.count("\n") == 1 and "Traceback" not in r.stderr
+    r = subprocess.run([sys.executable, "-m", "sim.cli", "scenarios"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    json.dumps(r.stdout)

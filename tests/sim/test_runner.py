@@ -1,0 +1,78 @@
+"""Headless end-to-end runs of the demo scenario (closed loop, report contract, files)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sim.cli import main
+from sim.runner import run_scenario
+from sim.scenario import SCENARIOS_DIR, load_scenario
+
+REQUIRED_METRICS = {"frames", "distance_m", "duration_s", "collisions", "waypoints_reached", "waypoints_failed", "realtime_factor"}
+
+
+def _short_demo(extra: list[str] | None = None):
+    return load_scenario(
+        SCENARIOS_DIR / "demo.toml",
+        ["map.name=\"small_floor\"", "mission.max_duration_s=6.0", "actors.random_furniture=1", "actors.random_people=1"] + (extra or []),
+    )
+
+
+def test_short_run_writes_the_report_contract(tmp_path: Path) -> None:
+    rep = run_scenario(_short_demo(), tmp_path, seed=3, progress=False)
+    on_disk = json.loads((tmp_path / "report.json").read_text())
+    assert on_disk == json.loads(json.dumps(rep))
+    assert on_disk["scenario"] == "demo" and on_disk["seed"] == 3
+    assert REQUIRED_METRICS <= set(on_disk["metrics"])
+    assert isinstance(on_disk["paper"], dict)
+    assert {"physics", "render", "noise"} <= set(on_disk["timing_ms"])
+    m = on_disk["metrics"]
+    assert m["waypoints_reached"] + m["waypoints_failed"] + m["waypoints_unvisited"] == len(on_disk["waypoints"])
+    assert m["distance_m"] > 1.0  # it drove
+    tum = np.loadtxt(tmp_path / "trajectory_truth.tum")
+    assert tum.shape[1] == 8 and len(tum) == m["frames"] + 1
+    np.testing.assert_allclose(np.linalg.norm(tum[:, 4:], axis=1), 1.0, atol=1e-6)
+    assert (tmp_path / "trajectory.png").stat().st_size > 1000
+
+
+def test_same_seed_same_run(tmp_path: Path) -> None:
+    a = run_scenario(_short_demo(["mission.max_duration_s=2.0"]), tmp_path / "a", seed=11, progress=False)
+    b = run_scenario(_short_demo(["mission.max_duration_s=2.0"]), tmp_path / "b", seed=11, progress=False)
+    assert (tmp_path / "a" / "trajectory_truth.tum").read_text() == (tmp_path / "b" / "trajectory_truth.tum").read_text()
+    assert a["metrics"]["distance_m"] == b["metrics"]["distance_m"]
+
+
+def test_interrupted_run_still_writes_its_report(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import sim.runner as runner
+
+    calls = {"n": 0}
+    real = runner.apply_kinect_noise
+
+    def flaky(*args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == 20:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(runner, "apply_kinect_noise", flaky)
+    rep = run_scenario(_short_demo(), tmp_path, seed=1, progress=False)
+    assert rep["interrupted"] is True
+    assert rep["metrics"]["frames"] == 19
+    assert json.loads((tmp_path / "report.json").read_text())["interrupted"] is True
+
+
+@pytest.mark.slow
+def test_demo_scenario_end_to_end_via_cli(tmp_path: Path) -> None:
+    """The README's demo, headless through the CLI, with a rerun recording."""
+    out = tmp_path / "demo"
+    rrd = out / "demo.rrd"
+    assert main(["run", "scenarios/demo.toml", "--out", str(out), "--rrd", str(rrd)]) == 0
+    rep = json.loads((out / "report.json").read_text())
+    m = rep["metrics"]
+    assert m["waypoints_reached"] >= 3
+    assert m["realtime_factor"] > 1.0
+    assert rrd.stat().st_size > 100_000

@@ -1,0 +1,96 @@
+"""Scenario TOML is parsed strictly: unknown keys, wrong types, missing files are one-line errors."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from autonomy.errors import InputError
+from sim.config import apply_overrides, parse_override
+from sim.scenario import SCENARIOS_DIR, Scenario, list_scenarios, load_scenario
+
+
+def _write(tmp_path: Path, text: str) -> Path:
+    p = tmp_path / "s.toml"
+    p.write_text(text)
+    return p
+
+
+BASE = 'name = "t"\n[map]\nname = "small_floor"\n'
+
+
+def test_every_shipped_scenario_parses() -> None:
+    items = list_scenarios()
+    assert items, "no scenarios shipped"
+    for path, desc in items:
+        scn = load_scenario(path)
+        assert isinstance(scn, Scenario)
+        assert desc, f"{path.name} has no description"
+
+
+def test_defaults_are_the_papers_and_design_values(tmp_path: Path) -> None:
+    scn = load_scenario(_write(tmp_path, BASE))
+    assert scn.kinect.intrinsics.width == 640 and scn.kinect.intrinsics.fx == 580.0
+    assert scn.kinect.mount.height_m == 0.7 and scn.kinect.mount.forward_m == 0.22
+    assert scn.robot.max_speed_mps == 0.75 and scn.robot.max_angular_rad_s == 1.5
+    assert scn.world.wall_height_m == 2.5 and scn.world.wall_thickness_m == 0.02
+    assert scn.odometry.translation_noise == 0.2
+
+
+@pytest.mark.parametrize(
+    "text, pattern",
+    [
+        (BASE + "[robot]\nmax_sped_mps = 1.0\n", r"s\.toml: unknown key 'robot\.max_sped_mps' \(expected one of: "),
+        (BASE + "[robot]\nmax_speed_mps = \"fast\"\n", r"key 'robot\.max_speed_mps' expected a number, got string 'fast'"),
+        (BASE + "[kinect.noise]\nshadows = 1\n", r"key 'kinect\.noise\.shadows' expected true or false"),
+        (BASE + "[kinect.intrinsics]\nwidth = 640.5\n", r"key 'kinect\.intrinsics\.width' expected an integer"),
+        (BASE + "[robot]\nradius_m = -1.0\n", r"s\.toml: robot\.radius_m: expected a positive number"),
+        ('name = "t"\n[map]\nname = "nope"\n', r"key 'map\.name': no building 'nope'"),
+        ('name = "t"\n[map]\nvectormap = "x.txt"\nnavgraph = "y.json"\n', r"key 'map\.vectormap': file not found"),
+        ("[map]\nname = \"small_floor\"\n", r"missing key 'name'"),
+        (BASE + "[[actors.furniture]]\nkind = \"sofa\"\n", r"furniture kind 'sofa'"),
+        (BASE + "[[actors.people]]\nroute = [[0, 0]]\n", r"at least two"),
+        (BASE + "[mission]\nkind = \"dance\"\n", r"mission\.kind 'dance'"),
+        ("seed = [1]\n" + BASE, r"key 'seed' expected an integer, got an array"),
+        (BASE + "seed = 3\n", r"unknown key 'map\.seed'"),
+        ("name = \n", r"s\.toml: invalid TOML"),
+    ],
+)
+def test_bad_scenarios_name_file_key_and_expectation(tmp_path: Path, text: str, pattern: str) -> None:
+    with pytest.raises(InputError, match=pattern) as ei:
+        load_scenario(_write(tmp_path, text))
+    assert "\n" not in str(ei.value)
+
+
+def test_missing_file(tmp_path: Path) -> None:
+    with pytest.raises(InputError, match="scenario file not found"):
+        load_scenario(tmp_path / "none.toml")
+
+
+def test_overrides_go_through_the_same_checks(tmp_path: Path) -> None:
+    p = _write(tmp_path, BASE)
+    scn = load_scenario(p, ["robot.max_speed_mps=0.5", "kinect.noise.shadows=false", "mission.waypoints=[1, 2]"])
+    assert scn.robot.max_speed_mps == 0.5 and scn.kinect.noise.shadows is False and scn.mission.waypoints == (1, 2)
+    with pytest.raises(InputError, match="unknown key 'robot.speed'"):
+        load_scenario(p, ["robot.speed=1"])
+    with pytest.raises(InputError, match="expected KEY=VALUE"):
+        load_scenario(p, ["robot.max_speed_mps"])
+    with pytest.raises(InputError, match="expected a number, got string 'abc'"):
+        load_scenario(p, ["robot.max_speed_mps=abc"])
+
+
+@given(st.text(alphabet="abcdefgh._=[] 0123456789\"'", max_size=30))
+def test_override_parser_never_crashes(text: str) -> None:
+    try:
+        path, _ = parse_override(text)
+        apply_overrides({}, [text])
+        assert all(path)
+    except InputError:
+        pass
+
+
+def test_shipped_scenarios_dir_exists() -> None:
+    assert (SCENARIOS_DIR / "demo.toml").is_file()

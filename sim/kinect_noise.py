@@ -1,0 +1,923 @@
+"""Kinect v1 depth-noise model applied to a clean planar depth image.
+
+Terms (each switchable in :class:`KinectNoiseConfig`), applied in this order:
+
+1. Incidence angle ``theta`` per pixel from normals of the *clean* image
+   (:func:`incidence_angle`).
+2. Projector shadows: pixels the IR projector cannot see are 0 (per-row epipolar scan).
+3. Lateral noise (Nguyen, Izadi & Lovell 2012, eq. for sigma_L): each output pixel takes
+   the depth of the pixel at a Gaussian offset (rounded, clamped to the image), which
+   blurs depth edges.
+4. Axial noise (same paper): Gaussian sigma_z(z, theta) added to z.
+5. Disparity quantisation: d = f b / z in 1/8 px steps (Kinect v1, DESIGN.md).
+6. Range cut [min_range_m, max_range_m] on the measured depth.
+7. Dropouts rising linearly with theta between 70 and 85 degrees, plus an optional
+   uniform dropout rate.
+
+Randomness is counter based: pixel i of a frame draws one 64-bit word, a SplitMix64 hash
+of (seed, i) (Steele, Lea & Flood 2014), whose bits give the two lateral offsets (a
+2048-quantile normal table), the axial normal (a 1024-layer ziggurat, Marsaglia & Tsang
+2000) and the dropout uniform. The output depends only on the inputs and the seed (never
+on call history, global RNG state or the thread count): same seed, same image, bit for bit.
+
+Speed: per row, vectorised float32 loops (normals, incidence angles, the final arithmetic)
+and lean scalar loops (table lookups, gathers, the shadow scan). The image is split into
+``cfg.threads`` row blocks run on threads with the GIL released; each block computes its
+own halo rows, so blocks need no synchronisation. See :func:`benchmark_noise`.
+
+Choices where the sources leave room: an output pixel whose own input is invalid stays 0
+(holes are not filled by the lateral jitter; a shadowed pixel can take a lit neighbour's
+depth); sigma_z and the dropout probability are those of the source pixel (its clean
+depth and theta); sigma_L is in pixels of a ``focal_px`` camera and scales with
+``intr.fx``; the range cut applies to the measured (noisy, quantised) depth; theta is
+clamped to 89 degrees in the closed forms. Nguyen et al. measured sigma_z on the sensor's
+quantised output; as specified for this module we still add quantisation on top
+(variance about sigma_z^2 + step^2 / 12).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, fields, replace
+from statistics import NormalDist
+
+import numba
+import numpy as np
+
+from autonomy.camera import CameraIntrinsics
+from autonomy.errors import InputError
+
+#: Incidence angles are clamped below this in the closed forms (both blow up at pi/2).
+THETA_MAX_RAD = math.radians(89.0)
+
+
+@dataclass(frozen=True)
+class KinectNoiseConfig:
+    """Parameters of the Kinect v1 noise model (Nguyen, Izadi & Lovell 2012; DESIGN.md)."""
+
+    axial: bool = True
+    """Add Gaussian axial noise sigma_z(z, theta)."""
+    axial_a_m: float = 0.0012
+    """Constant term of sigma_z (Nguyen et al.: 0.0012 m)."""
+    axial_b_per_m: float = 0.0019
+    """Quadratic coefficient of sigma_z in (z - z0)^2 (0.0019 1/m)."""
+    axial_z0_m: float = 0.4
+    """Depth z0 of the quadratic's vertex (0.4 m)."""
+    axial_grazing_m: float = 0.0001
+    """Grazing-term coefficient of sigma_z: c / sqrt(z) * theta^2 / (pi/2 - theta)^2 (0.0001)."""
+    axial_grazing_start_rad: float = math.radians(60.0)
+    """Incidence angle above which the grazing term is added (60 degrees)."""
+    lateral: bool = True
+    """Jitter each pixel's source position by the lateral noise sigma_L(theta)."""
+    lateral_a_px: float = 0.8
+    """Constant term of sigma_L in pixels of the 580 px camera (0.8 px)."""
+    lateral_b_px: float = 0.035
+    """Coefficient of theta / (pi/2 - theta) in sigma_L (0.035 px)."""
+    quantize: bool = True
+    """Quantise the disparity d = f b / z to 1/subpixel px."""
+    focal_px: float = 580.0
+    """Focal length f of the IR camera used for disparity (px)."""
+    baseline_m: float = 0.075
+    """Projector-camera baseline b used for disparity (m)."""
+    subpixel: int = 8
+    """Disparity steps per pixel (Kinect v1: 1/8 px)."""
+    min_range_m: float = 0.8
+    """Measured depths below this become 0."""
+    max_range_m: float = 4.0
+    """Measured depths above this become 0 (may be inf)."""
+    shadows: bool = True
+    """Zero the pixels the IR projector cannot see."""
+    projector_offset_m: float = 0.075
+    """Projector position along the optical x axis from the camera (+ = right in the image)."""
+    dropouts: bool = True
+    """Drop pixels seen at grazing incidence."""
+    dropout_start_rad: float = math.radians(70.0)
+    """Incidence angle where the dropout probability starts rising from 0."""
+    dropout_full_rad: float = math.radians(85.0)
+    """Incidence angle where the dropout probability reaches 1."""
+    dropout_rate: float = 0.0
+    """Extra uniform dropout probability for every valid pixel (when dropouts is on)."""
+    normal_max_rel_jump: float = 0.05
+    """Neighbour depth jump (relative to z) beyond which it is not used for the normal."""
+    threads: int = 2
+    """Threads for the kernels (capped at the CPU count); the output does not depend on it."""
+
+    def __post_init__(self) -> None:
+        for fd in fields(self):
+            val = getattr(self, fd.name)
+            if fd.type in ("bool", bool):
+                if not isinstance(val, bool | np.bool_):
+                    raise InputError(f"KinectNoiseConfig.{fd.name}: expected a bool, got {val!r}")
+            elif fd.name in ("subpixel", "threads"):
+                if isinstance(val, bool) or not isinstance(val, int | np.integer) or val <= 0:
+                    raise InputError(
+                        f"KinectNoiseConfig.{fd.name}: expected a positive int, got {val!r}"
+                    )
+            else:
+                if isinstance(val, bool) or not isinstance(
+                    val, int | float | np.integer | np.floating
+                ):
+                    raise InputError(f"KinectNoiseConfig.{fd.name}: expected a number, got {val!r}")
+                if math.isnan(val) or (math.isinf(val) and fd.name != "max_range_m"):
+                    raise InputError(f"KinectNoiseConfig.{fd.name}: must be finite, got {val!r}")
+
+        def need(ok: bool, name: str, what: str) -> None:
+            if not ok:
+                raise InputError(f"KinectNoiseConfig.{name}: {what}, got {getattr(self, name)!r}")
+
+        need(self.axial_a_m >= 0, "axial_a_m", "must be >= 0")
+        need(self.axial_b_per_m >= 0, "axial_b_per_m", "must be >= 0")
+        need(self.axial_grazing_m >= 0, "axial_grazing_m", "must be >= 0")
+        need(
+            0 <= self.axial_grazing_start_rad < math.pi / 2,
+            "axial_grazing_start_rad",
+            "must be in [0, pi/2)",
+        )
+        need(self.lateral_a_px >= 0, "lateral_a_px", "must be >= 0")
+        need(self.lateral_b_px >= 0, "lateral_b_px", "must be >= 0")
+        need(self.focal_px > 0, "focal_px", "must be > 0")
+        need(self.baseline_m > 0, "baseline_m", "must be > 0")
+        need(self.min_range_m >= 0, "min_range_m", "must be >= 0")
+        need(
+            self.max_range_m > self.min_range_m,
+            "max_range_m",
+            f"must be > min_range_m={self.min_range_m}",
+        )
+        need(
+            0 <= self.dropout_start_rad <= math.pi / 2, "dropout_start_rad", "must be in [0, pi/2]"
+        )
+        need(
+            self.dropout_start_rad < self.dropout_full_rad <= math.pi / 2,
+            "dropout_full_rad",
+            f"must be in (dropout_start_rad={self.dropout_start_rad:.4f}, pi/2]",
+        )
+        need(0 <= self.dropout_rate <= 1, "dropout_rate", "must be in [0, 1]")
+        need(self.normal_max_rel_jump > 0, "normal_max_rel_jump", "must be > 0")
+
+
+# --------------------------------------------------------------------------- closed forms
+
+
+def axial_sigma_m(z, theta, cfg: KinectNoiseConfig | None = None) -> np.ndarray:
+    """Axial noise sigma_z(z, theta) in metres (Nguyen, Izadi & Lovell 2012, Sec. 3).
+
+    0.0012 + 0.0019 (z - 0.4)^2, plus 0.0001 / sqrt(z) * theta^2 / (pi/2 - theta)^2 for
+    theta > 60 degrees. theta is clamped to :data:`THETA_MAX_RAD`.
+    """
+    c = cfg or KinectNoiseConfig()
+    z = np.asarray(z, dtype=np.float64)
+    th = np.minimum(np.asarray(theta, dtype=np.float64), THETA_MAX_RAD)
+    s = c.axial_a_m + c.axial_b_per_m * (z - c.axial_z0_m) ** 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        graze = c.axial_grazing_m / np.sqrt(z) * th**2 / (math.pi / 2 - th) ** 2
+    return np.where(th > c.axial_grazing_start_rad, s + graze, s)
+
+
+def lateral_sigma_px(theta, cfg: KinectNoiseConfig | None = None) -> np.ndarray:
+    """Lateral noise sigma_L(theta) = 0.8 + 0.035 theta / (pi/2 - theta) px (Nguyen et al. 2012).
+
+    In pixels of a camera with ``cfg.focal_px``; theta is clamped to :data:`THETA_MAX_RAD`.
+    """
+    c = cfg or KinectNoiseConfig()
+    th = np.minimum(np.asarray(theta, dtype=np.float64), THETA_MAX_RAD)
+    return c.lateral_a_px + c.lateral_b_px * th / (math.pi / 2 - th)
+
+
+def depth_step_m(z, cfg: KinectNoiseConfig | None = None) -> np.ndarray:
+    """Depth spacing of the disparity grid at z, to first order z^2 / (subpixel f b).
+
+    2.9 mm at 1 m and 46 mm at 4 m for the Kinect v1 defaults (DESIGN.md).
+    """
+    c = cfg or KinectNoiseConfig()
+    z = np.asarray(z, dtype=np.float64)
+    return z * z / (c.subpixel * c.focal_px * c.baseline_m)
+
+
+def dropout_probability(theta, cfg: KinectNoiseConfig | None = None) -> np.ndarray:
+    """Grazing-angle dropout probability: linear from 0 at dropout_start_rad to 1 at dropout_full_rad."""
+    c = cfg or KinectNoiseConfig()
+    th = np.asarray(theta, dtype=np.float64)
+    return np.clip(
+        (th - c.dropout_start_rad) / (c.dropout_full_rad - c.dropout_start_rad), 0.0, 1.0
+    )
+
+
+# --------------------------------------------------------------------------- random numbers
+#
+# Every pixel i = v * W + u owns one 64-bit word r = mix64(key + (i + 1) * gamma) (SplitMix64,
+# Steele, Lea & Flood 2014, used as a counter-based generator). Its bits:
+#   0-10 lateral u offset, 11-21 lateral v offset (index into _LAT_G),
+#   22-31 ziggurat layer, 32 sign, 33-47 ziggurat uniform (axial noise),
+#   48-63 dropout uniform.
+# The rare ziggurat wedge and tail tests hash r again for more words.
+
+_GAMMA = np.uint64(0x9E3779B97F4A7C15)
+_M1 = np.uint64(0xBF58476D1CE4E5B9)
+_M2 = np.uint64(0x94D049BB133111EB)
+_S30 = np.uint64(30)
+_S27 = np.uint64(27)
+_S31 = np.uint64(31)
+_S11 = np.uint64(11)
+_S22 = np.uint64(22)
+_S32 = np.uint64(32)
+_S33 = np.uint64(33)
+_M15 = np.uint64(0x7FFF)
+_ONE = np.uint64(1)
+_LAYER_MASK = np.uint64(0x3FF)
+_LAT_MASK = np.uint64(0x7FF)
+_TWO_M53 = 2.0**-53
+_TWO_M15 = 2.0**-15
+
+# Ziggurat for the standard normal (Marsaglia & Tsang 2000) with 1024 layers: the fast
+# path takes 99.6 % of draws. R (the base strip's edge) and V (every layer's area, for
+# f(x) = exp(-x^2 / 2)) solve the closure of the top layer; found by bisection.
+_ZIG_N = 1024
+_ZIG_R = 4.038849846109504
+_ZIG_V = 0.0012263246463530893
+
+
+def _ziggurat_tables() -> tuple[np.ndarray, np.ndarray]:
+    n = _ZIG_N
+    x = np.zeros(n + 1)
+    x[0] = _ZIG_V / math.exp(-0.5 * _ZIG_R * _ZIG_R)
+    x[1] = _ZIG_R
+    for i in range(1, n - 1):
+        x[i + 1] = math.sqrt(-2.0 * math.log(_ZIG_V / x[i] + math.exp(-0.5 * x[i] * x[i])))
+    x[n] = 0.0
+    return x, np.exp(-0.5 * x * x)
+
+
+_ZIG_X, _ZIG_F = _ziggurat_tables()
+_ZIG_X32 = _ZIG_X.astype(np.float32)  # the vectorised fast-path test
+
+#: 2048 equiprobable standard-normal quantiles Phi^-1((i + 0.5) / 2048) (|g| <= 3.49). The
+#: lateral offsets are rounded to whole pixels, so this discretised normal gets each offset's
+#: probability right to 1/2048 for one table load.
+_LAT_G = np.array([NormalDist().inv_cdf((i + 0.5) / 2048) for i in range(2048)], dtype=np.float32)
+
+
+@numba.njit(cache=True, inline="always")
+def _mix64(s):  # pragma: no cover - numba
+    """SplitMix64 finaliser (Steele, Lea & Flood 2014)."""
+    s = (s ^ (s >> _S30)) * _M1
+    s = (s ^ (s >> _S27)) * _M2
+    return s ^ (s >> _S31)
+
+
+@numba.njit(cache=True, inline="always")
+def _uniform53(r):  # pragma: no cover - numba
+    """Uniform in [0, 1) from the top 53 bits of a 64-bit word."""
+    return float(np.int64(r >> _S11)) * _TWO_M53
+
+
+@numba.njit(cache=True, inline="always")
+def _zig_candidate(r):  # pragma: no cover - numba
+    """Ziggurat candidate of a word: layer, sign (+-1) and x = U * X[layer]."""
+    i = np.int64((r >> _S22) & _LAYER_MASK)
+    sgn = 1.0 - 2.0 * float(np.int64((r >> _S32) & _ONE))
+    x = float(np.int32((r >> _S33) & _M15)) * _TWO_M15 * _ZIG_X[i]
+    return i, sgn, x
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _normal_slow(r):  # pragma: no cover - numba
+    """Standard normal of a word: the full ziggurat, more words chained by SplitMix64."""
+    while True:
+        i, sgn, x = _zig_candidate(r)
+        if x < _ZIG_X[i + 1]:
+            return sgn * x
+        if i == 0:  # tail beyond R (Marsaglia 1964)
+            while True:
+                r = _mix64(r + _GAMMA)
+                xt = -math.log(1.0 - _uniform53(r)) / _ZIG_R
+                r = _mix64(r + _GAMMA)
+                yt = -math.log(1.0 - _uniform53(r))
+                if 2.0 * yt > xt * xt:
+                    break
+            return sgn * (_ZIG_R + xt)
+        r = _mix64(r + _GAMMA)  # wedge
+        y = _ZIG_F[i] + _uniform53(r) * (_ZIG_F[i + 1] - _ZIG_F[i])
+        if y < math.exp(-0.5 * x * x):
+            return sgn * x
+        r = _mix64(r + _GAMMA)
+
+
+@numba.njit(cache=True)
+def _normals(key, n, out):  # pragma: no cover - numba
+    """n standard normals from the kernel's ziggurat and words (tests the generator)."""
+    for i in range(n):
+        out[i] = _normal_slow(_mix64(key + np.uint64(i + 1) * _GAMMA))
+
+
+# --------------------------------------------------------------------------- kernels
+
+_F32 = np.float32
+# Abramowitz & Stegun 4.4.46: acos(x) = sqrt(1 - x) * poly(x), |error| <= 2e-8 on [0, 1].
+_A0, _A1, _A2, _A3 = (
+    _F32(1.5707963050),
+    _F32(-0.2145988016),
+    _F32(0.0889789874),
+    _F32(-0.0501743046),
+)
+_A4, _A5, _A6, _A7 = (
+    _F32(0.0308918810),
+    _F32(-0.0170881256),
+    _F32(0.0066700901),
+    _F32(-0.0012624911),
+)
+_F0 = _F32(0.0)
+_F1 = _F32(1.0)
+_F2 = _F32(2.0)
+_F_HALF = _F32(0.5)
+_F_TWO_M15 = _F32(2.0**-15)
+_F_TWO_M16 = _F32(2.0**-16)
+_U1 = np.uint32(1)
+_U15 = np.uint32(0x7FFF)
+_U16 = np.uint32(16)
+_FINF = _F32(np.inf)
+_F_HALF_PI = _F32(0.5 * math.pi)
+_F_THETA_MAX = _F32(THETA_MAX_RAD)
+_Q_MAX = float(_F_THETA_MAX / (_F_HALF_PI - _F_THETA_MAX))  # theta / (pi/2 - theta) at the clamp
+# Vectorisable float maths that keeps NaN / inf semantics (no "nnan", "ninf").
+_FAST = {"nsz", "arcp", "contract", "afn", "reassoc"}
+
+
+@numba.njit(cache=True, inline="always", error_model="numpy", fastmath=_FAST)
+def _acos01(c):  # pragma: no cover - numba
+    """acos on [0, 1] (float32, A&S 4.4.46) without a libm call."""
+    p = _A7
+    p = p * c + _A6
+    p = p * c + _A5
+    p = p * c + _A4
+    p = p * c + _A3
+    p = p * c + _A2
+    p = p * c + _A1
+    p = p * c + _A0
+    return math.sqrt(max(_F1 - c, _F0)) * p
+
+
+@numba.njit(cache=True, inline="always", error_model="numpy", fastmath=_FAST)
+def _theta_px(z, zl, zr, zu, zd, xl, xc, xr, yu, yc, yd, jump):  # pragma: no cover - numba
+    """Incidence angle at one pixel from its 4 neighbours (0 = missing), branch free.
+
+    With P = z (x, y, 1) the horizontal difference P_r - P_l is A r + alpha e_x, with
+    r = (x_c, y_c, 1), A = z_r - z_l and alpha = (x_r - x_c) z_r + (x_c - x_l) z_l (a
+    missing side is replaced by the centre: one-sided differences); likewise vertically
+    B r + beta e_y. Their cross product is n = (-A beta, -alpha B, A beta x_c + alpha B y_c
+    + alpha beta) and n . r = alpha beta, exactly.
+    """
+    lim = jump * z
+    okl = (zl > _F0) & (abs(zl - z) <= lim)
+    okr = (zr > _F0) & (abs(zr - z) <= lim)
+    oku = (zu > _F0) & (abs(zu - z) <= lim)
+    okd = (zd > _F0) & (abs(zd - z) <= lim)
+    valid = (z > _F0) & (z < _FINF) & (okl | okr) & (oku | okd)
+    zl = zl if okl else z
+    zr = zr if okr else z
+    zu = zu if oku else z
+    zd = zd if okd else z
+    al = (xc - xl) if okl else _F0
+    ar = (xr - xc) if okr else _F0
+    bu = (yc - yu) if oku else _F0
+    bd = (yd - yc) if okd else _F0
+    a = zr - zl
+    alpha = ar * zr + al * zl
+    b = zd - zu
+    beta = bd * zd + bu * zu
+    n1 = a * beta
+    n2 = alpha * b
+    ab = alpha * beta
+    n3 = n1 * xc + n2 * yc + ab
+    nn = (n1 * n1 + n2 * n2 + n3 * n3) * (xc * xc + yc * yc + _F1)
+    c = min(abs(ab) / math.sqrt(nn), _F1)
+    t = _acos01(c)
+    return t if (valid & (nn > _F0)) else _F0
+
+
+@numba.njit(cache=True, inline="always", error_model="numpy", fastmath=_FAST)
+def _row_theta(depth, zero, v, xn, yn, jump, out):  # pragma: no cover - numba
+    """Incidence angles of image row v into out (float32, vectorised)."""
+    h, w = depth.shape
+    rc = depth[v]
+    ru = depth[v - 1] if v > 0 else zero
+    rd = depth[v + 1] if v + 1 < h else zero
+    yu = yn[v - 1] if v > 0 else _F0
+    yd = yn[v + 1] if v + 1 < h else _F0
+    yc = yn[v]
+    if w == 1:
+        out[0] = _theta_px(rc[0], _F0, _F0, ru[0], rd[0], _F0, xn[0], _F0, yu, yc, yd, jump)
+        return
+    for u in range(1, w - 1):
+        out[u] = _theta_px(
+            rc[u], rc[u - 1], rc[u + 1], ru[u], rd[u], xn[u - 1], xn[u], xn[u + 1], yu, yc, yd, jump
+        )
+    out[0] = _theta_px(rc[0], _F0, rc[1], ru[0], rd[0], _F0, xn[0], xn[1], yu, yc, yd, jump)
+    e = w - 1
+    out[e] = _theta_px(rc[e], rc[e - 1], _F0, ru[e], rd[e], xn[e - 1], xn[e], _F0, yu, yc, yd, jump)
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST)
+def _params_rows(
+    depth, v0, v1, row0, xn, yn, jump, lat, sl, lit, th, theta_only
+):  # pragma: no cover - numba
+    """Incidence angles and lateral sigmas of rows [v0, v1) (float32, vectorised).
+
+    theta (see :func:`incidence_angle`) comes from normals of the clean image; xn, yn are
+    the float32 normalised pixel coordinates (u - cx) / fx, (v - cy) / fy. Writes the
+    depth (0 where invalid) to lit, theta to th and sigma_L in image px to sl, with
+    lat = (on, a, b, scale) (sigma_L = 0 when off). Image row v goes to row v - row0 of
+    sl, lit, th. With theta_only, writes theta to sl and nothing else.
+    """
+    w = depth.shape[1]
+    zero = np.zeros(w, dtype=np.float32)
+    lon, la, lb, lsc = lat[0], lat[1], lat[2], lat[3]
+    for v in range(v0, v1):
+        slr = sl[v - row0]
+        if theta_only:
+            _row_theta(depth, zero, v, xn, yn, jump, slr)
+            continue
+        thr = th[v - row0]
+        _row_theta(depth, zero, v, xn, yn, jump, thr)
+        rc = depth[v]
+        litr = lit[v - row0]
+        for u in range(w):
+            z = rc[u]
+            litr[u] = z if (z > _F0) & (z < _FINF) else _F0  # lit until shadowed
+            tc = min(thr[u], _F_THETA_MAX)
+            slr[u] = lon * lsc * (la + lb * tc / (_F_HALF_PI - tc))
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _shadow_rows(depth, v0, v1, row0, shift_px, lit):  # pragma: no cover - numba
+    """Zero lit (the depth; image row v at v - row0) in rows [v0, v1) where the projector
+    cannot see.
+
+    shift_px = fx * projector_offset_m (signed, float32). The projector column of pixel u
+    at depth z is u_p = u - shift_px / z (float32). Projector on the right (shift > 0):
+    occluders lie to the right, so scan right to left keeping the running min of u_p; a
+    pixel whose u_p is larger than that min is behind a nearer surface. Projector on the
+    left: mirror image (scan left to right, running max). The shadow band lies on the side
+    of a foreground object away from the projector.
+
+    Only the stretch between the first and last "drop" (u_p[u] > u_p[u + 1]; invalid
+    pixels count as infinitely far) needs the scan: beyond it u_p is monotone, so those
+    pixels are visible (the scan stops once past it at a visible pixel).
+    """
+    w = depth.shape[1]
+    if shift_px == _F0:
+        return
+    up = np.empty(w, dtype=np.float32)
+    far = _FINF if shift_px > _F0 else -_FINF
+    for v in range(v0, v1):
+        rc = depth[v]
+        for u in range(w):  # vectorised
+            z = rc[u]
+            up[u] = _F32(u) - shift_px / z if (z > _F0) & (z < _FINF) else far
+        drops = 0
+        for u in range(w - 1):  # vectorised
+            drops += up[u] > up[u + 1]
+        if drops == 0:
+            continue
+        first = 0
+        while up[first] <= up[first + 1]:
+            first += 1
+        last = w - 2
+        while up[last] <= up[last + 1]:
+            last -= 1
+        litr = lit[v - row0]
+        if shift_px > _F0:
+            run = up[last + 1]  # min of the non-decreasing part right of the last drop
+            for u in range(last, -1, -1):
+                x = up[u]
+                if x <= run:
+                    run = x
+                    if u <= first:
+                        break  # non-decreasing to the left: all visible
+                else:
+                    litr[u] = _F0
+        else:
+            run = up[first]  # max of the non-decreasing part left of the first drop
+            for u in range(first + 1, w):
+                x = up[u]
+                if x >= run:
+                    run = x
+                    if u > last:
+                        break  # non-decreasing to the right: all visible
+                else:
+                    litr[u] = _F0
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _noise_rows(
+    depth, v0, v1, row0, lit, th, sl, key, axl, drop, quantize, fbs, zmin, zmax, out
+):  # pragma: no cover - numba
+    """Lateral source, axial noise, quantisation, range cut and dropouts of rows [v0, v1).
+
+    lit is the lit depth and th the incidence angle of every pixel, sl its sigma_L (image
+    row v at v - row0; they must cover every row a lateral offset can reach).
+    axl = (on, a, b, z0, c, theta_g): sigma_z = a + b (z - z0)^2 [+ c / sqrt(z) q^2 if
+    theta > theta_g], q = theta / (pi/2 - theta), at the source pixel; drop = (on, start,
+    1 / (full - start), rate). fbs = subpixel f b, zmin, zmax are float32 (zmax may be inf).
+
+    Per row, lean scalar loops (table lookups, gathers) and loops that LLVM vectorises
+    (8 float32 lanes): 1 random word and table lookups (scalar); 2 lateral source index,
+    ziggurat fast path, dropout uniform (vectorised); 3 the source's lit depth and theta
+    (scalar gathers); 4 ziggurat slow paths (0.4 %); 5 sigma_z, noise, quantisation, range
+    cut, dropouts (vectorised). Output pixels whose own input is invalid are 0.
+    """
+    h, w = depth.shape
+    litf = lit.ravel()
+    thf = th.ravel()
+    aon, aa, ab, az0, ag, agst = axl[0], axl[1], axl[2], axl[3], axl[4], axl[5]
+    don, dst, dinv, drate = drop[0], drop[1], drop[2], drop[3]
+    hi = np.empty(w, dtype=np.uint32)  # bits 32-63 of the pixel's random word
+    g1 = np.empty(w, dtype=np.float32)  # lateral normals
+    g2 = np.empty(w, dtype=np.float32)
+    x0 = np.empty(w, dtype=np.float32)  # ziggurat X[layer], X[layer + 1]
+    x1 = np.empty(w, dtype=np.float32)
+    src = np.empty(w, dtype=np.int32)  # flat source index
+    gz = np.empty(w, dtype=np.float32)  # axial normal (0 where the slow path is pending)
+    ud = np.empty(w, dtype=np.float32)  # dropout uniform
+    slow = np.empty(w, dtype=np.bool_)
+    zb = np.empty(w, dtype=np.float32)  # source's lit depth
+    tb = np.empty(w, dtype=np.float32)  # source's incidence angle
+    w32 = np.int32(w)
+    r0 = np.int32(row0)
+    wmax = np.int32(w - 1)
+    hmax = np.int32(h - 1)
+    for v in range(v0, v1):
+        ctr = key + np.uint64(v * w) * _GAMMA
+        for u in range(w):  # 1: scalar (table lookups)
+            ctr += _GAMMA
+            r = _mix64(ctr)
+            hi[u] = np.uint32(r >> _S32)
+            g1[u] = _LAT_G[r & _LAT_MASK]
+            g2[u] = _LAT_G[(r >> _S11) & _LAT_MASK]
+            i = (r >> _S22) & _LAYER_MASK
+            x0[u] = _ZIG_X32[i]
+            x1[u] = _ZIG_X32[i + _ONE]
+        slr = sl[v - row0]
+        nslow = 0
+        for u in range(w):  # 2: vectorised
+            s = slr[u]
+            us = min(max(np.int32(u + np.int32(np.rint(s * g1[u]))), np.int32(0)), wmax)
+            vs = min(max(np.int32(v + np.int32(np.rint(s * g2[u]))), np.int32(0)), hmax)
+            src[u] = np.int32((vs - r0) * w32 + us)
+            b = hi[u]
+            x = _F32(np.int32((b >> _U1) & _U15)) * _F_TWO_M15 * x0[u]
+            fast = x < x1[u]
+            sgn = _F1 - _F2 * _F32(np.int32(b & _U1))
+            gz[u] = sgn * x if fast else _F0
+            ud[u] = (_F32(np.int32(b >> _U16)) + _F_HALF) * _F_TWO_M16
+            slow[u] = not fast
+            nslow += not fast
+        for u in range(w):  # 3: scalar (gathers)
+            j = np.uint64(src[u])
+            zb[u] = litf[j]
+            tb[u] = thf[j]
+        if nslow > 0:  # 4: the ziggurat's slow paths
+            ctr = key + np.uint64(v * w) * _GAMMA
+            for u in range(w):
+                if slow[u]:
+                    gz[u] = _F32(_normal_slow(_mix64(ctr + np.uint64(u + 1) * _GAMMA)))
+        rc = depth[v]
+        orow = out[v]
+        for u in range(w):  # 5: vectorised
+            z = zb[u]
+            ts = tb[u]
+            tc = min(ts, _F_THETA_MAX)
+            q = tc / (_F_HALF_PI - tc)
+            graze = ag * q * q / math.sqrt(z) if tc > agst else _F0
+            sigma = aon * (aa + ab * (z - az0) * (z - az0) + graze)
+            zn = z + sigma * gz[u]
+            k = np.rint(fbs / zn)
+            zq = fbs / k if quantize else zn
+            pg = don * min(max((ts - dst) * dinv, _F0), _F1)
+            z0 = rc[u]
+            ok = (ud[u] >= pg + drate - pg * drate) & (z0 > _F0) & (z0 < _FINF) & (z > _F0)
+            ok = ok & (zq > _F0) & (zq < _FINF) & (zq >= zmin) & (zq <= zmax)
+            orow[u] = zq if ok else _F0
+
+
+@numba.njit(cache=True, nogil=True)
+def _block(
+    depth,
+    r0,
+    r1,
+    margin,
+    xn,
+    yn,
+    jump,
+    lat,
+    shift_px,
+    key,
+    axl,
+    drop,
+    quantize,
+    fbs,
+    zmin,
+    zmax,
+    sl,
+    lit,
+    th,
+    out,
+    theta_only,
+):  # pragma: no cover - numba
+    """The whole model for output rows [r0, r1): parameters and shadows of rows
+    [r0 - margin, r1 + margin) into the block's own scratch (sl, lit, th), then the noise.
+
+    margin bounds the lateral row offsets, so blocks are independent (their halo rows are
+    computed twice, identically) and can run concurrently. With theta_only, just the
+    incidence angles of rows [r0, r1), into sl.
+    """
+    h = depth.shape[0]
+    a0 = max(0, r0 - margin)
+    a1 = min(h, r1 + margin)
+    if theta_only:
+        _params_rows(depth, r0, r1, r0, xn, yn, jump, lat, sl, lit, th, True)
+        return
+    _params_rows(depth, a0, a1, a0, xn, yn, jump, lat, sl, lit, th, False)
+    _shadow_rows(depth, a0, a1, a0, shift_px, lit)
+    _noise_rows(depth, r0, r1, a0, lit, th, sl, key, axl, drop, quantize, fbs, zmin, zmax, out)
+
+
+# --------------------------------------------------------------------------- public API
+
+
+def _check_depth(depth, intr: CameraIntrinsics) -> np.ndarray:
+    if not isinstance(intr, CameraIntrinsics):
+        raise InputError(f"intrinsics: expected CameraIntrinsics, got {type(intr).__name__}")
+    arr = np.asarray(depth)
+    if arr.dtype.kind != "f":
+        raise InputError(f"depth image: expected a float array in metres, got dtype {arr.dtype}")
+    if arr.shape != (intr.height, intr.width):
+        raise InputError(
+            f"depth image shape {arr.shape} does not match the camera's {(intr.height, intr.width)}"
+        )
+    return np.ascontiguousarray(arr, dtype=np.float32)
+
+
+def _normalised_coords(intr: CameraIntrinsics) -> tuple[np.ndarray, np.ndarray]:
+    """float32 (u - cx) / fx and (v - cy) / fy."""
+    xn = (np.arange(intr.width, dtype=np.float64) - intr.cx) / intr.fx
+    yn = (np.arange(intr.height, dtype=np.float64) - intr.cy) / intr.fy
+    return xn.astype(np.float32), yn.astype(np.float32)
+
+
+def incidence_angle(
+    depth: np.ndarray, intr: CameraIntrinsics, max_rel_jump: float = 0.05
+) -> np.ndarray:
+    """Angle between each pixel's ray and its surface normal (float32 radians, H x W).
+
+    Normals are the cross product of horizontal and vertical differences of back-projected
+    neighbours (central; one-sided at borders, invalid neighbours and depth jumps larger
+    than ``max_rel_jump * z``). Pixels without a normal (or invalid) get 0.
+    """
+    d = _check_depth(depth, intr)
+    if not (isinstance(max_rel_jump, int | float) and max_rel_jump > 0):
+        raise InputError(f"incidence_angle: max_rel_jump must be > 0, got {max_rel_jump!r}")
+    xn, yn = _normalised_coords(intr)
+    theta = np.empty(d.shape, dtype=np.float32)
+    lat, axl, drop = _cfg_arrays(KinectNoiseConfig(), intr)
+    t = theta
+    f0 = np.float32(0)
+    _block(
+        d, 0, d.shape[0], 0, xn, yn, np.float32(max_rel_jump), lat, f0, np.uint64(0), axl,
+        drop, False, f0, f0, f0, t, t, t, t, True,
+    )  # fmt: skip
+    return theta
+
+
+def _fbs(cfg: KinectNoiseConfig) -> float:
+    """subpixel * focal_px * baseline_m: depth times disparity in 1/subpixel px units."""
+    return float(cfg.subpixel) * float(cfg.focal_px) * float(cfg.baseline_m)
+
+
+def _check_seed(seed) -> int:
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer):
+        raise InputError(f"seed: expected an int, got {seed!r}")
+    seed = int(seed)
+    if not 0 <= seed < 2**64:
+        raise InputError(f"seed: must be in [0, 2**64), got {seed}")
+    return seed
+
+
+def _seed_key(seed: int) -> np.uint64:
+    """Per-frame key: SplitMix64 of the seed (nearby seeds give unrelated streams)."""
+    m = (1 << 64) - 1
+    s = (seed * 0x9E3779B97F4A7C15 + 0x632BE59BD9B4E019) & m
+    s = ((s ^ (s >> 30)) * 0xBF58476D1CE4E5B9) & m
+    s = ((s ^ (s >> 27)) * 0x94D049BB133111EB) & m
+    return np.uint64(s ^ (s >> 31))
+
+
+_tls = threading.local()
+_pool_lock = threading.Lock()
+_pool: ThreadPoolExecutor | None = None
+_pool_workers = 0
+
+
+def _reset_pool() -> None:
+    global _pool, _pool_workers
+    _pool, _pool_workers = None, 0
+
+
+os.register_at_fork(after_in_child=_reset_pool)  # a forked child has no pool threads
+
+
+def _scratch(block: int, rows: int, w: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-thread, per-block scratch images (sigma_L, lit depth, theta), reused across frames."""
+    cache = getattr(_tls, "scratch", None)
+    if cache is None:
+        cache = _tls.scratch = {}
+    ws = cache.get(block)
+    if ws is None or ws[0].shape[0] < rows or ws[0].shape[1] != w:
+        ws = cache[block] = tuple(np.zeros((rows, w), dtype=np.float32) for _ in range(3))
+    return ws
+
+
+def _run_blocks(n: int, depth: np.ndarray, margin: int, args: tuple, out: np.ndarray) -> None:
+    """_block over all rows split into n blocks, blocks 1.. on pool threads (GIL released).
+
+    Every row's result depends only on the inputs and the seed, so the output is the same
+    for any n.
+    """
+    global _pool, _pool_workers
+    h, w = depth.shape
+    bounds = [h * c // n for c in range(n + 1)]
+    calls = []
+    for c in range(n):
+        r0, r1 = bounds[c], bounds[c + 1]
+        sl, lit, th = _scratch(c, min(h, r1 - r0 + 2 * margin), w)
+        calls.append((depth, r0, r1, margin, *args, sl, lit, th, out, False))
+    if n == 1:
+        _block(*calls[0])
+        return
+    with _pool_lock:
+        if _pool is None or _pool_workers < n - 1:
+            _pool = ThreadPoolExecutor(max_workers=n - 1, thread_name_prefix="kinect_noise")
+            _pool_workers = n - 1
+        pool = _pool
+    futures = [pool.submit(_block, *call) for call in calls[1:]]
+    _block(*calls[0])
+    for f in futures:
+        f.result()
+
+
+def _cfg_arrays(cfg: KinectNoiseConfig, intr: CameraIntrinsics) -> tuple[np.ndarray, ...]:
+    f32 = np.float32
+    lat = np.array(
+        [cfg.lateral, cfg.lateral_a_px, cfg.lateral_b_px, intr.fx / cfg.focal_px], dtype=f32
+    )
+    axl = np.array(
+        [cfg.axial, cfg.axial_a_m, cfg.axial_b_per_m, cfg.axial_z0_m, cfg.axial_grazing_m,
+         cfg.axial_grazing_start_rad],
+        dtype=f32,
+    )  # fmt: skip
+    drop = np.array(
+        [cfg.dropouts, cfg.dropout_start_rad, 1.0 / (cfg.dropout_full_rad - cfg.dropout_start_rad),
+         cfg.dropout_rate if cfg.dropouts else 0.0],
+        dtype=f32,
+    )  # fmt: skip
+    return lat, axl, drop
+
+
+def apply_kinect_noise(
+    depth: np.ndarray,
+    intr: CameraIntrinsics,
+    cfg: KinectNoiseConfig,
+    seed: int,
+    out: np.ndarray | None = None,
+) -> np.ndarray:
+    """The noisy Kinect v1 depth image (float32 metres, 0 = invalid) for a clean planar depth.
+
+    ``out`` (float32, C-contiguous, H x W) is filled and returned if given; it may be the
+    input array itself. Same seed -> identical output. Pixels invalid in the input (0,
+    negative, NaN, inf) are 0 in the output.
+    """
+    d = _check_depth(depth, intr)
+    if not isinstance(cfg, KinectNoiseConfig):
+        raise InputError(f"cfg: expected KinectNoiseConfig, got {type(cfg).__name__}")
+    key = _seed_key(_check_seed(seed))
+    if out is None:
+        out = np.empty(d.shape, dtype=np.float32)
+    elif not (
+        isinstance(out, np.ndarray)
+        and out.dtype == np.float32
+        and out.shape == d.shape
+        and out.flags.c_contiguous
+        and out.flags.writeable
+    ):
+        raise InputError(f"out: expected a writeable C-contiguous float32 array of shape {d.shape}")
+    if np.shares_memory(d, out):
+        d = d.copy()
+    xn, yn = _normalised_coords(intr)
+    lat, axl, drop = _cfg_arrays(cfg, intr)
+    # bound on |lateral row offset|: the largest table normal times the largest sigma_L
+    sigma_max = float(lat[0]) * float(lat[3]) * (float(lat[1]) + float(lat[2]) * _Q_MAX)
+    margin = math.ceil(float(np.abs(_LAT_G).max()) * sigma_max) + 1
+    n = max(1, min(cfg.threads, os.cpu_count() or 1, d.shape[0]))
+    args = (
+        xn, yn, np.float32(cfg.normal_max_rel_jump), lat,
+        np.float32(intr.fx * cfg.projector_offset_m if cfg.shadows else 0.0), key, axl, drop,
+        bool(cfg.quantize), np.float32(_fbs(cfg)), np.float32(cfg.min_range_m),
+        np.float32(cfg.max_range_m),
+    )  # fmt: skip
+    _run_blocks(n, d, margin, args, out)
+    return out
+
+
+# --------------------------------------------------------------------------- references
+
+
+def shadow_mask_reference(depth: np.ndarray, fx: float, projector_offset_m: float) -> np.ndarray:
+    """Slow numpy reference of the projector-shadow test (True = shadowed).
+
+    A valid pixel is shadowed when some valid pixel on the same row, on the projector's
+    side, has a smaller projector column u_p = u - fx b / z (b > 0) or a larger one (b < 0).
+    Computed in float32 with the kernel's operations, so the masks agree exactly.
+    """
+    z = np.asarray(depth, dtype=np.float32)
+    valid = (z > 0) & np.isfinite(z)
+    shift = np.float32(fx * projector_offset_m)
+    if shift == 0:
+        return np.zeros(z.shape, dtype=bool)
+    u = np.arange(z.shape[1], dtype=np.float32)[None, :]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        up = u - shift / np.where(valid, z, np.float32(1))
+    n = z.shape[0]
+    if shift > 0:
+        up = np.where(valid, up, np.float32(np.inf))
+        suffix = np.minimum.accumulate(up[:, ::-1], axis=1)[:, ::-1]
+        strict = np.concatenate([suffix[:, 1:], np.full((n, 1), np.inf, np.float32)], axis=1)
+        return valid & (up > strict)
+    up = np.where(valid, up, np.float32(-np.inf))
+    prefix = np.maximum.accumulate(up, axis=1)
+    strict = np.concatenate([np.full((n, 1), -np.inf, np.float32), prefix[:, :-1]], axis=1)
+    return valid & (up < strict)
+
+
+def quantize_depth_reference(z: np.ndarray, cfg: KinectNoiseConfig | None = None) -> np.ndarray:
+    """Slow numpy reference of disparity quantisation; 0 (and anything not > 0) gives 0.
+
+    With s = subpixel: k = round(s f b / z) (the disparity d = f b / z in 1/s px units) and
+    z_q = s f b / k = f b / (k / s), in float32 like the kernel.
+    """
+    c = cfg or KinectNoiseConfig()
+    z = np.asarray(z, dtype=np.float32)
+    fbs = np.float32(_fbs(c))
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        k = np.rint(fbs / z)
+        zq = fbs / k
+    return np.where((z > 0) & (k > 0) & np.isfinite(zq), zq, np.float32(0)).astype(np.float32)
+
+
+# --------------------------------------------------------------------------- benchmark
+
+
+def _bench_scene(intr: CameraIntrinsics) -> np.ndarray:
+    """A floor, a slanted wall and a box: a typical indoor frame."""
+    xn, yn = _normalised_coords(intr)
+    x, y = np.meshgrid(xn, yn)
+    wall = 3.0 / (1.0 + 0.6 * x)
+    with np.errstate(divide="ignore"):
+        floor = np.where(y > 0.01, 0.7 / np.maximum(y, 1e-9), np.inf)
+    z = np.minimum(wall, floor)
+    box = (np.abs(x - 0.1) < 0.15) & (np.abs(y - 0.05) < 0.2)
+    z[box] = 1.5
+    z[z > 6.0] = 0.0
+    return z.astype(np.float32)
+
+
+def benchmark_noise(
+    repeats: int = 100, cfg: KinectNoiseConfig | None = None, threads: int | None = None
+) -> float:
+    """Median milliseconds of :func:`apply_kinect_noise` on a 640 x 480 frame (JIT warmed up).
+
+    The frame is a floor, a slanted wall and a box; ``threads`` overrides ``cfg.threads``.
+    """
+    intr = CameraIntrinsics()
+    c = cfg or KinectNoiseConfig()
+    if threads is not None:
+        c = replace(c, threads=threads)
+    depth = _bench_scene(intr)
+    out = np.empty_like(depth)
+    for i in range(3):
+        apply_kinect_noise(depth, intr, c, i, out=out)
+    times = []
+    for i in range(repeats):
+        t0 = time.perf_counter()
+        apply_kinect_noise(depth, intr, c, i, out=out)
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times) * 1e3)
+
+
+if __name__ == "__main__":
+    for n in (1, 2):
+        print(
+            f"kinect noise, 640x480, {n} thread(s): {benchmark_noise(300, threads=n):.3f} ms median"
+        )

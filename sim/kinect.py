@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 from dataclasses import dataclass, field
 
 import mujoco
@@ -185,8 +186,10 @@ def make_depth_backend(model: mujoco.MjModel, camera_id: int, intr: CameraIntrin
         try:
             return GLDepth(model, camera_id, intr)
         except Exception as exc:  # no EGL/OSMesa/display: fall back
+            reason = f"OpenGL depth rendering unavailable (MUJOCO_GL={os.environ.get('MUJOCO_GL')}): {exc}"
             if backend == "gl":
-                raise RuntimeError(f"OpenGL depth rendering unavailable (MUJOCO_GL={os.environ.get('MUJOCO_GL')}): {exc}") from exc
+                raise RuntimeError(reason) from exc
+            warnings.warn(f"{reason}; using the ray-cast depth fallback (much slower)", RuntimeWarning, stacklevel=2)
     return RaycastDepth(model, camera_id, intr)
 
 

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from autonomy.errors import InputError
+from autonomy.fspf import fspf
 from autonomy.planner import astar, path_points
 from autonomy.vectormap import NavGraph, VectorMap, load_navgraph, load_vectormap
 from sim.actors import Furniture, Person, point_segment_distance
@@ -123,6 +124,8 @@ class Mission:
     path_xy: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     current: int = 0
     started_at: float = 0.0
+    timeout_s: float = 0.0
+    events: list[dict] = field(default_factory=list)
 
 
 def plan_mission(scn: Scenario, graph: NavGraph, rng: np.random.Generator) -> Mission:
@@ -175,10 +178,12 @@ class GroundTruthFollower:
         self.path = np.zeros((0, 2))
         self._cum = np.zeros(0)
 
-    def set_path(self, pts: np.ndarray) -> None:
+    def set_path(self, pts: np.ndarray) -> float:
+        """Follow a new polyline; returns its length."""
         self.path = np.asarray(pts, dtype=np.float64)
         seg = np.hypot(*np.diff(self.path, axis=0).T) if len(self.path) > 1 else np.zeros(0)
         self._cum = np.concatenate([[0.0], np.cumsum(seg)])
+        return float(self._cum[-1])
 
     def _project(self, xy: np.ndarray) -> float:
         best, best_s = math.inf, 0.0
@@ -247,7 +252,7 @@ def run_scenario(
     seed = scn.seed if seed is None else int(seed)
     ss = np.random.SeedSequence(seed)
     rng_actors, rng_mission, rng_odom, rng_noise = (np.random.default_rng(s) for s in ss.spawn(4))
-    noise_base = int(rng_noise.integers(0, 2**31))
+    noise_base, fspf_base = (int(v) for v in rng_noise.integers(0, 2**31, size=2))
 
     building = load_building(scn)
     vm, graph = building.vectormap, building.navgraph
@@ -291,7 +296,8 @@ def run_scenario(
         )
         recorder.log_waypoints(path_points(graph, mission.waypoints))
 
-    timing: dict[str, list[float]] = {k: [] for k in ("physics", "render", "noise", "control", "viz")}
+    timing: dict[str, list[float]] = {k: [] for k in ("physics", "render", "noise", "fspf", "control", "viz")}
+    fspf_counts: list[tuple[int, int, int, int]] = []  # plane points, outliers, planes, 2D points
     times: list[float] = []
     truth: list[np.ndarray] = []
     collisions = 0
@@ -300,7 +306,13 @@ def run_scenario(
     frame = 0
     interrupted = False
     prev_node = start_node
-    follower.set_path(path_points(graph, astar(graph, prev_node, mission.waypoints[0])))
+
+    def leg_timeout(length_m: float) -> float:
+        if scn.mission.waypoint_timeout_s > 0:
+            return scn.mission.waypoint_timeout_s
+        return 30.0 + 2.0 * length_m / scn.mission.cruise_speed_mps
+
+    mission.timeout_s = leg_timeout(follower.set_path(path_points(graph, astar(graph, prev_node, mission.waypoints[0]))))
     mission.started_at = 0.0
     max_frames = int(math.ceil(scn.mission.max_duration_s / frame_dt))
 
@@ -320,21 +332,26 @@ def run_scenario(
             t0 = time.perf_counter()
             pose = world.robot.pose(world.data)
             goal_xy = graph.node_xy()[graph.index_of(mission.waypoints[mission.current])]
-            if np.hypot(*(goal_xy - pose[:2])) < scn.mission.arrival_radius_m or (
-                t - mission.started_at > scn.mission.waypoint_timeout_s
-            ):
-                if np.hypot(*(goal_xy - pose[:2])) < scn.mission.arrival_radius_m:
+            arrived = np.hypot(*(goal_xy - pose[:2])) < scn.mission.arrival_radius_m
+            if arrived or t - mission.started_at > mission.timeout_s:
+                node = mission.waypoints[mission.current]
+                if arrived:
                     reached += 1
-                    prev_node = mission.waypoints[mission.current]
+                    prev_node = node
                 else:
                     failed += 1
                     prev_node = graph.nearest_node(*pose[:2])
+                mission.events.append(
+                    {"t": round(t, 3), "waypoint": node, "status": "reached" if arrived else "failed", "leg_s": round(t - mission.started_at, 3)}
+                )
                 mission.current += 1
                 mission.started_at = t
                 if mission.current >= len(mission.waypoints):
                     break
-                follower.set_path(
-                    np.vstack([pose[:2], path_points(graph, astar(graph, prev_node, mission.waypoints[mission.current]))])
+                mission.timeout_s = leg_timeout(
+                    follower.set_path(
+                        np.vstack([pose[:2], path_points(graph, astar(graph, prev_node, mission.waypoints[mission.current]))])
+                    )
                 )
             cmd = follower.command(pose)
             world.robot.command(world.data, cmd, frame_dt)
@@ -346,6 +363,10 @@ def run_scenario(
             t3 = time.perf_counter()
             depth = apply_kinect_noise(clean, scn.kinect.intrinsics, scn.kinect.noise, (noise_base + frame) % (2**31))
             t4 = time.perf_counter()
+            planes = fspf(depth, scn.kinect.intrinsics, scn.fspf, seed=fspf_base + frame, mount=scn.kinect.mount)
+            p2d, _ = planes.projected(scn.fspf.max_vertical_normal_angle_rad)
+            t4b = time.perf_counter()
+            fspf_counts.append((len(planes.points), len(planes.outliers), planes.planes, len(p2d)))
             new_pose = world.robot.pose(world.data)
             odom.update(new_pose)
             distance += float(np.hypot(*(new_pose[:2] - pose[:2])))
@@ -357,12 +378,16 @@ def run_scenario(
                 recorder.log_pose(frame, new_pose)
                 if recorder.heavy(frame):
                     recorder.log_depth(depth)
+                    recorder.log_fspf(planes)
                     recorder.log_people(world.people.positions(world.data.time))
                     recorder.log_scalars(
                         {
                             "speed_mps": float(np.hypot(*world.robot.velocity_body(world.data)[:2])),
                             "timing_ms/render": (t3 - t2) * 1e3,
                             "timing_ms/noise": (t4 - t3) * 1e3,
+                            "timing_ms/fspf": (t4b - t4) * 1e3,
+                            "fspf/plane_points": float(len(planes.points)),
+                            "fspf/points_2d": float(len(p2d)),
                             "timing_ms/physics": (t2 - t1) * 1e3,
                             "collisions": float(collisions),
                         }
@@ -372,7 +397,8 @@ def run_scenario(
             timing["physics"].append(t2 - t1)
             timing["render"].append(t3 - t2)
             timing["noise"].append(t4 - t3)
-            timing["viz"].append(t5 - t4)
+            timing["fspf"].append(t4b - t4)
+            timing["viz"].append(t5 - t4b)
             if bar is not None:
                 bar.update(1)
                 if frame % 30 == 0:
@@ -397,6 +423,16 @@ def run_scenario(
         "realtime_factor": round(sim_time / wall, 4) if wall > 0 else 0.0,
         "wall_time_s": round(wall, 3),
     }
+    if fspf_counts:
+        c = np.array(fspf_counts, dtype=np.float64)
+        metrics.update(
+            {
+                "fspf_plane_points_mean": round(float(c[:, 0].mean()), 2),
+                "fspf_outliers_mean": round(float(c[:, 1].mean()), 2),
+                "fspf_planes_mean": round(float(c[:, 2].mean()), 2),
+                "fspf_points_2d_mean": round(float(c[:, 3].mean()), 2),
+            }
+        )
     files = {"report": "report.json", "trajectory_truth": "trajectory_truth.tum"}
     write_tum(out / files["trajectory_truth"], np.array(times), truth_arr)
     if scn.report.figures:
@@ -429,6 +465,7 @@ def run_scenario(
         "map": {"segments": vm.n_segments, "nodes": len(graph.nodes), "edges": len(graph.edges)},
         "actors": {"furniture": len(furniture), "people": len(people)},
         "waypoints": mission.waypoints,
+        "events": mission.events,
         "files": files,
         "config": {k: v for k, v in to_dict(scn).items() if k != "base_dir"},
     }

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from autonomy.errors import InputError
+from autonomy.fspf import FSPFConfig
 from sim.actors import Furniture, Person
 from sim.config import apply_overrides, from_dict
 from sim.kinect import KinectConfig
@@ -83,8 +84,9 @@ class MissionConfig:
     """Stop once the robot has driven this far (0 = no target)."""
     arrival_radius_m: float = 0.35
     """A waypoint counts as reached within this distance."""
-    waypoint_timeout_s: float = 90.0
-    """A waypoint not reached within this time counts as failed."""
+    waypoint_timeout_s: float = 0.0
+    """A waypoint not reached within this time counts as failed; 0 = automatic
+    (30 s plus twice the leg's nominal time at cruise speed)."""
     cruise_speed_mps: float = 0.75
     """Follower's cruise speed."""
 
@@ -93,6 +95,10 @@ class MissionConfig:
             raise InputError(f"mission.kind {self.kind!r}: expected one of {', '.join(MISSION_KINDS)}")
         if self.follower not in FOLLOWERS:
             raise InputError(f"mission.follower {self.follower!r}: expected one of {', '.join(FOLLOWERS)}")
+        if self.waypoint_timeout_s < 0:
+            raise InputError("mission.waypoint_timeout_s: expected a number >= 0 (0 = automatic)")
+        if self.cruise_speed_mps <= 0:
+            raise InputError("mission.cruise_speed_mps: expected a positive number")
         if self.max_duration_s <= 0:
             raise InputError("mission.max_duration_s: expected a positive number")
         if self.n_random_waypoints < 1 and not self.waypoints:
@@ -132,6 +138,7 @@ class Scenario:
     robot: RobotConfig = field(default_factory=RobotConfig)
     odometry: OdometryConfig = field(default_factory=OdometryConfig)
     kinect: KinectConfig = field(default_factory=KinectConfig)
+    fspf: FSPFConfig = field(default_factory=FSPFConfig)
     actors: ActorsConfig = field(default_factory=ActorsConfig)
     mission: MissionConfig = field(default_factory=MissionConfig)
     report: ReportConfig = field(default_factory=ReportConfig)

@@ -8,6 +8,7 @@ Entity layout (timelines ``sim_time`` in seconds and ``frame``):
 - ``world/robot`` ground-truth pose (Transform3D) with ``world/robot/base``;
   ``world/robot/camera`` the Kinect (mount transform + Pinhole, optical frame RDF) and
   ``world/robot/camera/depth`` the depth image under it, so the viewer back-projects it.
+- ``world/robot/fspf/{plane_points,normals,outliers}`` FSPF output (robot frame).
 - ``world/trajectory/truth`` the driven path; ``world/waypoints`` the mission.
 - ``metrics/...`` scalars over time (speed, per-stage CPU ms, ...).
 
@@ -188,6 +189,26 @@ class Recorder:
         k = self.depth_downsample
         mm = np.round(np.asarray(depth)[k // 2 :: k, k // 2 :: k] * 1000.0).astype(np.uint16)
         self.rec.log("world/robot/camera/depth", rr.DepthImage(mm, meter=1000.0, depth_range=[0.0, 4500.0]))
+
+    def log_fspf(self, res, max_arrows: int = 200) -> None:
+        """FSPF output in the robot frame: plane points coloured by local plane, outliers, normals."""
+        if len(res.points):
+            ids = res.plane_ids.astype(np.int64)
+            # A fixed, well-spread colour per local plane (golden-angle hue).
+            hue = (ids * 0.618033988749895) % 1.0
+            colors = (255 * np.column_stack([0.5 + 0.5 * np.cos(2 * np.pi * (hue + k / 3)) for k in range(3)])).astype(np.uint8)
+            self.rec.log("world/robot/fspf/plane_points", rr.Points3D(res.points, colors=colors, radii=0.015))
+            step = max(1, len(res.points) // max_arrows)
+            self.rec.log(
+                "world/robot/fspf/normals",
+                rr.Arrows3D(origins=res.points[::step], vectors=0.15 * res.normals[::step], colors=(240, 200, 40)),
+            )
+        else:
+            self.rec.log("world/robot/fspf/plane_points", rr.Clear(recursive=False))
+        if len(res.outliers):
+            self.rec.log("world/robot/fspf/outliers", rr.Points3D(res.outliers, colors=(230, 60, 60), radii=0.012))
+        else:
+            self.rec.log("world/robot/fspf/outliers", rr.Clear(recursive=False))
 
     def log_people(self, xyh: np.ndarray, radius_m: float = 0.22, height_m: float = 1.75) -> None:
         if len(xyh):

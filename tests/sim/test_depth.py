@@ -109,7 +109,8 @@ def test_raycast_fallback_is_chosen_without_gl(monkeypatch: pytest.MonkeyPatch) 
 
     monkeypatch.setattr(kinect, "GLDepth", broken)
     w = _wall_world(2.0, SMALL)
-    b = kinect.make_depth_backend(w.model, w.camera_id, SMALL, "auto")
+    with pytest.warns(RuntimeWarning, match="ray-cast depth fallback"):
+        b = kinect.make_depth_backend(w.model, w.camera_id, SMALL, "auto")
     assert isinstance(b, RaycastDepth)
     with pytest.raises(RuntimeError, match="OpenGL depth rendering unavailable"):
         kinect.make_depth_backend(w.model, w.camera_id, SMALL, "gl")

@@ -1,0 +1,54 @@
+"""Rerun recordings of runs: they verify with rerun's own tooling and hold the expected entities."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+import sys
+from collections import Counter
+from pathlib import Path
+
+import pytest
+
+from sim.runner import run_scenario
+from sim.scenario import SCENARIOS_DIR, load_scenario
+
+
+def _rerun_cli() -> str | None:
+    exe = Path(sys.executable).parent / "rerun"
+    return str(exe) if exe.exists() else shutil.which("rerun")
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("viz")
+    scn = load_scenario(
+        SCENARIOS_DIR / "demo.toml",
+        ['map.name="small_floor"', "mission.max_duration_s=3.0", "report.rrd_every=10", "actors.random_people=1", "actors.random_furniture=1"],
+    )
+    rep = run_scenario(scn, out, seed=2, rrd=out / "run.rrd", progress=False)
+    assert rep["files"]["recording"] == "run.rrd"
+    return out / "run.rrd"
+
+
+@pytest.mark.skipif(_rerun_cli() is None, reason="rerun CLI not installed")
+def test_recording_verifies_and_holds_expected_entities(recording: Path) -> None:
+    cli = _rerun_cli()
+    v = subprocess.run([cli, "rrd", "verify", str(recording)], capture_output=True, text=True, timeout=120)
+    assert v.returncode == 0, v.stderr
+    p = subprocess.run([cli, "rrd", "print", str(recording)], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    chunks = re.findall(r" - (/world[^ ]*) - data columns: \[([^\]]*)\]", p.stdout)
+    counts = Counter(path for path, _ in chunks)
+    columns = {path: cols for path, cols in chunks}
+    for static in ("/world/map/walls", "/world/map/lines", "/world/map/navgraph/nodes", "/world/map/navgraph/edges", "/world/furniture", "/world/waypoints"):
+        assert counts[static] == 1, static
+    assert "Boxes3D:half_sizes" in columns["/world/map/walls"]
+    assert "LineStrips3D:strips" in columns["/world/map/lines"]
+    assert "DepthImage:buffer" in columns["/world/robot/camera/depth"]
+    assert any("Pinhole:image_from_camera" in c for path, c in chunks if path == "/world/robot/camera")
+    assert "Transform3D:translation" in columns["/world/robot"]
+    # 3 s at 30 Hz, heavy items every 10th frame; rerun batches rows into chunks.
+    assert sum(1 for path, _ in chunks if path == "/world/robot/camera/depth") >= 1
+    assert counts["/world/robot"] >= 1

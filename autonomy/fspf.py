@@ -153,6 +153,56 @@ def _seed_state(seed: int) -> int:
 # -- the kernel -------------------------------------------------------------------------
 
 
+@numba.njit(cache=True, inline="always")
+def _dot3(u, v):  # pragma: no cover - numba
+    """Dot product without BLAS (numba's np.dot needs SciPy)."""
+    return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
+
+
+@numba.njit(cache=True)
+def smallest_eigvec3(a):  # pragma: no cover - numba
+    """Unit eigenvector of the smallest eigenvalue of a symmetric 3 x 3 matrix.
+
+    Closed form (no LAPACK): eigenvalues by the trigonometric method for symmetric 3 x 3
+    matrices (Smith 1961), eigenvector as the largest cross product of two rows of
+    A - lambda I (those rows span the plane orthogonal to the eigenvector).
+    """
+    a00, a01, a02, a11, a12, a22 = a[0, 0], a[0, 1], a[0, 2], a[1, 1], a[1, 2], a[2, 2]
+    p1 = a01 * a01 + a02 * a02 + a12 * a12
+    q = (a00 + a11 + a22) / 3.0
+    p2 = (a00 - q) ** 2 + (a11 - q) ** 2 + (a22 - q) ** 2 + 2.0 * p1
+    out = np.zeros(3)
+    if p2 <= 1e-300:  # a multiple of the identity: any direction
+        out[2] = 1.0
+        return out
+    p = math.sqrt(p2 / 6.0)
+    b00, b11, b22 = (a00 - q) / p, (a11 - q) / p, (a22 - q) / p
+    b01, b02, b12 = a01 / p, a02 / p, a12 / p
+    r = (b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02) + b02 * (b01 * b12 - b11 * b02)) / 2.0
+    r = min(1.0, max(-1.0, r))
+    phi = math.acos(r) / 3.0
+    lam = q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0)  # the smallest eigenvalue
+    r0 = np.array([a00 - lam, a01, a02])
+    r1 = np.array([a01, a11 - lam, a12])
+    r2 = np.array([a02, a12, a22 - lam])
+    best = -1.0
+    for u, v in ((r0, r1), (r0, r2), (r1, r2)):
+        c = np.array([u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]])
+        n2 = c[0] * c[0] + c[1] * c[1] + c[2] * c[2]
+        if n2 > best:
+            best = n2
+            out[:] = c
+    n0, n1, n2 = _dot3(r0, r0), _dot3(r1, r1), _dot3(r2, r2)
+    if best <= 1e-18 * (n0 + n1 + n2) ** 2:
+        # The two smallest eigenvalues are equal (rank-1 A - lambda I): any vector
+        # orthogonal to its largest row is an eigenvector.
+        row = r0 if n0 >= n1 and n0 >= n2 else (r1 if n1 >= n2 else r2)
+        t = np.array([1.0, 0.0, 0.0]) if abs(row[0]) < 0.9 * math.sqrt(_dot3(row, row)) else np.array([0.0, 1.0, 0.0])
+        out[:] = np.array([row[1] * t[2] - row[2] * t[1], row[2] * t[0] - row[0] * t[2], row[0] * t[1] - row[1] * t[0]])
+        best = _dot3(out, out)
+    return out / math.sqrt(best)
+
+
 @numba.njit(cache=True)
 def _draw_valid(depth, state, v0, u0, half_v, half_u, max_redraws, out):  # pragma: no cover
     """Draw a pixel within (half_v, half_u) of (v0, u0) with valid depth; False if none."""
@@ -269,8 +319,8 @@ def _fspf_kernel(
             cov[1, 0] = cov[0, 1]
             cov[2, 0] = cov[0, 2]
             cov[2, 1] = cov[1, 2]
-            _, vecs = np.linalg.eigh(cov)
-            nx, ny, nz = vecs[0, 0], vecs[1, 0], vecs[2, 0]
+            ev = smallest_eigvec3(cov)
+            nx, ny, nz = ev[0], ev[1], ev[2]
             if nx * c0 + ny * c1 + nz * c2 > 0.0:  # face the camera
                 nx, ny, nz = -nx, -ny, -nz
             # Normal in the robot frame.

@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from autonomy.camera import CameraIntrinsics, CameraMount, pixel_rays
 from autonomy.errors import InputError
@@ -103,13 +105,22 @@ def test_clutter_goes_to_outliers_and_the_wall_to_plane_points() -> None:
         disc = b * b - a * (c @ c - r * r)
         z = np.where(disc > 0, (b - np.sqrt(np.maximum(disc, 0))) / a, np.inf)
         depth = np.where((z > 0) & (z < depth), z, depth).astype(np.float32)
+    # Vertical cylinders (axis along the optical y axis) of 0.1-0.2 m radius.
+    for _ in range(4):
+        cx, cz, r = rng.uniform(-1.2, 1.2), rng.uniform(1.5, 2.5), rng.uniform(0.1, 0.2)
+        rx, rz = RAYS[..., 0], RAYS[..., 2]
+        a = rx * rx + rz * rz
+        b = rx * cx + rz * cz
+        disc = b * b - a * (cx * cx + cz * cz - r * r)
+        t = np.where(disc > 0, (b - np.sqrt(np.maximum(disc, 0))) / a, np.inf)  # t is the depth (ray z = 1)
+        depth = np.where((t > 0) & (t < depth), t, depth).astype(np.float32)
     sphere_px = depth < 2.9
     assert sphere_px.mean() > 0.1
     res = optical(depth, cfg=FSPFConfig(k_max=4000))
     # The wall is in P ...
     on_wall_p = np.abs(res.points[:, 2] - 3.0) < 0.05
     assert on_wall_p.mean() > 0.9
-    # ... and the spheres' samples mostly in O.
+    # ... and the spheres' and cylinders' samples mostly in O.
     sphere_in_p = (res.points[:, 2] < 2.9).sum()
     sphere_in_o = (res.outliers[:, 2] < 2.9).sum()
     assert sphere_in_o > 3 * sphere_in_p
@@ -175,3 +186,27 @@ def test_bad_arguments() -> None:
         FSPFConfig(alpha_in=1.5)
     with pytest.raises(InputError, match="fspf.l"):
         FSPFConfig(l=0)
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.lists(st.floats(-10, 10, allow_nan=False), min_size=9, max_size=9),
+    st.sampled_from(["random", "planar", "repeated"]),
+)
+def test_smallest_eigvec3_matches_lapack(vals, kind) -> None:
+    from autonomy.fspf import smallest_eigvec3
+
+    m = np.array(vals).reshape(3, 3)
+    if kind == "planar":  # covariance of points on a plane: one eigenvalue near 0
+        m[:, 2] = 0.3 * m[:, 0] - 0.2 * m[:, 1]
+    a = m.T @ m
+    if kind == "repeated":
+        a = np.diag([2.0, 2.0, 5.0]) + 0 * a
+    w, v = np.linalg.eigh(a)
+    e = smallest_eigvec3(a)
+    assert abs(np.linalg.norm(e) - 1) < 1e-9
+    # It is an eigenvector of the smallest eigenvalue (up to the conditioning of that eigenvalue).
+    scale = max(1.0, w[-1])
+    assert np.linalg.norm(a @ e - w[0] * e) <= 1e-6 * scale
+    if w[1] - w[0] > 1e-6 * scale:
+        assert abs(abs(e @ v[:, 0]) - 1) < 1e-6 * scale / (w[1] - w[0]) + 1e-9

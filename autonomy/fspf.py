@@ -167,12 +167,21 @@ def smallest_eigvec3(a):  # pragma: no cover - numba
     matrices (Smith 1961), eigenvector as the largest cross product of two rows of
     A - lambda I (those rows span the plane orthogonal to the eigenvector).
     """
-    a00, a01, a02, a11, a12, a22 = a[0, 0], a[0, 1], a[0, 2], a[1, 1], a[1, 2], a[2, 2]
+    # Eigenvectors do not depend on scale: normalise so tiny or huge entries neither
+    # underflow into subnormals nor overflow.
+    s = 0.0
+    for i in range(3):
+        for j in range(3):
+            s = max(s, abs(a[i, j]))
+    out = np.zeros(3)
+    if s == 0.0 or not math.isfinite(s):
+        out[2] = 1.0
+        return out
+    a00, a01, a02, a11, a12, a22 = a[0, 0] / s, a[0, 1] / s, a[0, 2] / s, a[1, 1] / s, a[1, 2] / s, a[2, 2] / s
     p1 = a01 * a01 + a02 * a02 + a12 * a12
     q = (a00 + a11 + a22) / 3.0
     p2 = (a00 - q) ** 2 + (a11 - q) ** 2 + (a22 - q) ** 2 + 2.0 * p1
-    out = np.zeros(3)
-    if p2 <= 1e-300:  # a multiple of the identity: any direction
+    if p2 <= 1e-30:  # a multiple of the identity: any direction
         out[2] = 1.0
         return out
     p = math.sqrt(p2 / 6.0)

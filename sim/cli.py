@@ -217,6 +217,11 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except BrokenPipeError:
         return 1
+    except OSError as exc:
+        # Paths given on the command line that cannot be read or written.
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"depthnav: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

@@ -97,6 +97,13 @@ def test_user_errors_exit_2_with_one_line(capsys, argv, pattern) -> None:
     assert pattern in _err_line(capsys)
 
 
+def test_unwritable_output_exits_2(tmp_path: Path, capsys) -> None:
+    blocker = tmp_path / "file"
+    blocker.write_text("not a directory")
+    assert main(["map", "render", str(SMALL), "--out", str(blocker / "m.png")]) == 2
+    assert "file" in _err_line(capsys)
+
+
 def test_run_with_bad_set_exits_2(capsys) -> None:
     assert main(["run", "scenarios/demo.toml", "--set", "robot.bogus=1"]) == 2
     assert "unknown key 'robot.bogus'" in _err_line(capsys)

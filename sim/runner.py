@@ -18,9 +18,11 @@ from pathlib import Path
 
 import numpy as np
 
+from autonomy.cgr import CGRLocalizer
 from autonomy.errors import InputError
 from autonomy.fspf import fspf
 from autonomy.planner import astar, path_points
+from autonomy.raycast import SceneQuery, load_or_build
 from autonomy.vectormap import NavGraph, VectorMap, load_navgraph, load_vectormap
 from sim.actors import Furniture, Person, point_segment_distance
 from sim.config import to_dict
@@ -36,12 +38,13 @@ REPORT_VERSION = 1
 
 @dataclass
 class Building:
-    """A map with its graph and (if known) its zones."""
+    """A map with its graph, (if known) its zones, and the map file it came from."""
 
     vectormap: VectorMap
     navgraph: NavGraph
     open_areas: tuple[tuple[float, float, float, float], ...] = ()
     rooms: tuple[tuple[float, float, float, float], ...] = ()
+    map_path: Path | None = None
 
 
 def load_building(scn: Scenario) -> Building:
@@ -54,8 +57,9 @@ def load_building(scn: Scenario) -> Building:
         return Building(bp.vectormap, bp.navgraph, tuple(bp.open_areas), tuple(bp.rooms))
     if m.name:
         bp = blueprints.load_blueprint(ASSETS_DIR / m.name)
-        return Building(bp.vectormap, bp.navgraph, tuple(bp.open_areas), tuple(bp.rooms))
-    return Building(load_vectormap(scn.resolve(m.vectormap)), load_navgraph(scn.resolve(m.navgraph)))
+        return Building(bp.vectormap, bp.navgraph, tuple(bp.open_areas), tuple(bp.rooms), ASSETS_DIR / f"{m.name}.vectormap.txt")
+    path = scn.resolve(m.vectormap)
+    return Building(load_vectormap(path), load_navgraph(scn.resolve(m.navgraph)), map_path=path)
 
 
 def random_furniture(
@@ -271,6 +275,18 @@ def run_scenario(
     )
     camera = KinectCamera(world.model, world.camera_id, scn.kinect)
     odom = Odometry(scn.odometry, rng_odom, mission.start_pose)
+    lcfg = scn.localization
+    localizer = None
+    if lcfg.enabled:
+        rng_loc = np.random.default_rng(ss.spawn(1)[0])
+        query = SceneQuery(vm, load_or_build(vm, building.map_path, lcfg.grid))
+        localizer = CGRLocalizer(lambda x, y: query.scene_lines(x, y)[0], lcfg.cgr, lcfg.observation, rng_loc)
+        localizer.reset(mission.start_pose)
+    estimates: list[np.ndarray] = [mission.start_pose.copy()]
+    loc_errors: list[float] = []
+    heading_errors: list[float] = []
+    resets = 0
+    reset_points: list[np.ndarray] = []
     follower = GroundTruthFollower(graph, scn.mission.cruise_speed_mps)
 
     frame_dt = 1.0 / scn.kinect.rate_hz
@@ -296,7 +312,7 @@ def run_scenario(
         )
         recorder.log_waypoints(path_points(graph, mission.waypoints))
 
-    timing: dict[str, list[float]] = {k: [] for k in ("physics", "render", "noise", "fspf", "control", "viz")}
+    timing: dict[str, list[float]] = {k: [] for k in ("physics", "render", "noise", "fspf", "localization", "control", "viz")}
     fspf_counts: list[tuple[int, int, int, int]] = []  # plane points, outliers, planes, 2D points
     times: list[float] = []
     truth: list[np.ndarray] = []
@@ -368,7 +384,22 @@ def run_scenario(
             t4b = time.perf_counter()
             fspf_counts.append((len(planes.points), len(planes.outliers), planes.planes, len(p2d)))
             new_pose = world.robot.pose(world.data)
-            odom.update(new_pose)
+            increment = odom.update(new_pose)
+            t4c = time.perf_counter()
+            if localizer is not None:
+                localizer.predict(increment)
+                p2d, n2d = planes.projected(scn.fspf.max_vertical_normal_angle_rad)
+                localizer.update(p2d, n2d)
+                est = localizer.estimate()
+                err = float(np.hypot(*(est.pose[:2] - new_pose[:2])))
+                loc_errors.append(err)
+                heading_errors.append(abs(math.atan2(math.sin(est.pose[2] - new_pose[2]), math.cos(est.pose[2] - new_pose[2]))))
+                estimates.append(est.pose.copy())
+                if err > lcfg.reset_error_m:
+                    resets += 1
+                    reset_points.append(new_pose[:2].copy())
+                    localizer.reset(new_pose)
+            t4d = time.perf_counter()
             distance += float(np.hypot(*(new_pose[:2] - pose[:2])))
             truth.append(new_pose)
             times.append(world.data.time)
@@ -379,6 +410,8 @@ def run_scenario(
                 if recorder.heavy(frame):
                     recorder.log_depth(depth)
                     recorder.log_fspf(planes)
+                    if localizer is not None:
+                        recorder.log_localization(estimates, localizer.before_refinement, localizer.particles)
                     recorder.log_people(world.people.positions(world.data.time))
                     recorder.log_scalars(
                         {
@@ -388,6 +421,9 @@ def run_scenario(
                             "timing_ms/fspf": (t4b - t4) * 1e3,
                             "fspf/plane_points": float(len(planes.points)),
                             "fspf/points_2d": float(len(p2d)),
+                            "timing_ms/localization": (t4d - t4c) * 1e3,
+                            "localization/error_m": loc_errors[-1] if loc_errors else float("nan"),
+                            "localization/spread_m": localizer.estimate().std_xy_m if localizer else float("nan"),
                             "timing_ms/physics": (t2 - t1) * 1e3,
                             "collisions": float(collisions),
                         }
@@ -398,7 +434,8 @@ def run_scenario(
             timing["render"].append(t3 - t2)
             timing["noise"].append(t4 - t3)
             timing["fspf"].append(t4b - t4)
-            timing["viz"].append(t5 - t4b)
+            timing["localization"].append(t4d - t4c)
+            timing["viz"].append(t5 - t4d)
             if bar is not None:
                 bar.update(1)
                 if frame % 30 == 0:
@@ -423,6 +460,18 @@ def run_scenario(
         "realtime_factor": round(sim_time / wall, 4) if wall > 0 else 0.0,
         "wall_time_s": round(wall, 3),
     }
+    if loc_errors:
+        e = np.array(loc_errors)
+        metrics.update(
+            {
+                "resets": resets,
+                "loc_error_mean_m": round(float(e.mean()), 4),
+                "loc_error_median_m": round(float(np.median(e)), 4),
+                "loc_error_p95_m": round(float(np.percentile(e, 95)), 4),
+                "loc_error_max_m": round(float(e.max()), 4),
+                "loc_heading_error_mean_deg": round(math.degrees(float(np.mean(heading_errors))), 3),
+            }
+        )
     if fspf_counts:
         c = np.array(fspf_counts, dtype=np.float64)
         metrics.update(
@@ -435,6 +484,9 @@ def run_scenario(
         )
     files = {"report": "report.json", "trajectory_truth": "trajectory_truth.tum"}
     write_tum(out / files["trajectory_truth"], np.array(times), truth_arr)
+    if localizer is not None:
+        files["trajectory_estimate"] = "trajectory_estimate.tum"
+        write_tum(out / files["trajectory_estimate"], np.array(times[: len(estimates)]), np.array(estimates))
     if scn.report.figures:
         from sim.maprender import render_map
 
@@ -442,8 +494,8 @@ def run_scenario(
             vm,
             out / "trajectory.png",
             graph,
-            trajectories={"ground truth": truth_arr[:, :2]},
-            markers={"waypoints": path_points(graph, mission.waypoints)},
+            trajectories={"ground truth": truth_arr[:, :2], **({"CGR estimate": np.array(estimates)[:, :2]} if localizer is not None else {})},
+            markers={"waypoints": path_points(graph, mission.waypoints), **({"resets": np.array(reset_points)} if reset_points else {})},
             title=f"{scn.name} (seed {seed}): {distance:.0f} m, {collisions} collisions",
         )
         files["trajectory_figure"] = "trajectory.png"

@@ -11,8 +11,11 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from autonomy.cgr import CGRConfig
 from autonomy.errors import InputError
 from autonomy.fspf import FSPFConfig
+from autonomy.observation import ObservationConfig
+from autonomy.raycast import VisibilityGridConfig
 from sim.actors import Furniture, Person
 from sim.config import apply_overrides, from_dict
 from sim.kinect import KinectConfig
@@ -106,6 +109,27 @@ class MissionConfig:
 
 
 @dataclass(frozen=True)
+class LocalizationConfig:
+    """CGR localization on FSPF points in the loop (seed 000, IV)."""
+
+    enabled: bool = True
+    """Run the localization every frame."""
+    cgr: CGRConfig = field(default_factory=CGRConfig)
+    """Particle filter parameters."""
+    observation: ObservationConfig = field(default_factory=ObservationConfig)
+    """Point-cloud observation model parameters."""
+    grid: VisibilityGridConfig = field(default_factory=lambda: VisibilityGridConfig(cell_m=0.5, max_range_m=6.0))
+    """Visibility grid for the analytic ray cast."""
+    reset_error_m: float = 1.0
+    """Error above which the run counts a localization reset and re-initialises at the
+    true pose (the paper's failure threshold)."""
+
+    def __post_init__(self) -> None:
+        if not self.reset_error_m > 0:
+            raise InputError("localization.reset_error_m: expected a positive number")
+
+
+@dataclass(frozen=True)
 class ReportConfig:
     """What a run writes besides report.json."""
 
@@ -139,6 +163,7 @@ class Scenario:
     odometry: OdometryConfig = field(default_factory=OdometryConfig)
     kinect: KinectConfig = field(default_factory=KinectConfig)
     fspf: FSPFConfig = field(default_factory=FSPFConfig)
+    localization: LocalizationConfig = field(default_factory=LocalizationConfig)
     actors: ActorsConfig = field(default_factory=ActorsConfig)
     mission: MissionConfig = field(default_factory=MissionConfig)
     report: ReportConfig = field(default_factory=ReportConfig)

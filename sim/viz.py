@@ -9,7 +9,8 @@ Entity layout (timelines ``sim_time`` in seconds and ``frame``):
   ``world/robot/camera`` the Kinect (mount transform + Pinhole, optical frame RDF) and
   ``world/robot/camera/depth`` the depth image under it, so the viewer back-projects it.
 - ``world/robot/fspf/{plane_points,normals,outliers}`` FSPF output (robot frame).
-- ``world/trajectory/truth`` the driven path; ``world/waypoints`` the mission.
+- ``world/trajectory/truth`` the driven path, ``world/trajectory/estimate`` the CGR
+  estimate, ``world/particles/{first_stage,refined}`` the particles; ``world/waypoints``.
 - ``metrics/...`` scalars over time (speed, per-stage CPU ms, ...).
 
 Heavy items (depth images, trajectories, people) are logged every ``every``-th frame;
@@ -209,6 +210,20 @@ class Recorder:
             self.rec.log("world/robot/fspf/outliers", rr.Points3D(res.outliers, colors=(230, 60, 60), radii=0.012))
         else:
             self.rec.log("world/robot/fspf/outliers", rr.Clear(recursive=False))
+
+    def log_localization(self, estimates: list[np.ndarray], before: np.ndarray, after: np.ndarray) -> None:
+        """Estimated trajectory, and the CGR particles before and after refinement (arrows)."""
+        if len(estimates) > 1:
+            e = np.asarray(estimates)
+            strip = np.column_stack([e[:, :2], np.full(len(e), 0.05)])
+            self.rec.log("world/trajectory/estimate", rr.LineStrips3D([strip], colors=ESTIMATE_COLOR, radii=0.03))
+            p = e[-1]
+            self.rec.log("world/estimate", rr.Transform3D(translation=[p[0], p[1], 0.0], quaternion=_yaw_quat_xyzw(p[2])))
+        for name, parts, color in (("first_stage", before, (150, 150, 255)), ("refined", after, (255, 140, 0))):
+            if len(parts):
+                o = np.column_stack([parts[:, :2], np.full(len(parts), 0.1)])
+                v = np.column_stack([0.3 * np.cos(parts[:, 2]), 0.3 * np.sin(parts[:, 2]), np.zeros(len(parts))])
+                self.rec.log(f"world/particles/{name}", rr.Arrows3D(origins=o, vectors=v, colors=color))
 
     def log_people(self, xyh: np.ndarray, radius_m: float = 0.22, height_m: float = 1.75) -> None:
         if len(xyh):

@@ -33,6 +33,13 @@ def test_short_run_writes_the_report_contract(tmp_path: Path) -> None:
     m = on_disk["metrics"]
     assert m["waypoints_reached"] + m["waypoints_failed"] + m["waypoints_unvisited"] == len(on_disk["waypoints"])
     assert m["distance_m"] > 1.0  # it drove
+    # CGR localization ran on FSPF points every frame and tracked the robot.
+    for key in ("loc_error_mean_m", "loc_error_median_m", "loc_error_p95_m", "loc_error_max_m", "resets"):
+        assert key in m, key
+    assert m["loc_error_max_m"] < 0.3 and m["resets"] == 0
+    assert "localization" in on_disk["timing_ms"]
+    est = np.loadtxt(tmp_path / "trajectory_estimate.tum")
+    assert est.shape == (m["frames"] + 1, 8)
     tum = np.loadtxt(tmp_path / "trajectory_truth.tum")
     assert tum.shape[1] == 8 and len(tum) == m["frames"] + 1
     np.testing.assert_allclose(np.linalg.norm(tum[:, 4:], axis=1), 1.0, atol=1e-6)

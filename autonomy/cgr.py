@@ -1,0 +1,264 @@
+"""Corrective Gradient Refinement (CGR) localization on a vector map (seed 000, IV-C).
+
+A particle filter over (x, y, theta). Each frame (IV-C, steps 1-4):
+
+1. the particles move through the motion model of an omnidirectional base driven by
+   odometry increments: the first-stage proposal q0;
+2. each sample is refined in r iterations along the gradient of the observation
+   log-likelihood (:func:`autonomy.observation.refine`): q1 .. qr;
+3. an acceptance test chooses, per sample, between its refined and its first-stage
+   version: the refined one is kept with probability min(1, p(y|x_r) / p(y|x_0));
+4. samples are weighted by their observation likelihood and resampled (low variance).
+
+With r = 0 this is plain Monte Carlo localization (MCL), kept as a baseline. The pose
+estimate is the mean position and the circular-mean heading, with their spread.
+
+Motion noise (DESIGN.md, the original code): for an increment of translation tr and
+rotation rot, the translation noise is alpha3 * tr per axis and the rotation noise
+alpha1 * |rot| + alpha2 * tr. Degenerate frames (too few usable points, all weights 0 or
+NaN) skip the observation: the filter goes on on odometry alone.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from autonomy.errors import InputError
+from autonomy.observation import ObservationConfig, correspond, line_frames, moments, refine_all_m
+
+SceneLinesFn = Callable[[float, float], np.ndarray]
+
+
+@dataclass(frozen=True)
+class CGRConfig:
+    """CGR parameters; defaults from the paper and the original code (DESIGN.md)."""
+
+    n_particles: int = 20
+    """Number of particles."""
+    refinements: int = 6
+    """r: gradient refinement iterations (point clouds); 0 = plain MCL."""
+    alpha1: float = 0.1
+    """Rotation noise per unit rotation."""
+    alpha2_rad_per_m: float = math.radians(5.0)
+    """Rotation noise per metre of translation."""
+    alpha3: float = 0.1
+    """Translation noise per unit translation."""
+    min_translation_std_m: float = 0.001
+    """Floor on the per-frame translation noise (keeps diversity when nearly still)."""
+    min_rotation_std_rad: float = 0.001
+    """Floor on the per-frame rotation noise."""
+    step_fraction: float = 0.5
+    """kappa: fraction of the preconditioned gradient step taken per refinement."""
+    share_radius_m: float = 1.0
+    """Particles within this distance (and share_angle_rad) of the proposal mean share its
+    scene lines and correspondences; others get their own."""
+    share_angle_rad: float = math.radians(20.0)
+    """Heading tolerance for sharing correspondences."""
+    init_std_xy_m: float = 0.05
+    """Spread of the particles drawn by reset() around a pose, per axis."""
+    init_std_theta_rad: float = math.radians(2.0)
+    """Heading spread drawn by reset()."""
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.n_particles, int) and self.n_particles >= 1):
+            raise InputError(f"cgr.n_particles: expected an integer >= 1, got {self.n_particles!r}")
+        if not (isinstance(self.refinements, int) and self.refinements >= 0):
+            raise InputError(f"cgr.refinements: expected an integer >= 0, got {self.refinements!r}")
+        for name in ("alpha1", "alpha2_rad_per_m", "alpha3", "min_translation_std_m", "min_rotation_std_rad", "init_std_xy_m", "init_std_theta_rad"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise InputError(f"cgr.{name}: expected a number >= 0, got {v!r}")
+        if not 0 < self.step_fraction <= 1:
+            raise InputError("cgr.step_fraction: expected a number in (0, 1]")
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """The filter's belief summary."""
+
+    pose: np.ndarray
+    """Mean x, y and circular-mean heading."""
+    std_xy_m: float
+    """RMS distance of the particles from the mean position."""
+    std_theta_rad: float
+    """Circular standard deviation of the headings."""
+    cov_xy: np.ndarray
+    """2 x 2 covariance of the particle positions."""
+
+
+@dataclass
+class UpdateStats:
+    """What one update did (for reports and tests)."""
+
+    points: int = 0
+    used_points: int = 0
+    accepted_refinements: int = 0
+    observation: bool = False
+    shared: int = 0
+
+
+def _wrap(a: np.ndarray | float) -> np.ndarray | float:
+    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
+
+
+def circular_mean(theta: np.ndarray, w: np.ndarray | None = None) -> float:
+    w = np.ones(len(theta)) if w is None else w
+    return float(math.atan2(np.sum(w * np.sin(theta)), np.sum(w * np.cos(theta))))
+
+
+def low_variance_resample(weights: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Indices drawn by low-variance (systematic) resampling (Thrun et al., Table 4.4)."""
+    n = len(weights)
+    c = np.cumsum(weights)
+    c[-1] = 1.0
+    u = (rng.uniform(0.0, 1.0 / n) + np.arange(n) / n)
+    return np.searchsorted(c, u, side="left").clip(0, n - 1)
+
+
+class CGRLocalizer:
+    """CGR over a map given as a scene-lines function (location -> (M, 4) visible lines)."""
+
+    def __init__(
+        self,
+        scene_lines: SceneLinesFn,
+        cfg: CGRConfig = CGRConfig(),
+        obs: ObservationConfig = ObservationConfig(),
+        rng: np.random.Generator | None = None,
+    ) -> None:
+        self.scene_lines = scene_lines
+        self.cfg = cfg
+        self.obs = obs
+        self.rng = rng if rng is not None else np.random.default_rng(0)
+        self.particles = np.zeros((cfg.n_particles, 3))
+        self.weights = np.full(cfg.n_particles, 1.0 / cfg.n_particles)
+        self.before_refinement = self.particles.copy()
+        self.last = UpdateStats()
+
+    # -- belief ------------------------------------------------------------------------
+    def reset(self, pose: np.ndarray, std_xy_m: float | None = None, std_theta_rad: float | None = None) -> None:
+        """Re-initialise the particles around ``pose`` (used for localization resets)."""
+        sxy = self.cfg.init_std_xy_m if std_xy_m is None else std_xy_m
+        sth = self.cfg.init_std_theta_rad if std_theta_rad is None else std_theta_rad
+        n = self.cfg.n_particles
+        p = np.empty((n, 3))
+        p[:, :2] = np.asarray(pose[:2], dtype=np.float64) + sxy * self.rng.standard_normal((n, 2))
+        p[:, 2] = _wrap(float(pose[2]) + sth * self.rng.standard_normal(n))
+        self.particles = p
+        self.weights = np.full(n, 1.0 / n)
+        self.before_refinement = p.copy()
+
+    def estimate(self) -> Estimate:
+        p, w = self.particles, self.weights
+        mean_xy = (w[:, None] * p[:, :2]).sum(axis=0)
+        th = circular_mean(p[:, 2], w)
+        d = p[:, :2] - mean_xy
+        cov = (w[:, None, None] * np.einsum("ni,nj->nij", d, d)).sum(axis=0)
+        r = math.hypot(float(np.sum(w * np.cos(p[:, 2]))), float(np.sum(w * np.sin(p[:, 2]))))
+        std_th = math.sqrt(max(0.0, -2.0 * math.log(max(r, 1e-12))))
+        return Estimate(np.array([mean_xy[0], mean_xy[1], th]), float(math.sqrt(np.trace(cov))), std_th, cov)
+
+    # -- CGR steps ---------------------------------------------------------------------
+    def predict(self, increment: np.ndarray) -> None:
+        """Step 1: sample the motion model for an odometry increment (dx, dy, dtheta)."""
+        dx, dy, dth = (float(v) for v in increment)
+        if not all(math.isfinite(v) for v in (dx, dy, dth)):
+            return  # a broken odometry message: keep the belief
+        cfg = self.cfg
+        tr = math.hypot(dx, dy)
+        s_t = max(cfg.alpha3 * tr, cfg.min_translation_std_m)
+        s_r = max(cfg.alpha1 * abs(dth) + cfg.alpha2_rad_per_m * tr, cfg.min_rotation_std_rad)
+        n = cfg.n_particles
+        e = self.rng.standard_normal((n, 3))
+        ix, iy, it = dx + s_t * e[:, 0], dy + s_t * e[:, 1], dth + s_r * e[:, 2]
+        th = self.particles[:, 2]
+        c, s = np.cos(th), np.sin(th)
+        self.particles[:, 0] += c * ix - s * iy
+        self.particles[:, 1] += s * ix + c * iy
+        self.particles[:, 2] = _wrap(th + it)
+
+    def update(self, points: np.ndarray, normals: np.ndarray | None) -> UpdateStats:
+        """Steps 2-4 for a 2D observation (robot frame); ``normals`` None = laser model."""
+        cfg, obs = self.cfg, self.obs
+        pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
+        use_n = normals is not None
+        nrm = np.ascontiguousarray(normals if use_n else np.zeros_like(pts), dtype=np.float64).reshape(-1, 2)
+        stats = UpdateStats(points=len(pts))
+        self.before_refinement = self.particles.copy()
+        self.last = stats
+        if len(pts) < obs.min_points:
+            return stats
+        n = cfg.n_particles
+        est = self.estimate()
+        shared_pose = est.pose
+        lines = np.ascontiguousarray(self.scene_lines(float(shared_pose[0]), float(shared_pose[1])), dtype=np.float64).reshape(-1, 4)
+        if len(lines) == 0:
+            return stats
+        cos_max = math.cos(obs.theta_max_rad)
+        k = obs.inv_two_f_sigma2
+        idx_shared = np.empty(len(pts), dtype=np.int64)
+        kept = correspond(lines, shared_pose, pts, nrm, use_n, cos_max, obs.max_distance_m, idx_shared)
+        frames_shared = line_frames(lines, shared_pose[0], shared_pose[1])
+        stats.used_points = int(kept)
+        lnp0 = np.empty(n)
+        lnpr = np.empty(n)
+        refined = np.empty_like(self.particles)
+        iters = cfg.refinements
+        # Particles near the proposal mean share its correspondences, hence one moment
+        # matrix; the others get their own scene lines and correspondences.
+        d_xy = np.hypot(self.particles[:, 0] - shared_pose[0], self.particles[:, 1] - shared_pose[1])
+        d_th = np.abs(_wrap(self.particles[:, 2] - shared_pose[2]))
+        share = (d_xy <= cfg.share_radius_m) & (d_th <= cfg.share_angle_rad)
+        stats.shared = int(share.sum())
+        m = np.empty((5, 5))
+        if share.any():
+            used = moments(frames_shared, idx_shared, pts, m)
+            sel = np.flatnonzero(share)
+            o_p, o0, o1 = np.empty((len(sel), 3)), np.empty(len(sel)), np.empty(len(sel))
+            refine_all_m(m, used, np.ascontiguousarray(self.particles[sel]), k, iters, cfg.step_fraction, obs.min_points, o_p, o0, o1)
+            refined[sel], lnp0[sel], lnpr[sel] = o_p, o0, o1
+        for i in np.flatnonzero(~share):
+            p = self.particles[i]
+            own = np.ascontiguousarray(self.scene_lines(float(p[0]), float(p[1])), dtype=np.float64).reshape(-1, 4)
+            idx = np.full(len(pts), -1, dtype=np.int64)
+            frames = np.zeros((0, 3))
+            if len(own):
+                correspond(own, p, pts, nrm, use_n, cos_max, obs.max_distance_m, idx)
+                frames = line_frames(own, p[0], p[1])
+            used = moments(frames, idx, pts, m)
+            o_p, o0, o1 = np.empty((1, 3)), np.empty(1), np.empty(1)
+            refine_all_m(m, used, p[None, :].copy(), k, iters, cfg.step_fraction, obs.min_points, o_p, o0, o1)
+            refined[i], lnp0[i], lnpr[i] = o_p[0], o0[0], o1[0]
+        # Step 3: acceptance test between the refined and first-stage samples.
+        u = self.rng.uniform(size=n)
+        with np.errstate(invalid="ignore", over="ignore"):
+            accept = np.isfinite(lnpr) & ((lnpr >= lnp0) | (np.log(np.maximum(u, 1e-300)) < lnpr - lnp0))
+        self.particles[accept] = refined[accept]
+        self.particles[:, 2] = _wrap(self.particles[:, 2])
+        lnp = np.where(accept, lnpr, lnp0)
+        stats.accepted_refinements = int(accept.sum()) if cfg.refinements > 0 else 0
+        # Step 4: importance weights and low-variance resampling.
+        finite = np.isfinite(lnp)
+        if not finite.any():
+            self.weights = np.full(n, 1.0 / n)
+            return stats
+        w = np.where(finite, np.exp(lnp - lnp[finite].max()), 0.0)
+        total = w.sum()
+        if not (total > 0 and math.isfinite(total)):
+            self.weights = np.full(n, 1.0 / n)
+            return stats
+        self.weights = w / total
+        stats.observation = True
+        idx = low_variance_resample(self.weights, self.rng)
+        self.particles = self.particles[idx]
+        self.weights = np.full(n, 1.0 / n)
+        return stats
+
+    def step(self, increment: np.ndarray, points: np.ndarray, normals: np.ndarray | None) -> Estimate:
+        """One frame: predict with the odometry increment, update with the observation."""
+        self.predict(increment)
+        self.update(points, normals)
+        return self.estimate()

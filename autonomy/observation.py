@@ -1,0 +1,361 @@
+"""Observation models on scene lines: projected 3D point cloud (seed 000, IV-B) and laser.
+
+For each 2D plane-filtered point p_i (robot frame) and a pose x = (t, theta), the point in
+the world is q_i = R(theta) p_i + t. Following Section IV-B:
+
+1. the scene line l_i hit by the ray from t towards q_i is found;
+2. points without such a line are discarded;
+3. points whose normal differs from the line's normal by more than theta_max are
+   discarded;
+4. d_i is the perpendicular distance of q_i from the (extended) line l_i;
+5. p(y | x) = prod_i exp(-d_i^2 / (2 f sigma^2))   (Eq. 1, read from the garbled PDF:
+   sigma the standard deviation of one distance measurement, f >= 1 the discount for
+   the correlation between rays).
+
+The gradient (Eq. 2) of ln p(y | x) = -sum d_i^2 / (2 f sigma^2) follows from rigid
+translation and rotation of the point cloud: d d_i / d t = n_i and
+d d_i / d theta = n_i . J (q_i - t), with J the 90 degree rotation.
+
+Our additions (not in the paper): points farther than ``max_distance_m`` from their
+line are also discarded as unexplained (people, furniture), and correspondences (which
+line each point belongs to) are computed once per frame at a shared pose and reused by
+every particle near it (:func:`correspond`), since they hardly differ between nearby
+particles; the distances and gradients are then evaluated per particle.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from autonomy.errors import InputError
+
+
+@dataclass(frozen=True)
+class ObservationConfig:
+    """Parameters of the point-cloud (and laser) observation model."""
+
+    sigma_m: float = 0.05
+    """sigma: standard deviation of one distance measurement (Eq. 1)."""
+    correlation_f: float = 10.0
+    """f: discount for the correlation between rays, f >= 1 (Eq. 1)."""
+    theta_max_rad: float = math.radians(35.0)
+    """theta_max: maximum angle between a point's normal and its line's normal."""
+    max_distance_m: float = 0.5
+    """Points farther than this from their line are discarded (ours)."""
+    min_points: int = 10
+    """Fewer usable points than this: no observation update (odometry only)."""
+
+    def __post_init__(self) -> None:
+        if not (self.sigma_m > 0 and math.isfinite(self.sigma_m)):
+            raise InputError(f"observation.sigma_m: expected a positive number, got {self.sigma_m!r}")
+        if not self.correlation_f >= 1.0:
+            raise InputError(f"observation.correlation_f: expected a number >= 1, got {self.correlation_f!r}")
+        if not 0 < self.theta_max_rad <= math.pi:
+            raise InputError("observation.theta_max_rad: expected an angle in (0, pi]")
+        if not self.max_distance_m > 0:
+            raise InputError("observation.max_distance_m: expected a positive number")
+        if self.min_points < 1:
+            raise InputError("observation.min_points: expected an integer >= 1")
+
+    @property
+    def inv_two_f_sigma2(self) -> float:
+        return 1.0 / (2.0 * self.correlation_f * self.sigma_m**2)
+
+
+@numba.njit(cache=True)
+def line_frames(lines, ox, oy):  # pragma: no cover - numba
+    """Unit normals (facing the point (ox, oy)) and offsets c = n . a of each line (M, 3)."""
+    m = lines.shape[0]
+    out = np.empty((m, 3))
+    for j in range(m):
+        ax, ay, bx, by = lines[j, 0], lines[j, 1], lines[j, 2], lines[j, 3]
+        dx, dy = bx - ax, by - ay
+        L = math.sqrt(dx * dx + dy * dy)
+        if L <= 0.0:
+            out[j, 0] = 0.0
+            out[j, 1] = 0.0
+            out[j, 2] = 0.0
+            continue
+        nx, ny = -dy / L, dx / L
+        if nx * (ox - ax) + ny * (oy - ay) < 0.0:
+            nx, ny = -nx, -ny
+        out[j, 0] = nx
+        out[j, 1] = ny
+        out[j, 2] = nx * ax + ny * ay
+    return out
+
+
+@numba.njit(cache=True)
+def correspond(lines, pose, pts, nrm, use_normals, cos_theta_max, max_dist, out_idx):  # pragma: no cover
+    """Line index for each point (-1: discarded) at ``pose``; returns the count kept.
+
+    The line is the first one hit by the ray from the robot's location through the
+    point (rule 1); rules 2-3 and the distance gate discard the rest.
+    """
+    x, y, th = pose[0], pose[1], pose[2]
+    c, s = math.cos(th), math.sin(th)
+    frames = line_frames(lines, x, y)
+    m = lines.shape[0]
+    kept = 0
+    for i in range(pts.shape[0]):
+        qx = c * pts[i, 0] - s * pts[i, 1]
+        qy = s * pts[i, 0] + c * pts[i, 1]
+        # Ray from (x, y) along (qx, qy) (q - t in the world frame).
+        best = -1
+        best_t = np.inf
+        for j in range(m):
+            ax, ay = lines[j, 0] - x, lines[j, 1] - y
+            ex, ey = lines[j, 2] - lines[j, 0], lines[j, 3] - lines[j, 1]
+            den = qx * ey - qy * ex
+            if den == 0.0:
+                continue
+            t = (ax * ey - ay * ex) / den
+            u = (ax * qy - ay * qx) / den
+            if t > 0.0 and -1e-9 <= u <= 1.0 + 1e-9 and t < best_t:
+                best_t = t
+                best = j
+        if best < 0:
+            out_idx[i] = -1
+            continue
+        nx, ny = frames[best, 0], frames[best, 1]
+        if use_normals:
+            wx = c * nrm[i, 0] - s * nrm[i, 1]
+            wy = s * nrm[i, 0] + c * nrm[i, 1]
+            if wx * nx + wy * ny < cos_theta_max:
+                out_idx[i] = -1
+                continue
+        d = nx * (qx + x) + ny * (qy + y) - frames[best, 2]
+        if abs(d) > max_dist:
+            out_idx[i] = -1
+            continue
+        out_idx[i] = best
+        kept += 1
+    return kept
+
+
+@numba.njit(cache=True)
+def loglik_grad(frames, idx, pose, pts, inv_2fs2, out):  # pragma: no cover - numba
+    """ln p(y | x) (Eq. 1), its gradient (Eq. 2) and the Gauss-Newton curvature at ``pose``.
+
+    ``out`` receives [lnp, g_x, g_y, g_theta, H_xx, H_yy, H_tt, n_used, H_xy, H_xt, H_yt]
+    where H = sum J_i^T J_i / (f sigma^2) with J_i = d d_i / d (x, y, theta);
+    correspondences ``idx`` are fixed (from :func:`correspond`).
+    """
+    x, y, th = pose[0], pose[1], pose[2]
+    c, s = math.cos(th), math.sin(th)
+    lnp = 0.0
+    gx = gy = gt = 0.0
+    hxx = hyy = htt = hxy = hxt = hyt = 0.0
+    n = 0
+    k2 = 2.0 * inv_2fs2
+    for i in range(pts.shape[0]):
+        j = idx[i]
+        if j < 0:
+            continue
+        rx = c * pts[i, 0] - s * pts[i, 1]
+        ry = s * pts[i, 0] + c * pts[i, 1]
+        nx, ny = frames[j, 0], frames[j, 1]
+        d = nx * (rx + x) + ny * (ry + y) - frames[j, 2]
+        dth = nx * (-ry) + ny * rx  # n . J (q - t)
+        lnp -= d * d * inv_2fs2
+        gx -= d * nx * k2
+        gy -= d * ny * k2
+        gt -= d * dth * k2
+        hxx += nx * nx * k2
+        hyy += ny * ny * k2
+        htt += dth * dth * k2
+        hxy += nx * ny * k2
+        hxt += nx * dth * k2
+        hyt += ny * dth * k2
+        n += 1
+    out[0] = lnp
+    out[1] = gx
+    out[2] = gy
+    out[3] = gt
+    out[4] = hxx
+    out[5] = hyy
+    out[6] = htt
+    out[7] = n
+    out[8] = hxy
+    out[9] = hxt
+    out[10] = hyt
+
+
+@numba.njit(cache=True)
+def refine(frames, idx, pose, pts, inv_2fs2, iters, kappa, out_pose, work):  # pragma: no cover
+    """r steps of preconditioned gradient ascent on ln p(y | x) from ``pose`` (CGR step 2).
+
+    Each step is kappa * (H + lambda I)^-1 g: the gradient preconditioned by the damped
+    Gauss-Newton curvature H (our reading of "refined using the gradients": a plain fixed
+    step zig-zags when x, y and theta are coupled). Along a direction the points do not
+    constrain (a featureless corridor) both H and g vanish, so the sample does not move.
+    """
+    out_pose[0] = pose[0]
+    out_pose[1] = pose[1]
+    out_pose[2] = pose[2]
+    for _ in range(iters):
+        loglik_grad(frames, idx, out_pose, pts, inv_2fs2, work)
+        if work[7] == 0 or not _gn_step(work, kappa, out_pose):
+            return
+
+
+@numba.njit(cache=True)
+def moments(frames, idx, pts, out):  # pragma: no cover - numba
+    """The 5 x 5 moment matrix M = sum v_i v_i^T of the used points; returns their count.
+
+    With fixed correspondences, d_i = v_i . z where v_i = (n . p_i, n x p_i, n_x, n_y, -c)
+    (p_i in the robot frame, n and c of its line) and z = (cos theta, sin theta, t_x,
+    t_y, 1). So ln p(y | x) = -k z^T M z, its gradient and its Gauss-Newton curvature at
+    any pose follow from M alone (:func:`loglik_grad_m`): one pass over the points serves
+    every particle that shares the correspondences, and every refinement step.
+    """
+    for a in range(5):
+        for b in range(5):
+            out[a, b] = 0.0
+    n = 0
+    v = np.empty(5)
+    for i in range(pts.shape[0]):
+        j = idx[i]
+        if j < 0:
+            continue
+        nx, ny = frames[j, 0], frames[j, 1]
+        v[0] = nx * pts[i, 0] + ny * pts[i, 1]
+        v[1] = ny * pts[i, 0] - nx * pts[i, 1]
+        v[2] = nx
+        v[3] = ny
+        v[4] = -frames[j, 2]
+        for a in range(5):
+            for b in range(a, 5):
+                out[a, b] += v[a] * v[b]
+        n += 1
+    for a in range(5):
+        for b in range(a):
+            out[a, b] = out[b, a]
+    return n
+
+
+@numba.njit(cache=True)
+def loglik_grad_m(m, n_used, pose, inv_2fs2, out):  # pragma: no cover - numba
+    """Same outputs as :func:`loglik_grad`, from the moment matrix (O(25) per pose)."""
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    z = np.array([c, s, pose[0], pose[1], 1.0])
+    w = np.array([-s, c, 0.0, 0.0, 0.0])  # d z / d theta
+    mz = np.zeros(5)
+    mw = np.zeros(5)
+    for a in range(5):
+        for b in range(5):
+            mz[a] += m[a, b] * z[b]
+            mw[a] += m[a, b] * w[b]
+    zmz = 0.0
+    wmz = 0.0
+    wmw = 0.0
+    for a in range(5):
+        zmz += z[a] * mz[a]
+        wmz += w[a] * mz[a]
+        wmw += w[a] * mw[a]
+    k2 = 2.0 * inv_2fs2
+    out[0] = -inv_2fs2 * zmz
+    out[1] = -k2 * mz[2]
+    out[2] = -k2 * mz[3]
+    out[3] = -k2 * wmz
+    out[4] = k2 * m[2, 2]
+    out[5] = k2 * m[3, 3]
+    out[6] = k2 * wmw
+    out[7] = n_used
+    out[8] = k2 * m[2, 3]
+    out[9] = k2 * mw[2]
+    out[10] = k2 * mw[3]
+
+
+@numba.njit(cache=True)
+def _gn_step(work, kappa, pose):  # pragma: no cover - numba
+    """pose += kappa (H + lambda I)^-1 g from a loglik_grad output; False if singular."""
+    lam = 1e-3 * (work[4] + work[5] + work[6]) / 3.0 + 1e-9
+    a, b, cc = work[4] + lam, work[8], work[9]
+    d, e = work[5] + lam, work[10]
+    f = work[6] + lam
+    c00 = d * f - e * e
+    c01 = cc * e - b * f
+    c02 = b * e - cc * d
+    det = a * c00 + b * c01 + cc * c02
+    if not det > 0.0:
+        return False
+    c11 = a * f - cc * cc
+    c12 = b * cc - a * e
+    c22 = a * d - b * b
+    g0, g1, g2 = work[1], work[2], work[3]
+    pose[0] += kappa * (c00 * g0 + c01 * g1 + c02 * g2) / det
+    pose[1] += kappa * (c01 * g0 + c11 * g1 + c12 * g2) / det
+    pose[2] += kappa * (c02 * g0 + c12 * g1 + c22 * g2) / det
+    return True
+
+
+@numba.njit(cache=True)
+def refine_all_m(m, n_used, poses, inv_2fs2, iters, kappa, min_points, out_poses, lnp0, lnpr):  # pragma: no cover
+    """CGR steps 2 for every particle sharing one moment matrix: first-stage and refined
+    log-likelihoods and the refined poses (r preconditioned gradient steps each)."""
+    work = np.zeros(11)
+    for i in range(poses.shape[0]):
+        p = out_poses[i]
+        p[0] = poses[i, 0]
+        p[1] = poses[i, 1]
+        p[2] = poses[i, 2]
+        if n_used < min_points:
+            lnp0[i] = -np.inf
+            lnpr[i] = -np.inf
+            continue
+        loglik_grad_m(m, n_used, p, inv_2fs2, work)
+        lnp0[i] = work[0]
+        for _ in range(iters):
+            if not _gn_step(work, kappa, p):
+                break
+            loglik_grad_m(m, n_used, p, inv_2fs2, work)
+        lnpr[i] = work[0]
+
+
+def expected_ranges(lines: np.ndarray, pose: np.ndarray, angles: np.ndarray, max_range_m: float = np.inf) -> np.ndarray:
+    """Laser ranges a sensor at ``pose`` would measure along ``angles`` (robot frame) on the
+    scene lines; 0 where a ray hits nothing within ``max_range_m`` (no return)."""
+    from autonomy.raycast import rays_hit
+
+    a = np.asarray(angles, dtype=np.float64) + float(pose[2])
+    idx, t = rays_hit(np.ascontiguousarray(lines, dtype=np.float64).reshape(-1, 4), float(pose[0]), float(pose[1]), np.column_stack([np.cos(a), np.sin(a)]))
+    return np.where((idx >= 0) & (t < max_range_m), t, 0.0)
+
+
+def points_from_scan(ranges: np.ndarray, angles: np.ndarray, max_range_m: float) -> np.ndarray:
+    """Laser ranges (0 or beyond max range = no return) to 2D points in the sensor frame."""
+    r = np.asarray(ranges, dtype=np.float64)
+    ok = (r > 0) & (r < max_range_m) & np.isfinite(r)
+    a = np.asarray(angles, dtype=np.float64)[ok]
+    return np.column_stack([r[ok] * np.cos(a), r[ok] * np.sin(a)])
+
+
+class PointCloudModel:
+    """Eq. 1-2 for one pose: correspondences, likelihood and gradient (tests, tools).
+
+    ``normals`` None gives the laser variant (no normal test): the scan's end points are
+    matched to the scene lines hit by their rays, as the simulated-laser baselines need.
+    """
+
+    def __init__(self, cfg: ObservationConfig = ObservationConfig()) -> None:
+        self.cfg = cfg
+
+    def evaluate(
+        self, lines: np.ndarray, pose: np.ndarray, points: np.ndarray, normals: np.ndarray | None
+    ) -> tuple[float, np.ndarray, int]:
+        """(ln p(y | x), gradient (3,), points used) at ``pose``."""
+        lines = np.ascontiguousarray(lines, dtype=np.float64).reshape(-1, 4)
+        pose = np.asarray(pose, dtype=np.float64)
+        pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
+        use_n = normals is not None
+        nrm = np.ascontiguousarray(normals if use_n else np.zeros_like(pts), dtype=np.float64).reshape(-1, 2)
+        idx = np.empty(len(pts), dtype=np.int64)
+        correspond(lines, pose, pts, nrm, use_n, math.cos(self.cfg.theta_max_rad), self.cfg.max_distance_m, idx)
+        out = np.zeros(11)
+        loglik_grad(line_frames(lines, pose[0], pose[1]), idx, pose, pts, self.cfg.inv_two_f_sigma2, out)
+        return float(out[0]), out[1:4].copy(), int(out[7])

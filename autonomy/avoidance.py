@@ -1,0 +1,215 @@
+"""Obstacle avoidance by open path lengths: seed 000, Section V, Eq. 3-5.
+
+For a candidate direction theta with unit vector theta_hat, robot radius r and obstacle
+points P u O down-projected to the floor plane (robot frame, x forward, y left):
+
+- Eq. 3: P_theta = {p : ||p - (p . theta_hat) theta_hat|| < r}, the points inside the
+  corridor of half-width r swept by the robot moving along theta.
+- Eq. 4: d(theta) = min over p in P_theta with p . theta_hat > 0 of max(0, p . theta_hat - r),
+  the open path length; ``max_range`` when no point blocks (and it is capped there: the
+  sensor sees no further).
+- Eq. 5: theta* = argmax_theta d(theta) cos(theta - theta_d).
+
+Readings of the garbled text and choices made here:
+
+- Only points strictly ahead (p . theta_hat > 0) block a direction: what lies behind the
+  robot never stops it moving away. A point within r of the robot centre and ahead lies in
+  the corridor (its lateral offset is at most its distance) with p . theta_hat - r < 0, so
+  it blocks that direction with d = 0; the same point does not block directions pointing
+  away from it (p . theta_hat <= 0, including exactly abeam).
+- ``r`` in Eq. 3-4 is ``robot_radius_m + safety_margin_m`` (the margin widens the corridor
+  and shortens the open length alike). Eq. 4 subtracts r, not the exact contact offset
+  sqrt(r^2 - lateral^2): conservative by up to r for points near the corridor edge.
+- The candidate fan spans theta_d +- fov_rad / 2 (theta_d wrapped to [-pi, pi]), clipped
+  to [-pi, pi] so it never turns through the back; with a camera-width fan the chosen
+  direction stays near where the camera looks (and can see obstacles). The sample nearest
+  theta_d is replaced by theta_d itself, so the desired direction is always a candidate.
+- Ties in Eq. 5 go to the candidate closest to theta_d (then the lower index, i.e. the
+  more clockwise one).
+- Safe speed: the largest v from which the robot stops within d(theta*) - stop_distance
+  at the maximum deceleration a, v = sqrt(2 a max(0, d* - stop)); the caller caps it at
+  its cruise speed. ``blocked`` when d* <= stop_distance.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from autonomy.errors import InputError
+
+
+@dataclass(frozen=True)
+class AvoidanceConfig:
+    """Obstacle avoidance parameters (seed 000, Section V)."""
+
+    robot_radius_m: float = 0.3
+    """r: robot radius (Eq. 3-4)."""
+    safety_margin_m: float = 0.1
+    """Clearance added to r for the corridor test and open length (Eq. 3-4)."""
+    max_range_m: float = 4.0
+    """Cap on the open path length d(theta): the depth sensor's range."""
+    n_directions: int = 61
+    """Number of candidate directions theta in the fan."""
+    fov_rad: float = math.radians(90.0)
+    """Angular width of the candidate fan, centred on theta_d (clipped to [-pi, pi])."""
+    min_height_m: float = 0.05
+    """Points lower than this above the floor are floor, not obstacles."""
+    max_height_m: float = 1.1
+    """Points higher than this are overhead (the robot passes below), not obstacles."""
+    stop_distance_m: float = 0.05
+    """Open length kept in reserve when stopping; d(theta*) at or below it means blocked."""
+    max_decel_mps2: float = 1.0
+    """a: maximum braking deceleration used for the safe speed."""
+
+    def __post_init__(self) -> None:
+        for name in ("robot_radius_m", "max_range_m", "max_decel_mps2", "fov_rad"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise InputError(f"avoidance.{name}: expected a positive number, got {v!r}")
+        for name in ("safety_margin_m", "stop_distance_m"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise InputError(f"avoidance.{name}: expected a number >= 0, got {v!r}")
+        n = self.n_directions
+        if not (isinstance(n, int) and not isinstance(n, bool) and n >= 1):
+            raise InputError(f"avoidance.n_directions: expected an integer >= 1, got {n!r}")
+        if self.fov_rad > 2.0 * math.pi:
+            raise InputError(f"avoidance.fov_rad: expected an angle in (0, 2 pi], got {self.fov_rad!r}")
+        for name in ("min_height_m", "max_height_m"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v)):
+                raise InputError(f"avoidance.{name}: expected a finite number, got {v!r}")
+        if not self.min_height_m < self.max_height_m:
+            raise InputError(
+                f"avoidance.min_height_m ({self.min_height_m!r}) must be below max_height_m ({self.max_height_m!r})"
+            )
+
+    @property
+    def radius_m(self) -> float:
+        """The r used in Eq. 3-4: robot radius plus safety margin."""
+        return self.robot_radius_m + self.safety_margin_m
+
+
+@dataclass(frozen=True)
+class AvoidanceResult:
+    """Outcome of one obstacle-avoidance decision (robot frame)."""
+
+    angles: np.ndarray
+    """theta: candidate directions (K,), radians, increasing."""
+    lengths: np.ndarray
+    """d(theta): open path length of each candidate (K,), metres (Eq. 4)."""
+    best_index: int
+    """Index of theta* in ``angles`` (Eq. 5)."""
+    theta_star: float
+    """theta*: chosen direction of travel, radians (Eq. 5)."""
+    open_length_m: float
+    """d(theta*): open path length along the chosen direction."""
+    safe_speed_mps: float
+    """Largest speed from which the robot stops within d(theta*) - stop distance."""
+    blocked: bool
+    """True when d(theta*) <= stop distance: no direction in the fan is open."""
+
+
+def obstacle_points(points3d: np.ndarray, cfg: AvoidanceConfig | None = None) -> np.ndarray:
+    """(n, 3) robot-frame points (P u O) -> (k, 2) floor-plane obstacles inside the height band.
+
+    Points with z outside [min_height_m, max_height_m] (floor, overhead) and non-finite
+    points are dropped; the rest are down-projected to (x, y) (Section V).
+    """
+    cfg = AvoidanceConfig() if cfg is None else cfg
+    pts = np.asarray(points3d, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise InputError(f"obstacle_points: expected an (n, 3) array, got shape {pts.shape}")
+    z = pts[:, 2]
+    keep = (z >= cfg.min_height_m) & (z <= cfg.max_height_m) & np.isfinite(pts).all(axis=1)
+    return np.ascontiguousarray(pts[keep, :2])
+
+
+@numba.njit(cache=True)
+def _open_path_lengths_kernel(
+    xs: np.ndarray, ys: np.ndarray, angles: np.ndarray, radius: float, max_range: float, out: np.ndarray
+) -> None:
+    """Eq. 3-4 for every angle: out[k] = min over blocking points of max(0, p . t - r)."""
+    n = xs.shape[0]
+    for k in range(angles.shape[0]):
+        c = math.cos(angles[k])
+        s = math.sin(angles[k])
+        best = max_range
+        for i in range(n):
+            along = xs[i] * c + ys[i] * s  # p . theta_hat
+            if along <= 0.0:
+                continue  # behind (or abeam): does not block this direction
+            lateral = ys[i] * c - xs[i] * s  # signed distance from the ray's line
+            if abs(lateral) < radius:  # Eq. 3
+                d = along - radius  # Eq. 4
+                if d < best:
+                    best = d
+        out[k] = best if best > 0.0 else 0.0
+
+
+def open_path_lengths(points2d: np.ndarray, angles: np.ndarray, radius: float, max_range: float) -> np.ndarray:
+    """Open path length d(theta) (Eq. 3-4) for each robot-frame angle, capped at max_range.
+
+    O(n * K) in one numba kernel; an empty cloud gives max_range everywhere.
+    """
+    pts = np.asarray(points2d, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 2:
+        raise InputError(f"open_path_lengths: expected an (n, 2) array of points, got shape {pts.shape}")
+    ang = np.ascontiguousarray(np.asarray(angles, dtype=np.float64).reshape(-1))
+    if not (math.isfinite(radius) and radius >= 0):
+        raise InputError(f"open_path_lengths: radius must be a number >= 0, got {radius!r}")
+    if not (math.isfinite(max_range) and max_range > 0):
+        raise InputError(f"open_path_lengths: max_range must be a positive number, got {max_range!r}")
+    if not np.isfinite(ang).all():
+        raise InputError("open_path_lengths: angles must be finite")
+    out = np.empty(ang.shape[0], dtype=np.float64)
+    xs = np.ascontiguousarray(pts[:, 0])
+    ys = np.ascontiguousarray(pts[:, 1])
+    _open_path_lengths_kernel(xs, ys, ang, float(radius), float(max_range), out)
+    return out
+
+
+def wrap_angle(a: float) -> float:
+    """Angle wrapped to [-pi, pi)."""
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def candidate_angles(desired_rad: float, cfg: AvoidanceConfig) -> np.ndarray:
+    """The candidate fan: n_directions angles over theta_d +- fov/2 clipped to [-pi, pi], theta_d included."""
+    if not math.isfinite(desired_rad):
+        raise InputError(f"choose_direction: desired direction must be finite, got {desired_rad!r}")
+    d = wrap_angle(float(desired_rad))
+    half = 0.5 * cfg.fov_rad
+    lo, hi = max(-math.pi, d - half), min(math.pi, d + half)
+    angles = np.linspace(lo, hi, cfg.n_directions)
+    angles[int(np.argmin(np.abs(angles - d)))] = d  # stays sorted: d lies between its neighbours
+    return angles
+
+
+def choose_direction(
+    points2d: np.ndarray, desired_rad: float, cfg: AvoidanceConfig | None = None
+) -> AvoidanceResult:
+    """theta* by Eq. 5 over the candidate fan around desired_rad, with its open length and safe speed."""
+    cfg = AvoidanceConfig() if cfg is None else cfg
+    angles = candidate_angles(desired_rad, cfg)
+    d = wrap_angle(float(desired_rad))
+    lengths = open_path_lengths(points2d, angles, cfg.radius_m, cfg.max_range_m)
+    score = lengths * np.cos(angles - d)  # Eq. 5
+    best = float(score.max())
+    ties = np.flatnonzero(score >= best - 1e-12 * max(1.0, abs(best)))
+    i = int(ties[np.argmin(np.abs(angles[ties] - d))])
+    dstar = float(lengths[i])
+    v = math.sqrt(2.0 * cfg.max_decel_mps2 * max(0.0, dstar - cfg.stop_distance_m))
+    return AvoidanceResult(
+        angles=angles,
+        lengths=lengths,
+        best_index=i,
+        theta_star=float(angles[i]),
+        open_length_m=dstar,
+        safe_speed_mps=v,
+        blocked=bool(dstar <= cfg.stop_distance_m),
+    )

@@ -18,9 +18,11 @@ from pathlib import Path
 
 import numpy as np
 
+from autonomy.avoidance import obstacle_points
 from autonomy.cgr import CGRLocalizer
 from autonomy.errors import InputError
 from autonomy.fspf import fspf
+from autonomy.navigator import Navigator
 from autonomy.planner import astar, path_points
 from autonomy.raycast import SceneQuery, load_or_build
 from autonomy.vectormap import NavGraph, VectorMap, load_navgraph, load_vectormap
@@ -34,6 +36,12 @@ from sim.world import World, build_world
 
 #: Report schema version (bump when keys change meaning).
 REPORT_VERSION = 1
+
+#: The paper's figures for scenarios that reproduce one of its experiments (seed 000).
+PAPER_FIGURES: dict[str, dict[str, float]] = {
+    # VI-B: the long-run trial drove over 4 km with 3 localization resets.
+    "long_run": {"distance_m": 4000.0, "resets": 3},
+}
 
 
 @dataclass
@@ -147,7 +155,9 @@ def plan_mission(scn: Scenario, graph: NavGraph, rng: np.random.Generator) -> Mi
     else:
         wps = []
         prev = m.start_node if m.start_node >= 0 else None
-        while len(wps) < m.n_random_waypoints:
+        # A long run draws one waypoint at a time until it has driven its distance.
+        n_first = 1 if m.target_distance_m > 0 else m.n_random_waypoints
+        while len(wps) < n_first:
             c = int(rng.choice(ids))
             if c != prev:
                 wps.append(c)
@@ -164,69 +174,6 @@ def plan_mission(scn: Scenario, graph: NavGraph, rng: np.random.Generator) -> Mi
     heading = math.atan2(q[1] - p[1], q[0] - p[0]) if np.hypot(*(q - p)) > 1e-6 else 0.0
     mission = Mission(waypoints=wps, start_pose=np.array([p[0], p[1], heading]))
     return mission
-
-
-class GroundTruthFollower:
-    """Carrot following on the true pose along the nav-graph path to each waypoint.
-
-    The carrot is ``lookahead_m`` ahead along the path from the closest path point; the
-    body-frame velocity points at the carrot at cruise speed (slowing into the final
-    point), and the heading turns towards the direction of travel so the camera looks
-    where the robot goes.
-    """
-
-    def __init__(self, graph: NavGraph, cruise_mps: float, lookahead_m: float = 0.8) -> None:
-        self.graph = graph
-        self.cruise = cruise_mps
-        self.lookahead = lookahead_m
-        self.path = np.zeros((0, 2))
-        self._cum = np.zeros(0)
-
-    def set_path(self, pts: np.ndarray) -> float:
-        """Follow a new polyline; returns its length."""
-        self.path = np.asarray(pts, dtype=np.float64)
-        seg = np.hypot(*np.diff(self.path, axis=0).T) if len(self.path) > 1 else np.zeros(0)
-        self._cum = np.concatenate([[0.0], np.cumsum(seg)])
-        return float(self._cum[-1])
-
-    def _project(self, xy: np.ndarray) -> float:
-        best, best_s = math.inf, 0.0
-        for k in range(len(self.path) - 1):
-            a, b = self.path[k], self.path[k + 1]
-            d = b - a
-            L2 = float(d @ d)
-            t = 0.0 if L2 == 0 else float(np.clip((xy - a) @ d / L2, 0.0, 1.0))
-            p = a + t * d
-            dist = float(np.hypot(*(xy - p)))
-            if dist < best:
-                best, best_s = dist, self._cum[k] + t * math.sqrt(L2)
-        return best_s
-
-    def _point_at(self, s: float) -> np.ndarray:
-        s = min(max(s, 0.0), self._cum[-1])
-        k = int(np.clip(np.searchsorted(self._cum, s, side="right") - 1, 0, len(self.path) - 2))
-        L = self._cum[k + 1] - self._cum[k]
-        t = 0.0 if L == 0 else (s - self._cum[k]) / L
-        return self.path[k] + t * (self.path[k + 1] - self.path[k])
-
-    def command(self, pose: np.ndarray) -> np.ndarray:
-        if len(self.path) < 2:
-            return np.zeros(3)
-        xy = pose[:2]
-        s = self._project(xy)
-        carrot = self._point_at(s + self.lookahead)
-        to_goal = float(np.hypot(*(self.path[-1] - xy)))
-        d = carrot - xy
-        dist = float(np.hypot(*d))
-        speed = min(self.cruise, 0.8 * to_goal + 0.05)
-        v_world = d / dist * speed if dist > 1e-6 else np.zeros(2)
-        c, sn = math.cos(pose[2]), math.sin(pose[2])
-        vx, vy = c * v_world[0] + sn * v_world[1], -sn * v_world[0] + c * v_world[1]
-        desired = math.atan2(d[1], d[0]) if dist > 0.1 else pose[2]
-        err = math.atan2(math.sin(desired - pose[2]), math.cos(desired - pose[2]))
-        # Slow down translation while the heading is far off, so the camera leads.
-        scale = max(0.2, math.cos(err)) if abs(err) < math.pi / 2 else 0.2
-        return np.array([vx * scale, vy * scale, 2.0 * err])
 
 
 def write_tum(path: Path, t: np.ndarray, poses: np.ndarray) -> None:
@@ -287,11 +234,11 @@ def run_scenario(
     heading_errors: list[float] = []
     resets = 0
     reset_points: list[np.ndarray] = []
-    follower = GroundTruthFollower(graph, scn.mission.cruise_speed_mps)
+    navigator = Navigator(graph, scn.navigator, scn.avoidance, walls=np.asarray(vm.segments))
+    use_estimate = scn.mission.follower == "navigator" and localizer is not None
 
     frame_dt = 1.0 / scn.kinect.rate_hz
     n_sub = max(1, round(frame_dt / scn.world.timestep_s))
-    start_node = graph.nearest_node(*mission.start_pose[:2])
 
     recorder = None
     if rrd or spawn:
@@ -312,7 +259,7 @@ def run_scenario(
         )
         recorder.log_waypoints(path_points(graph, mission.waypoints))
 
-    timing: dict[str, list[float]] = {k: [] for k in ("physics", "render", "noise", "fspf", "localization", "control", "viz")}
+    timing: dict[str, list[float]] = {k: [] for k in ("physics", "render", "noise", "fspf", "localization", "navigation", "viz")}
     fspf_counts: list[tuple[int, int, int, int]] = []  # plane points, outliers, planes, 2D points
     times: list[float] = []
     truth: list[np.ndarray] = []
@@ -321,16 +268,18 @@ def run_scenario(
     distance = 0.0
     frame = 0
     interrupted = False
-    prev_node = start_node
+    nav_cfg = scn.navigator
 
     def leg_timeout(length_m: float) -> float:
         if scn.mission.waypoint_timeout_s > 0:
             return scn.mission.waypoint_timeout_s
-        return 30.0 + 2.0 * length_m / scn.mission.cruise_speed_mps
+        return 30.0 + 2.0 * length_m / nav_cfg.cruise_speed_mps
 
-    mission.timeout_s = leg_timeout(follower.set_path(path_points(graph, astar(graph, prev_node, mission.waypoints[0]))))
+    mission.timeout_s = leg_timeout(navigator.set_goal(mission.waypoints[0], mission.start_pose, 0.0))
     mission.started_at = 0.0
     max_frames = int(math.ceil(scn.mission.max_duration_s / frame_dt))
+    long_run = scn.mission.target_distance_m > 0
+    node_ids = [int(i) for i in graph.node_ids()]
 
     show = progress if progress is not None else (scn.report.progress and sys.stderr.isatty())
     bar = None
@@ -342,36 +291,54 @@ def run_scenario(
     pose = world.robot.pose(world.data)
     truth.append(pose)
     times.append(0.0)
+    # The first frame, so the navigator sees before it moves.
+    planes = fspf(
+        apply_kinect_noise(camera.render_clean(world.data), scn.kinect.intrinsics, scn.kinect.noise, noise_base % (2**31)),
+        scn.kinect.intrinsics, scn.fspf, seed=fspf_base, mount=scn.kinect.mount,
+    )
+    obstacles = obstacle_points(np.vstack([planes.points, planes.outliers]), scn.avoidance)
+    nav = None
+    nav_states: dict[str, int] = {}
     try:
         while frame < max_frames and mission.current < len(mission.waypoints):
             t = world.data.time
             t0 = time.perf_counter()
             pose = world.robot.pose(world.data)
-            goal_xy = graph.node_xy()[graph.index_of(mission.waypoints[mission.current])]
-            arrived = np.hypot(*(goal_xy - pose[:2])) < scn.mission.arrival_radius_m
-            if arrived or t - mission.started_at > mission.timeout_s:
+            control_pose = estimates[-1] if use_estimate else pose
+            nav = navigator.command(control_pose, obstacles, t)
+            nav_states[nav.state] = nav_states.get(nav.state, 0) + 1
+            timed_out = t - mission.started_at > mission.timeout_s
+            if nav.state == "arrived" or timed_out:
                 node = mission.waypoints[mission.current]
-                if arrived:
-                    reached += 1
-                    prev_node = node
-                else:
-                    failed += 1
-                    prev_node = graph.nearest_node(*pose[:2])
+                goal_xy = graph.node_xy()[graph.index_of(node)]
+                # The navigator arrives on its estimate; the run checks the truth.
+                ok = nav.state == "arrived" and np.hypot(*(goal_xy - pose[:2])) < nav_cfg.arrival_radius_m + 0.5
+                reached += int(ok)
+                failed += int(not ok)
                 mission.events.append(
-                    {"t": round(t, 3), "waypoint": node, "status": "reached" if arrived else "failed", "leg_s": round(t - mission.started_at, 3)}
+                    {
+                        "t": round(t, 3),
+                        "waypoint": node,
+                        "status": "reached" if ok else ("timeout" if timed_out else "wrong_place"),
+                        "leg_s": round(t - mission.started_at, 3),
+                        "distance_m": round(distance, 2),
+                    }
                 )
                 mission.current += 1
                 mission.started_at = t
+                if long_run and distance < scn.mission.target_distance_m and mission.current >= len(mission.waypoints):
+                    nxt = node
+                    while nxt == node:
+                        nxt = int(rng_mission.choice(node_ids))
+                    mission.waypoints.append(nxt)
                 if mission.current >= len(mission.waypoints):
                     break
-                mission.timeout_s = leg_timeout(
-                    follower.set_path(
-                        np.vstack([pose[:2], path_points(graph, astar(graph, prev_node, mission.waypoints[mission.current]))])
-                    )
-                )
-            cmd = follower.command(pose)
+                mission.timeout_s = leg_timeout(navigator.set_goal(mission.waypoints[mission.current], control_pose, t))
+                nav = navigator.command(control_pose, obstacles, t)
+            cmd = nav.velocity
             world.robot.command(world.data, cmd, frame_dt)
             t1 = time.perf_counter()
+            timing["navigation"].append(t1 - t0)
             world.people.update(world.data, t + frame_dt, pose[:2])
             collisions += world.step_frame(n_sub)
             t2 = time.perf_counter()
@@ -383,6 +350,7 @@ def run_scenario(
             p2d, _ = planes.projected(scn.fspf.max_vertical_normal_angle_rad)
             t4b = time.perf_counter()
             fspf_counts.append((len(planes.points), len(planes.outliers), planes.planes, len(p2d)))
+            obstacles = obstacle_points(np.vstack([planes.points, planes.outliers]), scn.avoidance)
             new_pose = world.robot.pose(world.data)
             increment = odom.update(new_pose)
             t4c = time.perf_counter()
@@ -429,7 +397,6 @@ def run_scenario(
                         }
                     )
             t5 = time.perf_counter()
-            timing["control"].append(t1 - t0)
             timing["physics"].append(t2 - t1)
             timing["render"].append(t3 - t2)
             timing["noise"].append(t4 - t3)
@@ -439,7 +406,7 @@ def run_scenario(
             if bar is not None:
                 bar.update(1)
                 if frame % 30 == 0:
-                    bar.set_postfix(dist=f"{distance:.0f}m", wp=f"{reached}/{len(mission.waypoints)}", coll=collisions)
+                    bar.set_postfix(dist=f"{distance:.0f}m", wp=f"{reached}/{len(mission.waypoints)}", coll=collisions, resets=resets)
     except KeyboardInterrupt:
         interrupted = True
     finally:
@@ -511,12 +478,13 @@ def run_scenario(
         "seed": seed,
         "interrupted": interrupted,
         "metrics": metrics,
-        "paper": {},
+        "paper": PAPER_FIGURES.get(scn.name, {}),
         "timing_ms": {k: round(_median_ms(v), 4) for k, v in timing.items()},
         "render_backend": backend,
         "map": {"segments": vm.n_segments, "nodes": len(graph.nodes), "edges": len(graph.edges)},
         "actors": {"furniture": len(furniture), "people": len(people)},
         "waypoints": mission.waypoints,
+        "navigation": {"states": nav_states, "replans": navigator.replans, "recoveries": navigator.recoveries},
         "events": mission.events,
         "files": files,
         "config": {k: v for k, v in to_dict(scn).items() if k != "base_dir"},

@@ -11,9 +11,11 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from autonomy.avoidance import AvoidanceConfig
 from autonomy.cgr import CGRConfig
 from autonomy.errors import InputError
 from autonomy.fspf import FSPFConfig
+from autonomy.navigator import NavigatorConfig
 from autonomy.observation import ObservationConfig
 from autonomy.raycast import VisibilityGridConfig
 from sim.actors import Furniture, Person
@@ -27,7 +29,7 @@ ASSETS_DIR = Path(__file__).resolve().parent / "assets"
 SCENARIOS_DIR = Path(__file__).resolve().parent.parent / "scenarios"
 
 MISSION_KINDS = ("waypoints",)
-FOLLOWERS = ("ground_truth",)
+FOLLOWERS = ("navigator", "ground_truth")
 
 
 @dataclass(frozen=True)
@@ -79,29 +81,27 @@ class MissionConfig:
     """How many random waypoints when none are given."""
     start_node: int = -1
     """Node id to start at; -1 = the first waypoint's graph neighbour / a random node."""
-    follower: str = "ground_truth"
-    """Controller: ground_truth (carrot following on the true pose)."""
+    follower: str = "navigator"
+    """navigator: drives on the localization estimate; ground_truth: the same navigator on
+    the true pose (for tests of everything but localization)."""
     max_duration_s: float = 120.0
     """Stop after this much simulated time."""
     target_distance_m: float = 0.0
-    """Stop once the robot has driven this far (0 = no target)."""
-    arrival_radius_m: float = 0.35
-    """A waypoint counts as reached within this distance."""
+    """Long run: keep drawing random waypoints until the robot has driven this far
+    (0 = visit the given / drawn waypoints once)."""
     waypoint_timeout_s: float = 0.0
     """A waypoint not reached within this time counts as failed; 0 = automatic
     (30 s plus twice the leg's nominal time at cruise speed)."""
-    cruise_speed_mps: float = 0.75
-    """Follower's cruise speed."""
 
     def __post_init__(self) -> None:
+        if self.target_distance_m < 0:
+            raise InputError("mission.target_distance_m: expected a number >= 0")
         if self.kind not in MISSION_KINDS:
             raise InputError(f"mission.kind {self.kind!r}: expected one of {', '.join(MISSION_KINDS)}")
         if self.follower not in FOLLOWERS:
             raise InputError(f"mission.follower {self.follower!r}: expected one of {', '.join(FOLLOWERS)}")
         if self.waypoint_timeout_s < 0:
             raise InputError("mission.waypoint_timeout_s: expected a number >= 0 (0 = automatic)")
-        if self.cruise_speed_mps <= 0:
-            raise InputError("mission.cruise_speed_mps: expected a positive number")
         if self.max_duration_s <= 0:
             raise InputError("mission.max_duration_s: expected a positive number")
         if self.n_random_waypoints < 1 and not self.waypoints:
@@ -164,6 +164,8 @@ class Scenario:
     kinect: KinectConfig = field(default_factory=KinectConfig)
     fspf: FSPFConfig = field(default_factory=FSPFConfig)
     localization: LocalizationConfig = field(default_factory=LocalizationConfig)
+    navigator: NavigatorConfig = field(default_factory=NavigatorConfig)
+    avoidance: AvoidanceConfig = field(default_factory=AvoidanceConfig)
     actors: ActorsConfig = field(default_factory=ActorsConfig)
     mission: MissionConfig = field(default_factory=MissionConfig)
     report: ReportConfig = field(default_factory=ReportConfig)

@@ -1,0 +1,263 @@
+"""Waypoint navigation: global plan on the nav graph, carrot following, avoidance, recovery.
+
+The navigator reads only a pose (the localization estimate in the loop) and the obstacle
+points the depth camera sensed (robot frame, down-projected); it never sees ground truth.
+Per frame it:
+
+1. projects the pose on the planned polyline and puts a carrot ``lookahead_m`` further on;
+2. if the carrot is far off the heading, turns in place first (the Kinect sees only
+   +-29 degrees, so the robot must look where it is going);
+3. otherwise asks the obstacle avoidance (seed 000, Eq. 3-5) for the direction theta*
+   closest to the carrot with the longest open path, and a speed that can stop within it;
+4. watches progress: no progress for ``stuck_time_s`` triggers a recovery (back off
+   briefly, then re-plan from the nearest reachable node).
+
+Obstacles are remembered for ``memory_s`` in the world frame (through the pose
+estimate) while they are out of the camera's view: with a 58 degree field of view and
+nothing seen closer than 0.8 m, a person the robot is passing is otherwise forgotten
+exactly when it matters (ours, off by default; the paper reacts to the current frame).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from autonomy.avoidance import AvoidanceConfig, choose_direction
+from autonomy.errors import InputError
+from autonomy.planner import astar, path_points
+from autonomy.vectormap import NavGraph
+
+
+@dataclass(frozen=True)
+class NavigatorConfig:
+    """Carrot following, speed and recovery parameters."""
+
+    cruise_speed_mps: float = 0.75
+    """Speed on open paths (CoBot: 0.75 m/s)."""
+    lookahead_m: float = 0.8
+    """Carrot distance ahead along the plan."""
+    arrival_radius_m: float = 0.35
+    """The goal counts as reached within this distance."""
+    heading_gain: float = 2.0
+    """Yaw rate per radian of heading error."""
+    max_turn_rate_rad_s: float = 1.5
+    """Yaw-rate limit."""
+    turn_in_place_rad: float = math.radians(45.0)
+    """Turn in place while the carrot is more than this off the heading."""
+    stuck_time_s: float = 6.0
+    """No progress for this long triggers a recovery."""
+    stuck_progress_m: float = 0.25
+    """Progress (m along the plan) that counts within stuck_time_s."""
+    backoff_time_s: float = 1.0
+    """Recovery: back off for this long ..."""
+    backoff_speed_mps: float = 0.15
+    """... at this speed, then re-plan."""
+    exclude_stairs: bool = True
+    """Plans avoid edges flagged has_stairs."""
+    memory_s: float = 0.0
+    """Obstacle memory: sensed points outside the camera's view persist this long (the
+    Kinect sees +-29 degrees and nothing closer than 0.8 m, so a person beside the robot
+    is out of view while it passes); 0 = react to the current frame only, as the paper.
+    Off by default until it is tuned against the people scenarios (issue 5)."""
+    memory_cell_m: float = 0.05
+    """Remembered points are kept on a grid of this size."""
+    camera_fov_rad: float = math.radians(57.8)
+    """Horizontal field of view of the camera (for the memory's in-view test)."""
+    camera_min_range_m: float = 0.8
+    """The camera sees nothing closer than this."""
+    camera_max_range_m: float = 4.0
+    """... nor farther than this."""
+    camera_forward_m: float = 0.22
+    """Camera position ahead of the base centre."""
+
+    def __post_init__(self) -> None:
+        for name in ("cruise_speed_mps", "lookahead_m", "arrival_radius_m", "heading_gain", "max_turn_rate_rad_s", "stuck_time_s"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise InputError(f"navigator.{name}: expected a positive number, got {v!r}")
+        for name in ("backoff_time_s", "backoff_speed_mps", "stuck_progress_m", "memory_s"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise InputError(f"navigator.{name}: expected a number >= 0, got {v!r}")
+
+
+@dataclass
+class NavCommand:
+    """What the navigator decided this frame."""
+
+    velocity: np.ndarray
+    """Body-frame command (vx, vy, omega)."""
+    state: str
+    """idle, turning, driving, blocked, recovering or arrived."""
+    carrot: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    """Carrot in the world frame."""
+    desired_rad: float = 0.0
+    """Carrot direction in the robot frame."""
+    theta_star_rad: float = 0.0
+    """Direction chosen by the avoidance (robot frame)."""
+    open_length_m: float = math.inf
+    """Open path length along theta*."""
+    fan: tuple[np.ndarray, np.ndarray] | None = None
+    """(angles, open lengths) of the avoidance fan, for visualisation."""
+
+
+def _wrap(a: float) -> float:
+    return math.atan2(math.sin(a), math.cos(a))
+
+
+class Navigator:
+    """Drives to nav-graph goals on a pose estimate, avoiding sensed obstacles."""
+
+    def __init__(
+        self,
+        graph: NavGraph,
+        cfg: NavigatorConfig = NavigatorConfig(),
+        avoid: AvoidanceConfig = AvoidanceConfig(),
+        walls: np.ndarray | None = None,
+    ) -> None:
+        self.graph = graph
+        self.cfg = cfg
+        self.avoid = avoid
+        self.walls = None if walls is None else np.asarray(walls, dtype=np.float64).reshape(-1, 4)
+        self.goal: int | None = None
+        self.path = np.zeros((0, 2))
+        self._cum = np.zeros(1)
+        self._best_s = 0.0
+        self._progress_t = 0.0
+        self._backoff_until = -1.0
+        self.replans = 0
+        self.recoveries = 0
+        self._mem = np.zeros((0, 2))
+        self._mem_t = np.zeros(0)
+
+    # -- planning ----------------------------------------------------------------------
+    def nearest_reachable_node(self, xy: np.ndarray) -> int:
+        """The closest node that can be reached in a straight line (no wall in between)."""
+        nodes = self.graph.node_xy()
+        order = np.argsort(np.hypot(nodes[:, 0] - xy[0], nodes[:, 1] - xy[1]))
+        if self.walls is None or not len(self.walls):
+            return int(self.graph.nodes[int(order[0])].id)
+        for k in order[:30]:
+            if not _crosses_any(xy, nodes[k], self.walls):
+                return int(self.graph.nodes[int(k)].id)
+        return int(self.graph.nodes[int(order[0])].id)
+
+    def set_goal(self, goal_id: int, pose: np.ndarray, t: float = 0.0) -> float:
+        """Plan from the pose to a node; returns the plan's length in metres."""
+        start = self.nearest_reachable_node(np.asarray(pose[:2]))
+        nodes = astar(self.graph, start, goal_id, exclude_stairs=self.cfg.exclude_stairs)
+        pts = np.vstack([np.asarray(pose[:2], dtype=np.float64)[None, :], path_points(self.graph, nodes)])
+        keep = np.concatenate([[True], np.hypot(*np.diff(pts, axis=0).T) > 1e-6])
+        self.path = pts[keep]
+        seg = np.hypot(*np.diff(self.path, axis=0).T) if len(self.path) > 1 else np.zeros(0)
+        self._cum = np.concatenate([[0.0], np.cumsum(seg)])
+        self.goal = goal_id
+        self._best_s = 0.0
+        self._progress_t = t
+        return float(self._cum[-1])
+
+    def _project(self, xy: np.ndarray) -> float:
+        a, b = self.path[:-1], self.path[1:]
+        d = b - a
+        L2 = np.einsum("ij,ij->i", d, d)
+        t = np.clip(np.einsum("ij,ij->i", xy - a, d) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
+        q = a + t[:, None] * d
+        k = int(np.argmin(np.hypot(xy[0] - q[:, 0], xy[1] - q[:, 1])))
+        return float(self._cum[k] + t[k] * math.sqrt(L2[k]))
+
+    def _point_at(self, s: float) -> np.ndarray:
+        s = min(max(s, 0.0), float(self._cum[-1]))
+        k = int(np.clip(np.searchsorted(self._cum, s, side="right") - 1, 0, len(self.path) - 2))
+        L = self._cum[k + 1] - self._cum[k]
+        a = 0.0 if L == 0 else (s - self._cum[k]) / L
+        return self.path[k] + a * (self.path[k + 1] - self.path[k])
+
+    # -- obstacle memory ----------------------------------------------------------------
+    def remember(self, pose: np.ndarray, obstacles: np.ndarray, t: float) -> np.ndarray:
+        """Fold this frame's obstacles into the memory; all known obstacles, robot frame.
+
+        Remembered points in the region the camera sees now are replaced by the current
+        observation (people move on); the others persist for ``memory_s``.
+        """
+        cfg = self.cfg
+        obs = np.asarray(obstacles, dtype=np.float64).reshape(-1, 2)
+        if cfg.memory_s <= 0:
+            return obs
+        c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
+        if len(self._mem):
+            rel = self._mem - np.asarray(pose[:2], dtype=np.float64)
+            bx = c * rel[:, 0] + s * rel[:, 1] - cfg.camera_forward_m
+            by = -s * rel[:, 0] + c * rel[:, 1]
+            rng = np.hypot(bx, by)
+            in_view = (np.abs(np.arctan2(by, bx)) < 0.45 * cfg.camera_fov_rad) & (rng > cfg.camera_min_range_m + 0.1) & (rng < cfg.camera_max_range_m - 0.2)
+            keep = (t - self._mem_t <= cfg.memory_s) & ~in_view
+            self._mem, self._mem_t = self._mem[keep], self._mem_t[keep]
+        if len(obs):
+            w = np.column_stack([c * obs[:, 0] - s * obs[:, 1] + pose[0], s * obs[:, 0] + c * obs[:, 1] + pose[1]])
+            cells = np.unique(np.round(w / cfg.memory_cell_m).astype(np.int64), axis=0)
+            self._mem = np.vstack([self._mem, cells * cfg.memory_cell_m])
+            self._mem_t = np.concatenate([self._mem_t, np.full(len(cells), t)])
+        if not len(self._mem):
+            return self._mem.copy()
+        rel = self._mem - np.asarray(pose[:2], dtype=np.float64)
+        return np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]])
+
+    # -- control -----------------------------------------------------------------------
+    def command(self, pose: np.ndarray, obstacles: np.ndarray, t: float) -> NavCommand:
+        """Body-frame velocity for this frame from the pose estimate and sensed obstacles."""
+        cfg = self.cfg
+        obstacles = self.remember(pose, obstacles, t)
+        if self.goal is None or len(self.path) < 2:
+            return NavCommand(np.zeros(3), "idle")
+        xy = np.asarray(pose[:2], dtype=np.float64)
+        goal_xy = self.path[-1]
+        to_goal = float(np.hypot(*(goal_xy - xy)))
+        if to_goal < cfg.arrival_radius_m:
+            return NavCommand(np.zeros(3), "arrived", carrot=goal_xy)
+        if t < self._backoff_until:
+            return NavCommand(np.array([-cfg.backoff_speed_mps, 0.0, 0.0]), "recovering")
+        s = self._project(xy)
+        if s > self._best_s + cfg.stuck_progress_m:
+            self._best_s = s
+            self._progress_t = t
+        elif t - self._progress_t > cfg.stuck_time_s:
+            # Recovery: back off, then re-plan from wherever the robot then is.
+            self.recoveries += 1
+            self._backoff_until = t + cfg.backoff_time_s
+            self.replans += 1
+            self.set_goal(self.goal, pose, t + cfg.backoff_time_s)
+            return NavCommand(np.array([-cfg.backoff_speed_mps, 0.0, 0.0]), "recovering")
+        carrot = self._point_at(s + cfg.lookahead_m)
+        d = carrot - xy
+        desired = _wrap(math.atan2(d[1], d[0]) - float(pose[2]))
+        turn = float(np.clip(cfg.heading_gain * desired, -cfg.max_turn_rate_rad_s, cfg.max_turn_rate_rad_s))
+        if abs(desired) > cfg.turn_in_place_rad:
+            return NavCommand(np.array([0.0, 0.0, turn]), "turning", carrot=carrot, desired_rad=desired)
+        res = choose_direction(np.asarray(obstacles, dtype=np.float64).reshape(-1, 2), desired, self.avoid)
+        speed = min(cfg.cruise_speed_mps, res.safe_speed_mps, 0.8 * to_goal + 0.05)
+        fan = (res.angles, res.lengths)
+        if res.blocked:
+            # Wait (turning towards the carrot): people step aside; stuck detection recovers.
+            return NavCommand(np.array([0.0, 0.0, turn]), "blocked", carrot, desired, res.theta_star, res.open_length_m, fan)
+        th = res.theta_star
+        # Look where the robot goes: turn towards the chosen direction.
+        omega = float(np.clip(cfg.heading_gain * th, -cfg.max_turn_rate_rad_s, cfg.max_turn_rate_rad_s))
+        v = np.array([speed * math.cos(th), speed * math.sin(th), omega])
+        return NavCommand(v, "driving", carrot, desired, th, res.open_length_m, fan)
+
+
+def _crosses_any(p: np.ndarray, q: np.ndarray, walls: np.ndarray) -> bool:
+    """Whether segment p-q properly crosses any wall (vectorised)."""
+    a, b = walls[:, :2], walls[:, 2:]
+
+    def orient(u, v, w):
+        return (v[..., 0] - u[..., 0]) * (w[..., 1] - u[..., 1]) - (v[..., 1] - u[..., 1]) * (w[..., 0] - u[..., 0])
+
+    o1 = orient(p[None, :], q[None, :], a)
+    o2 = orient(p[None, :], q[None, :], b)
+    o3 = orient(a, b, p[None, :])
+    o4 = orient(a, b, q[None, :])
+    return bool(np.any((o1 * o2 < 0) & (o3 * o4 < 0)))

@@ -1,0 +1,98 @@
+"""The navigator's decisions on a known plan: carrot, turning, blocking, recovery, arrival."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from autonomy.errors import InputError
+from autonomy.navigator import Navigator, NavigatorConfig
+from autonomy.vectormap import NavEdge, NavGraph, NavNode
+
+
+def line_graph() -> NavGraph:
+    nodes = tuple(NavNode(id=i, x=float(2 * i), y=0.0) for i in range(6))
+    edges = tuple(NavEdge(s0_id=i, s1_id=i + 1) for i in range(5))
+    return NavGraph(nodes=nodes, edges=edges)
+
+
+def test_drives_towards_the_carrot_at_cruise_speed() -> None:
+    nav = Navigator(line_graph())
+    nav.set_goal(5, np.array([0.0, 0.0, 0.0]))
+    cmd = nav.command(np.array([0.0, 0.0, 0.0]), np.zeros((0, 2)), 0.0)
+    assert cmd.state == "driving"
+    np.testing.assert_allclose(cmd.velocity, [0.75, 0.0, 0.0], atol=1e-9)
+
+
+def test_turns_in_place_when_the_goal_is_behind() -> None:
+    nav = Navigator(line_graph())
+    nav.set_goal(0, np.array([6.0, 0.0, 0.0]))
+    cmd = nav.command(np.array([6.0, 0.0, 0.0]), np.zeros((0, 2)), 0.0)
+    assert cmd.state == "turning" and cmd.velocity[:2].tolist() == [0.0, 0.0] and abs(cmd.velocity[2]) > 1.0
+
+
+def test_steers_around_an_obstacle_and_stops_for_a_wall() -> None:
+    nav = Navigator(line_graph())
+    nav.set_goal(5, np.zeros(3))
+    # A box 1.2 m ahead, straddling the path: steer off the straight line.
+    box = np.array([[1.2, y] for y in np.linspace(-0.3, 0.3, 13)])
+    cmd = nav.command(np.zeros(3), box, 0.0)
+    assert cmd.state == "driving" and abs(cmd.theta_star_rad) > 0.2
+    # A wall across the whole fan, 0.4 m ahead: blocked, no translation.
+    wall = np.array([[0.4, y] for y in np.linspace(-3, 3, 121)])
+    cmd = nav.command(np.zeros(3), wall, 0.0)
+    assert cmd.state == "blocked" and np.hypot(*cmd.velocity[:2]) == 0.0
+
+
+def test_slows_down_to_stop_before_an_obstacle() -> None:
+    nav = Navigator(line_graph())
+    nav.set_goal(5, np.zeros(3))
+    wall = np.array([[0.6, y] for y in np.linspace(-3, 3, 121)])  # open length 0.2 m: v = sqrt(2 a 0.15)
+    v = np.hypot(*nav.command(np.zeros(3), wall, 0.0).velocity[:2])
+    assert 0.0 < v < 0.75
+
+
+def test_no_progress_triggers_back_off_and_replan() -> None:
+    nav = Navigator(line_graph(), NavigatorConfig(stuck_time_s=2.0))
+    nav.set_goal(5, np.zeros(3))
+    states = [nav.command(np.zeros(3), np.zeros((0, 2)), t).state for t in np.arange(0, 4, 1 / 30)]
+    assert "recovering" in states and nav.recoveries >= 1 and nav.replans >= 1
+    i = states.index("recovering")
+    assert states[i + 1] == "recovering"  # backs off for a while, then drives again
+    assert states[-1] == "driving"
+
+
+def test_arrives() -> None:
+    nav = Navigator(line_graph())
+    nav.set_goal(2, np.zeros(3))
+    assert nav.command(np.array([4.1, 0.1, 0.0]), np.zeros((0, 2)), 0.0).state == "arrived"
+
+
+def test_nearest_reachable_node_skips_nodes_behind_walls() -> None:
+    walls = np.array([[1.0, -1.0, 1.0, 1.0]])
+    nav = Navigator(line_graph(), walls=walls)
+    # Node 1 at (2, 0) is nearer to (1.2, 0) than node 0 ... but node 0 is behind the wall.
+    assert nav.nearest_reachable_node(np.array([0.9, 0.0])) == 0
+    assert nav.nearest_reachable_node(np.array([1.1, 0.0])) == 1
+
+
+def test_bad_config() -> None:
+    with pytest.raises(InputError, match="lookahead_m"):
+        NavigatorConfig(lookahead_m=0.0)
+    assert math.isfinite(NavigatorConfig().cruise_speed_mps)
+
+
+def test_obstacle_memory_keeps_points_out_of_view_and_refreshes_points_in_view() -> None:
+    nav = Navigator(line_graph(), NavigatorConfig(memory_s=2.0))
+    nav.set_goal(5, np.zeros(3))
+    person = np.array([[2.0, 0.0]])  # 2 m ahead: in view
+    assert len(nav.remember(np.zeros(3), person, 0.0)) == 1
+    # Next frame the camera sees the same place and the person is gone: forgotten.
+    assert len(nav.remember(np.zeros(3), np.zeros((0, 2)), 0.1)) == 0
+    # A point beside the robot (out of view) persists until memory_s, then is dropped.
+    nav.remember(np.zeros(3), np.array([[0.0, 0.6]]), 0.2)
+    kept = nav.remember(np.array([0.5, 0.0, 0.0]), np.zeros((0, 2)), 1.0)
+    np.testing.assert_allclose(kept, [[-0.5, 0.6]], atol=0.03)  # in the new robot frame
+    assert len(nav.remember(np.array([0.5, 0.0, 0.0]), np.zeros((0, 2)), 2.5)) == 0

@@ -1,0 +1,45 @@
+"""The whole stack in the loop, headless: the navigator reaching a goal on the estimate."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from autonomy.vectormap import NavEdge, NavGraph, NavNode, VectorMap, save_navgraph, save_vectormap
+from sim.runner import run_scenario
+from sim.scenario import load_scenario
+
+
+def corridor_files(tmp_path: Path, length: float = 16.0, width: float = 2.4) -> str:
+    """A closed straight corridor with a nav graph along its centre line."""
+    vm = VectorMap.from_segments(np.array([[0, 0, length, 0], [length, 0, length, width], [length, width, 0, width], [0, width, 0, 0]]))
+    save_vectormap(vm, tmp_path / "c.vectormap.txt")
+    xs = np.arange(1.0, length - 0.5, 1.0)
+    g = NavGraph(
+        nodes=tuple(NavNode(id=i, x=float(x), y=width / 2) for i, x in enumerate(xs)),
+        edges=tuple(NavEdge(s0_id=i, s1_id=i + 1) for i in range(len(xs) - 1)),
+    )
+    save_navgraph(g, tmp_path / "c.navigation.json")
+    return str(len(xs) - 1)
+
+
+def _scenario(tmp_path: Path, body: str) -> Path:
+    p = tmp_path / "s.toml"
+    p.write_text(body)
+    return p
+
+
+def test_navigator_reaches_a_goal_on_the_estimate(tmp_path: Path) -> None:
+    last = corridor_files(tmp_path)
+    scn = load_scenario(
+        _scenario(
+            tmp_path,
+            f'name = "reach"\n[map]\nvectormap = "c.vectormap.txt"\nnavgraph = "c.navigation.json"\n'
+            f"[mission]\nwaypoints = [{last}]\nstart_node = 0\nmax_duration_s = 40.0\n",
+        )
+    )
+    rep = run_scenario(scn, tmp_path / "out", seed=1, progress=False)
+    m = rep["metrics"]
+    assert m["waypoints_reached"] == 1 and m["collisions"] == 0 and m["resets"] == 0
+    assert m["distance_m"] > 12.0

@@ -107,29 +107,9 @@ def _ang_overlap(a0: float, a1: float, b0: float, b1: float) -> bool:
     return d <= (a1 - a0) + eps or d + (b1 - b0) >= 4.0 - eps
 
 
-@numba.njit(cache=True)
-def _trim_interval(
-    ax: float, ay: float, bx: float, by: float, cx: float, cy: float, dx: float, dy: float
-) -> tuple[float, float]:
-    """TrimOcclusion core: the parameter interval [lo, hi] of l1 = A + s (B - A) hidden by
-    l2 = C -> D (counter-clockwise seen from the origin x), or lo > hi when none.
-
-    Shadow of l2 = {P : cross(C, P) >= 0, cross(P, D) >= 0, P beyond the line CD}.
-    """
-    lo = 0.0
-    hi = 1.0
-    # wedge side through C
-    h0 = cx * ay - cy * ax
-    h1 = cx * by - cy * bx
-    if h0 < 0.0:
-        if h1 < 0.0:
-            return 1.0, 0.0
-        lo = h0 / (h0 - h1)
-    elif h1 < 0.0:
-        hi = h0 / (h0 - h1)
-    # wedge side through D
-    h0 = ax * dy - ay * dx
-    h1 = bx * dy - by * dx
+@numba.njit(cache=True, inline="always")
+def _clip(h0: float, h1: float, lo: float, hi: float) -> tuple[float, float]:
+    """Clip [lo, hi] of s to the half-plane h(s) = h0 + s (h1 - h0) >= 0 (empty: lo > hi)."""
     if h0 < 0.0:
         if h1 < 0.0:
             return 1.0, 0.0
@@ -140,6 +120,24 @@ def _trim_interval(
         t = h0 / (h0 - h1)
         if t < hi:
             hi = t
+    return lo, hi
+
+
+@numba.njit(cache=True)
+def _trim_interval(
+    ax: float, ay: float, bx: float, by: float, cx: float, cy: float, dx: float, dy: float
+) -> tuple[float, float]:
+    """TrimOcclusion core: the parameter interval [lo, hi] of l1 = A + s (B - A) hidden by
+    l2 = C -> D (counter-clockwise seen from the origin x), or lo > hi when none.
+
+    Shadow of l2 = {P : cross(C, P) >= 0, cross(P, D) >= 0, P beyond the line CD}: the
+    three half-planes are each affine in s, so clipping [0, 1] against them in turn gives
+    the hidden interval.
+    """
+    # wedge side through C
+    lo, hi = _clip(cx * ay - cy * ax, cx * by - cy * bx, 0.0, 1.0)
+    # wedge side through D
+    lo, hi = _clip(ax * dy - ay * dx, bx * dy - by * dx, lo, hi)
     if lo >= hi:
         return 1.0, 0.0
     # beyond the line of l2: -cross(D - C, P - C) >= tol * |D - C|
@@ -151,19 +149,7 @@ def _trim_interval(
     if abs(g0) <= tol and abs(g1) <= tol:
         # l1 lies on the line of l2: the overlap is hidden (collinear duplicates).
         return lo, hi
-    g0 -= tol
-    g1 -= tol
-    if g0 < 0.0:
-        if g1 < 0.0:
-            return 1.0, 0.0
-        t = g0 / (g0 - g1)
-        if t > lo:
-            lo = t
-    elif g1 < 0.0:
-        t = g0 / (g0 - g1)
-        if t < hi:
-            hi = t
-    return lo, hi
+    return _clip(g0 - tol, g1 - tol, lo, hi)
 
 
 @numba.njit(cache=True, inline="always")

@@ -261,8 +261,8 @@ class PeopleController:
             self._state[i] = self._place(i)
         return self._state.copy()
 
-    def positions(self, t: float | None = None) -> np.ndarray:
-        """(n, 3) x, y, heading of each person (as of the last update)."""
+    def positions(self) -> np.ndarray:
+        """(n, 3) x, y, heading of each person as of the last :meth:`update`."""
         return self._state.copy()
 
     def update(self, data: mujoco.MjData, t: float, robot_xy: np.ndarray | None = None) -> None:

@@ -399,6 +399,18 @@ def _add_room(
     g.edge(ids[2], centre, max_clearance=_q(min(x1 - x0, y1 - y0) / 2 - 0.5))
 
 
+def _node_grid(g, xs, ys) -> list[list[int]]:
+    """Nav nodes on a grid of xs x ys joined to their 4-neighbours (open areas)."""
+    ids = [[g.node(x, y) for x in xs] for y in ys]
+    for j in range(len(ys)):
+        for i in range(len(xs)):
+            if i + 1 < len(xs):
+                g.edge(ids[j][i], ids[j][i + 1], max_clearance=1.0)
+            if j + 1 < len(ys):
+                g.edge(ids[j][i], ids[j + 1][i], max_clearance=1.0)
+    return ids
+
+
 def _add_open_area(
     walls: _Walls,
     g: _Graph,
@@ -424,13 +436,7 @@ def _add_open_area(
         return [_q(a + (b - a) * k / n) for k in range(n + 1)]
 
     xs, ys = grid(x0, x1), grid(y0, y1)
-    ids = [[g.node(x, y) for x in xs] for y in ys]
-    for j in range(len(ys)):
-        for i in range(len(xs)):
-            if i + 1 < len(xs):
-                g.edge(ids[j][i], ids[j][i + 1], max_clearance=1.0)
-            if j + 1 < len(ys):
-                g.edge(ids[j][i], ids[j + 1][i], max_clearance=1.0)
+    ids = _node_grid(g, xs, ys)
     for side, corr in sorted(connect.items()):
         if side in "SN":
             row = 0 if side == "S" else len(ys) - 1
@@ -871,13 +877,7 @@ def small_floor() -> Blueprint:
     box = (10.0, 0.0, 16.0, 10.0)
     areas.append(box)
     xs, ys = (11.5, 14.5), (1.5, 5.1, 8.5)
-    ids = [[g.node(x, y) for x in xs] for y in ys]
-    for j in range(len(ys)):
-        for i in range(len(xs)):
-            if i + 1 < len(xs):
-                g.edge(ids[j][i], ids[j][i + 1], max_clearance=1.0)
-            if j + 1 < len(ys):
-                g.edge(ids[j][i], ids[j + 1][i], max_clearance=1.0)
+    ids = _node_grid(g, xs, ys)
     corr.chain(g, 3.0)
     g.edge(g.node(10.0, 5.1), ids[1][0], max_clearance=1.0)
     walls.rect((12.8, 3.1, 13.2, 3.5))  # one pillar between the open area's nodes

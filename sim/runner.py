@@ -133,7 +133,6 @@ class Mission:
 
     waypoints: list[int]
     start_pose: np.ndarray
-    path_xy: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     current: int = 0
     started_at: float = 0.0
     timeout_s: float = 0.0
@@ -380,7 +379,7 @@ def run_scenario(
                     recorder.log_fspf(planes)
                     if localizer is not None:
                         recorder.log_localization(estimates, localizer.before_refinement, localizer.particles)
-                    recorder.log_people(world.people.positions(world.data.time))
+                    recorder.log_people(world.people.positions())
                     recorder.log_scalars(
                         {
                             "speed_mps": float(np.hypot(*world.robot.velocity_body(world.data)[:2])),

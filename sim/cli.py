@@ -139,12 +139,11 @@ def _save_depth_png(depth, path: Path) -> None:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from sim.runner import run_scenario
-    from sim.scenario import load_scenario
+    from sim.experiments import load_experiment
 
-    scn = load_scenario(args.scenario, args.set or [])
+    exp, scn = load_experiment(args.scenario, args.set or [])
     out = Path(args.out) if args.out else Path("runs") / scn.name
-    report = run_scenario(scn, out, seed=args.seed, rrd=args.rrd, spawn=args.spawn)
+    report = exp.run(scn, out, seed=args.seed, rrd=args.rrd, spawn=args.spawn)
     m = report["metrics"]
     summary = ", ".join(f"{k}={v}" for k, v in m.items())
     print(f"{scn.name}: {summary}")

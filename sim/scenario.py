@@ -191,6 +191,9 @@ def load_scenario(path: str | Path, overrides: list[str] | None = None) -> Scena
         raise InputError(f"{src}: not a UTF-8 text file") from None
     if "base_dir" in data:
         raise InputError(f"{src}: unknown key 'base_dir' (it is set from the file's location)")
+    if data.get("kind", "mission") != "mission":
+        raise InputError(f"{src}: key 'kind': this is a {data['kind']!r} experiment, not a mission scenario")
+    data.pop("kind", None)
     data = apply_overrides(data, overrides or [])
     data["base_dir"] = str(path.resolve().parent)
     scn = from_dict(Scenario, data, source=src)

@@ -1,0 +1,86 @@
+"""Experiment kinds: every scenario file names one, and each kind knows how to run and sweep.
+
+A scenario TOML may start with ``kind = "..."`` (default ``"mission"``, the waypoint runs
+of :mod:`sim.runner`). A kind is an :class:`Experiment`: the frozen dataclass its file is
+parsed into, a ``run`` that writes ``report.json`` (and figures) for one invocation, and
+the three parts a sweep needs — ``trials`` (the seeded trial specs of an ``n``-trial
+sweep), ``trial`` (one spec in, one JSON-able result out; a plain module-level function so
+process pools and Ray can ship it) and ``summarize`` (all results in, ``report.json`` out).
+
+Kinds are looked up lazily by module so that ``depthnav run`` of one kind imports only
+what that kind needs.
+"""
+
+from __future__ import annotations
+
+import importlib
+import tomllib
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from autonomy.errors import InputError
+from sim.config import apply_overrides, from_dict
+
+#: kind → module that defines ``EXPERIMENTS[kind]``.
+KINDS: dict[str, str] = {
+    "mission": "sim.mission",
+    "localization_comparison": "sim.loc_compare",
+    "mapping_cuboid": "sim.mapping_experiments",
+    "mapping_wall": "sim.mapping_experiments",
+    "mapping_corridor": "sim.mapping_experiments",
+}
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """What a scenario kind provides (see the module docstring)."""
+
+    kind: str
+    config_type: type
+    """Frozen dataclass with at least ``name``, ``description``, ``seed`` and ``base_dir``."""
+    run: Callable[..., dict]
+    """``run(cfg, out_dir, *, seed=None, rrd=None, spawn=False, progress=None) -> report``;
+    the report has ``metrics`` (flat dict) and ``interrupted`` (bool)."""
+    trials: Callable[[Any, int, int], list[dict]]
+    """``trials(cfg, n, seed) -> [spec, ...]``; each spec is JSON-able with a unique ``id``."""
+    trial: Callable[[Any, dict], dict]
+    """``trial(cfg, spec) -> result`` (JSON-able), deterministic for a spec."""
+    summarize: Callable[[Any, list[dict], Path], dict]
+    """``summarize(cfg, results, out_dir) -> report``; writes report.json and figures."""
+
+
+def experiment(kind: str, source: str = "") -> Experiment:
+    """The :class:`Experiment` registered for ``kind`` (InputError naming ``source`` if none)."""
+    if kind not in KINDS:
+        raise InputError(f"{source}: key 'kind': unknown experiment kind {kind!r} (expected one of: {', '.join(KINDS)})")
+    module = importlib.import_module(KINDS[kind])
+    return module.EXPERIMENTS[kind]
+
+
+def load_experiment(path: str | Path, overrides: list[str] | None = None) -> tuple[Experiment, Any]:
+    """Read a scenario file of any kind: (its Experiment, its parsed config)."""
+    path = Path(path)
+    src = str(path)
+    if not path.is_file():
+        raise InputError(f"{src}: scenario file not found")
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{src}: invalid TOML: {exc}") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{src}: not a UTF-8 text file") from None
+    kind = data.pop("kind", "mission")
+    if not isinstance(kind, str):
+        raise InputError(f"{src}: key 'kind' expected a string, got {kind!r}")
+    exp = experiment(kind, src)
+    if kind == "mission":
+        from sim.scenario import load_scenario
+
+        return exp, load_scenario(path, overrides)
+    if "base_dir" in data:
+        raise InputError(f"{src}: unknown key 'base_dir' (it is set from the file's location)")
+    data = apply_overrides(data, overrides or [])
+    data["base_dir"] = str(path.resolve().parent)
+    return exp, from_dict(exp.config_type, data, source=src)

@@ -1,0 +1,76 @@
+"""The ``mission`` experiment kind: waypoint runs and long-run trials (:mod:`sim.runner`).
+
+One trial of a sweep is one whole run with its own seed (people, furniture, waypoints,
+odometry and sensor noise all drawn from it), written without figures or recordings;
+the summary gives each metric's mean, min and max over trials and the totals the
+paper's long-run trial counts (distance, resets, collisions).
+"""
+
+from __future__ import annotations
+
+import json
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sim.experiments import Experiment
+from sim.scenario import Scenario
+
+
+def run(cfg: Scenario, out_dir: str | Path, *, seed: int | None = None, rrd=None, spawn: bool = False, progress=None) -> dict:
+    from sim.runner import run_scenario
+
+    return run_scenario(cfg, out_dir, seed=seed, rrd=rrd, spawn=spawn, progress=progress)
+
+
+def trials(cfg: Scenario, n: int, seed: int) -> list[dict]:
+    """``n`` trials with seeds spawned from the sweep's seed."""
+    seeds = np.random.SeedSequence(seed).generate_state(n, dtype=np.uint32)
+    return [{"id": f"trial-{i:04d}", "seed": int(s)} for i, s in enumerate(seeds)]
+
+
+def trial(cfg: Scenario, spec: dict) -> dict:
+    """One run, headless and quiet; its metrics (plus the seed) as the result."""
+    import dataclasses
+
+    from sim.runner import run_scenario
+
+    quiet = dataclasses.replace(cfg, report=dataclasses.replace(cfg.report, figures=False, progress=False))
+    with tempfile.TemporaryDirectory(prefix="depthnav-trial-") as d:
+        report = run_scenario(quiet, d, seed=int(spec["seed"]), progress=False)
+    if report["interrupted"]:
+        raise KeyboardInterrupt
+    return {"seed": report["seed"], "metrics": report["metrics"], "timing_ms": report["timing_ms"], "events": report["events"]}
+
+
+def summarize(cfg: Scenario, results: list[dict], out_dir: Path) -> dict:
+    from sim.runner import PAPER_FIGURES
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    keys = sorted({k for r in results for k, v in r["metrics"].items() if isinstance(v, (int, float))})
+    stats: dict[str, Any] = {}
+    for k in keys:
+        v = np.array([r["metrics"][k] for r in results if k in r["metrics"]], dtype=np.float64)
+        stats[k] = {"mean": round(float(v.mean()), 4), "min": round(float(v.min()), 4), "max": round(float(v.max()), 4)}
+    totals = {
+        k: round(float(sum(r["metrics"].get(k, 0) for r in results)), 4)
+        for k in ("distance_m", "duration_s", "collisions", "resets", "waypoints_reached", "waypoints_failed")
+    }
+    report = {
+        "scenario": cfg.name,
+        "kind": "mission",
+        "trials": len(results),
+        "interrupted": False,
+        "metrics": {"trials": len(results), **{f"total_{k}": v for k, v in totals.items()}},
+        "per_metric": stats,
+        "paper": PAPER_FIGURES.get(cfg.name, {}),
+        "seeds": [r["seed"] for r in results],
+    }
+    (out_dir / "report.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    return report
+
+
+EXPERIMENTS = {"mission": Experiment("mission", Scenario, run, trials, trial, summarize)}

@@ -15,7 +15,8 @@ Per frame it:
 Obstacles are remembered for ``memory_s`` in the world frame (through the pose
 estimate) while they are out of the camera's view: with a 58 degree field of view and
 nothing seen closer than 0.8 m, a person the robot is passing is otherwise forgotten
-exactly when it matters (ours, off by default; the paper reacts to the current frame).
+exactly when it matters (ours; ``memory_s = 0`` reacts to the current frame only, as
+the paper).
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from autonomy.avoidance import AvoidanceConfig, choose_direction
+from autonomy.avoidance import AvoidanceConfig, AvoidanceResult, choose_direction
 from autonomy.errors import InputError
 from autonomy.planner import astar, path_points
 from autonomy.vectormap import NavGraph
@@ -51,19 +52,28 @@ class NavigatorConfig:
     """No progress for this long triggers a recovery."""
     stuck_progress_m: float = 0.25
     """Progress (m along the plan) that counts within stuck_time_s."""
-    backoff_time_s: float = 1.0
+    backoff_time_s: float = 2.0
     """Recovery: back off for this long ..."""
     backoff_speed_mps: float = 0.15
     """... at this speed, then re-plan."""
+    max_backoff_s: float = 8.0
+    """Backing off goes on past backoff_time_s while an obstacle remembered in the path
+    is still too close for the camera to see, up to this long."""
     exclude_stairs: bool = True
     """Plans avoid edges flagged has_stairs."""
-    memory_s: float = 0.0
+    memory_s: float = 2.0
     """Obstacle memory: sensed points outside the camera's view persist this long (the
-    Kinect sees +-29 degrees and nothing closer than 0.8 m, so a person beside the robot
-    is out of view while it passes); 0 = react to the current frame only, as the paper.
-    Off by default until it is tuned against the people scenarios (issue 5)."""
+    Kinect sees +-29 degrees and nothing closer than 0.8 m, so a person beside or right
+    in front of the robot is out of view exactly when it matters); 0 = react to the
+    current frame only, as the paper."""
+    side_hysteresis: float = 0.7
+    """Keep swerving to the side chosen before while a direction there scores at least
+    this fraction of Eq. 5's best (1 = no hysteresis, as the paper)."""
     memory_cell_m: float = 0.05
-    """Remembered points are kept on a grid of this size."""
+    """Remembered points are kept on a grid of this size (one point per cell)."""
+    memory_radius_m: float = 2.0
+    """Only obstacles sensed within this distance of the robot are remembered: the
+    blind zone beside and right in front of the robot is what the memory covers."""
     camera_fov_rad: float = math.radians(57.8)
     """Horizontal field of view of the camera (for the memory's in-view test)."""
     camera_min_range_m: float = 0.8
@@ -128,10 +138,12 @@ class Navigator:
         self._best_s = 0.0
         self._progress_t = 0.0
         self._backoff_until = -1.0
+        self._backoff_started = -np.inf
         self.replans = 0
         self.recoveries = 0
         self._mem = np.zeros((0, 2))
         self._mem_t = np.zeros(0)
+        self._side = 0
 
     # -- planning ----------------------------------------------------------------------
     def nearest_reachable_node(self, xy: np.ndarray) -> int:
@@ -180,7 +192,9 @@ class Navigator:
         """Fold this frame's obstacles into the memory; all known obstacles, robot frame.
 
         Remembered points in the region the camera sees now are replaced by the current
-        observation (people move on); the others persist for ``memory_s``.
+        observation (people move on); points right in front of the robot but closer than
+        the camera's minimum range persist until that place is seen again; the others
+        persist for ``memory_s``.
         """
         cfg = self.cfg
         obs = np.asarray(obstacles, dtype=np.float64).reshape(-1, 2)
@@ -192,18 +206,57 @@ class Navigator:
             bx = c * rel[:, 0] + s * rel[:, 1] - cfg.camera_forward_m
             by = -s * rel[:, 0] + c * rel[:, 1]
             rng = np.hypot(bx, by)
-            in_view = (np.abs(np.arctan2(by, bx)) < 0.45 * cfg.camera_fov_rad) & (rng > cfg.camera_min_range_m + 0.1) & (rng < cfg.camera_max_range_m - 0.2)
-            keep = (t - self._mem_t <= cfg.memory_s) & ~in_view
+            in_cone = np.abs(np.arctan2(by, bx)) < 0.45 * cfg.camera_fov_rad
+            in_view = in_cone & (rng > cfg.camera_min_range_m + 0.1) & (rng < cfg.camera_max_range_m - 0.2)
+            # Right in front but too close to be seen: kept until the place is seen again
+            # (the robot backs off or turns), however long that takes.
+            blind_ahead = (bx > -cfg.camera_forward_m) & (rng <= cfg.camera_min_range_m + 0.1) & (np.abs(by) < self.avoid.radius_m + 0.2)
+            keep = ((t - self._mem_t <= cfg.memory_s) | blind_ahead) & ~in_view
             self._mem, self._mem_t = self._mem[keep], self._mem_t[keep]
-        if len(obs):
-            w = np.column_stack([c * obs[:, 0] - s * obs[:, 1] + pose[0], s * obs[:, 0] + c * obs[:, 1] + pose[1]])
-            cells = np.unique(np.round(w / cfg.memory_cell_m).astype(np.int64), axis=0)
-            self._mem = np.vstack([self._mem, cells * cfg.memory_cell_m])
-            self._mem_t = np.concatenate([self._mem_t, np.full(len(cells), t)])
+        near = obs[np.hypot(obs[:, 0], obs[:, 1]) <= cfg.memory_radius_m] if len(obs) else obs
+        if len(near):
+            w = np.column_stack([c * near[:, 0] - s * near[:, 1] + pose[0], s * near[:, 0] + c * near[:, 1] + pose[1]])
+            cells = np.round(w / cfg.memory_cell_m).astype(np.int64)
+            old = np.round(self._mem / cfg.memory_cell_m).astype(np.int64)
+            # One point per cell, with the latest time it was seen (new cells come first).
+            allc = np.vstack([cells, old])
+            allt = np.concatenate([np.full(len(cells), t), self._mem_t])
+            _, first = np.unique(allc, axis=0, return_index=True)
+            self._mem, self._mem_t = allc[first] * cfg.memory_cell_m, allt[first]
         if not len(self._mem):
             return self._mem.copy()
         rel = self._mem - np.asarray(pose[:2], dtype=np.float64)
         return np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]])
+
+    def _blind_blocked(self, obstacles: np.ndarray) -> bool:
+        """Whether an obstacle point lies in the path ahead closer than the camera sees."""
+        if self.cfg.memory_s <= 0 or not len(obstacles):
+            return False
+        o = np.asarray(obstacles, dtype=np.float64).reshape(-1, 2)
+        rng = np.hypot(o[:, 0] - self.cfg.camera_forward_m, o[:, 1])
+        ahead = (o[:, 0] > 0.0) & (np.abs(o[:, 1]) < self.avoid.radius_m)
+        return bool(np.any(ahead & (rng < self.cfg.camera_min_range_m + 0.1)))
+
+    def _keep_side(self, res: AvoidanceResult, desired: float) -> AvoidanceResult:
+        """Hysteresis on Eq. 5: once the robot swerves to one side of the carrot direction,
+        it keeps to that side while a direction there scores at least ``side_hysteresis``
+        of the best (flipping left-right-left in front of an obstacle wastes the approach)."""
+        cfg = self.cfg
+        band = math.radians(3.0)
+        side = _side_of(res.theta_star, desired, band)
+        prev = self._side
+        if prev != 0 and side == -prev and not res.blocked:
+            score = res.lengths * np.cos(res.angles - desired)
+            same = np.array([_side_of(a, desired, band) != -prev for a in res.angles])
+            if same.any():
+                j = int(np.flatnonzero(same)[np.argmax(score[same])])
+                if score[j] >= cfg.side_hysteresis * float(score.max()) and res.lengths[j] > self.avoid.stop_distance_m:
+                    d = float(res.lengths[j])
+                    v = math.sqrt(2.0 * self.avoid.max_decel_mps2 * max(0.0, d - self.avoid.stop_distance_m))
+                    res = AvoidanceResult(res.angles, res.lengths, j, float(res.angles[j]), d, v, False)
+                    side = prev
+        self._side = side
+        return res
 
     # -- control -----------------------------------------------------------------------
     def command(self, pose: np.ndarray, obstacles: np.ndarray, t: float) -> NavCommand:
@@ -217,7 +270,9 @@ class Navigator:
         to_goal = float(np.hypot(*(goal_xy - xy)))
         if to_goal < cfg.arrival_radius_m:
             return NavCommand(np.zeros(3), "arrived", carrot=goal_xy)
-        if t < self._backoff_until:
+        if t < self._backoff_until or (t - self._backoff_started < cfg.max_backoff_s and self._blind_blocked(obstacles)):
+            # Back off at least backoff_time_s, and on until what blocked the way is in
+            # the camera's view again (or max_backoff_s has passed).
             return NavCommand(np.array([-cfg.backoff_speed_mps, 0.0, 0.0]), "recovering")
         s = self._project(xy)
         if s > self._best_s + cfg.stuck_progress_m:
@@ -227,6 +282,7 @@ class Navigator:
             # Recovery: back off, then re-plan from wherever the robot then is.
             self.recoveries += 1
             self._backoff_until = t + cfg.backoff_time_s
+            self._backoff_started = t
             self.replans += 1
             self.set_goal(self.goal, pose, t + cfg.backoff_time_s)
             return NavCommand(np.array([-cfg.backoff_speed_mps, 0.0, 0.0]), "recovering")
@@ -237,9 +293,16 @@ class Navigator:
         if abs(desired) > cfg.turn_in_place_rad:
             return NavCommand(np.array([0.0, 0.0, turn]), "turning", carrot=carrot, desired_rad=desired)
         res = choose_direction(np.asarray(obstacles, dtype=np.float64).reshape(-1, 2), desired, self.avoid)
+        res = self._keep_side(res, desired)
         speed = min(cfg.cruise_speed_mps, res.safe_speed_mps, 0.8 * to_goal + 0.05)
         fan = (res.angles, res.lengths)
         if res.blocked:
+            if self._blind_blocked(obstacles):
+                # What blocks is too close for the camera to see: back off until it can
+                # look again (a person may have moved on; else it is seen and avoided).
+                self._backoff_until = t + cfg.backoff_time_s
+                self._backoff_started = t
+                return NavCommand(np.array([-cfg.backoff_speed_mps, 0.0, 0.0]), "recovering", carrot, desired, res.theta_star, res.open_length_m, fan)
             # Wait (turning towards the carrot): people step aside; stuck detection recovers.
             return NavCommand(np.array([0.0, 0.0, turn]), "blocked", carrot, desired, res.theta_star, res.open_length_m, fan)
         th = res.theta_star
@@ -247,6 +310,11 @@ class Navigator:
         omega = float(np.clip(cfg.heading_gain * th, -cfg.max_turn_rate_rad_s, cfg.max_turn_rate_rad_s))
         v = np.array([speed * math.cos(th), speed * math.sin(th), omega])
         return NavCommand(v, "driving", carrot, desired, th, res.open_length_m, fan)
+
+
+def _side_of(theta: float, desired: float, dead_band: float) -> int:
+    d = _wrap(theta - desired)
+    return 0 if abs(d) <= dead_band else (1 if d > 0 else -1)
 
 
 def _crosses_any(p: np.ndarray, q: np.ndarray, walls: np.ndarray) -> bool:

@@ -166,16 +166,26 @@ class PeopleController:
     People are polite pedestrians: when the robot is ahead of a person within
     ``notice_m``, the person steps up to ``step_aside_m`` to the right of the route
     (never closer than 5 cm to a wall), and waits while the robot is within ``pause_m``
-    in front. Otherwise they walk their route at constant speed, back and forth or looped.
+    in front — for at most ``max_wait_s``, then they walk on past it, stepped aside.
+    Otherwise they walk their route at constant speed, back and forth or looped.
+    Nobody walks into the robot: a person whose next step would bring them closer than
+    ``personal_space_m`` (plus both radii) to the robot's centre stays put for that
+    step — people see a robot coming round a corner even when its camera cannot see
+    them. A robot that drives into a person still collides, and that is counted.
     """
 
     notice_m = 2.5
-    step_aside_m = 0.6
+    step_aside_m = 0.8
     pause_m = 1.0
+    max_wait_s = 2.0
     side_speed_mps = 0.8
+    personal_space_m = 0.15
 
-    def __init__(self, people: tuple[Person, ...], mocap_ids: np.ndarray, walls: np.ndarray | None = None) -> None:
+    def __init__(
+        self, people: tuple[Person, ...], mocap_ids: np.ndarray, walls: np.ndarray | None = None, robot_radius_m: float = 0.3
+    ) -> None:
         self.people = people
+        self.robot_radius_m = float(robot_radius_m)
         self.mocap_ids = mocap_ids
         self.walls = np.zeros((0, 4)) if walls is None else np.asarray(walls, dtype=np.float64)
         self._pts: list[np.ndarray] = []
@@ -193,18 +203,21 @@ class PeopleController:
         """People back at their start offsets."""
         self._s = np.array([p.start_offset_m for p in self.people], dtype=np.float64)
         self._side = np.zeros(len(self.people))
+        self._waited = np.zeros(len(self.people))
         self._t = 0.0
         self._state = np.zeros((len(self.people), 3))
         for i in range(len(self.people)):
             self._state[i] = self._place(i)
 
     @classmethod
-    def from_model(cls, model: mujoco.MjModel, people: tuple[Person, ...], walls: np.ndarray | None = None) -> PeopleController:
+    def from_model(
+        cls, model: mujoco.MjModel, people: tuple[Person, ...], walls: np.ndarray | None = None, robot_radius_m: float = 0.3
+    ) -> PeopleController:
         ids = []
         for i in range(len(people)):
             bid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, f"person_{i}")
             ids.append(model.body_mocapid[bid])
-        return cls(people, np.array(ids, dtype=int), walls)
+        return cls(people, np.array(ids, dtype=int), walls, robot_radius_m)
 
     def _route_point(self, i: int, s: float) -> tuple[np.ndarray, np.ndarray]:
         """Position and unit walking direction at arc length s (ping-pong or loop)."""
@@ -242,6 +255,7 @@ class PeopleController:
         self._t = t
         for i, p in enumerate(self.people):
             pos, d = self._route_point(i, self._s[i])
+            before = (self._s[i], self._side[i])
             target_side, walk = 0.0, True
             if robot_xy is not None:
                 rel = np.asarray(robot_xy[:2]) - pos
@@ -249,7 +263,8 @@ class PeopleController:
                 across = float(rel[0] * d[1] - rel[1] * d[0])  # > 0: robot to the person's right
                 if 0.0 < ahead < self.notice_m and abs(across - self._side[i]) < 1.0:
                     target_side = self.step_aside_m if across <= 0 else -self.step_aside_m
-                    walk = ahead > self.pause_m or abs(across - self._side[i]) > 0.7
+                    walk = ahead > self.pause_m or abs(across - self._side[i]) > 0.7 or self._waited[i] > self.max_wait_s
+            self._waited[i] = 0.0 if walk else self._waited[i] + dt
             step = float(np.clip(target_side - self._side[i], -self.side_speed_mps * dt, self.side_speed_mps * dt))
             if step:
                 right = np.array([d[1], -d[0]])
@@ -258,7 +273,15 @@ class PeopleController:
                     self._side[i] = new_side
             if walk:
                 self._s[i] += p.speed_mps * dt
-            self._state[i] = self._place(i)
+            new = self._place(i)
+            if robot_xy is not None:
+                keep = self.robot_radius_m + p.radius_m + self.personal_space_m
+                d_new = float(np.hypot(new[0] - robot_xy[0], new[1] - robot_xy[1]))
+                d_old = float(np.hypot(self._state[i, 0] - robot_xy[0], self._state[i, 1] - robot_xy[1]))
+                if d_new < keep and d_new < d_old:
+                    self._s[i], self._side[i] = before
+                    continue
+            self._state[i] = new
         return self._state.copy()
 
     def positions(self) -> np.ndarray:

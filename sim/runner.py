@@ -23,6 +23,7 @@ from autonomy.cgr import CGRLocalizer
 from autonomy.errors import InputError
 from autonomy.fspf import fspf
 from autonomy.navigator import Navigator
+from autonomy.observation import correspond
 from autonomy.planner import astar, path_points
 from autonomy.raycast import SceneQuery, load_or_build
 from autonomy.vectormap import NavGraph, VectorMap, load_navgraph, load_vectormap
@@ -379,6 +380,20 @@ def run_scenario(
                     recorder.log_fspf(planes)
                     if localizer is not None:
                         recorder.log_localization(estimates, localizer.before_refinement, localizer.particles)
+                        est_pose = estimates[-1]
+                        lines = query.scene_lines(float(est_pose[0]), float(est_pose[1]))[0]
+                        idx = np.full(len(p2d), -1, dtype=np.int64)
+                        if len(lines) and len(p2d):
+                            ocfg = lcfg.observation
+                            correspond(
+                                np.ascontiguousarray(lines), est_pose, np.ascontiguousarray(p2d, dtype=np.float64),
+                                np.ascontiguousarray(n2d, dtype=np.float64), True, math.cos(ocfg.theta_max_rad), ocfg.max_distance_m, idx,
+                            )
+                        recorder.log_scene(lines, est_pose, p2d, idx)
+                    if nav is not None and nav.fan is not None:
+                        recorder.log_avoidance(
+                            nav.fan[0], nav.fan[1], nav.theta_star_rad, nav.desired_rad, navigator.avoid.radius_m
+                        )
                     recorder.log_people(world.people.positions())
                     recorder.log_scalars(
                         {
@@ -420,6 +435,7 @@ def run_scenario(
         "distance_m": round(distance, 4),
         "duration_s": round(sim_time, 4),
         "collisions": collisions,
+        **{f"collisions_{k}": sum(k in c["with"] for c in world.collision_log) for k in ("wall", "furniture", "person")},
         "waypoints_reached": reached,
         "waypoints_failed": failed,
         "waypoints_unvisited": unvisited,
@@ -485,6 +501,7 @@ def run_scenario(
         "waypoints": mission.waypoints,
         "navigation": {"states": nav_states, "replans": navigator.replans, "recoveries": navigator.recoveries},
         "events": mission.events,
+        "collision_events": world.collision_log,
         "files": files,
         "config": {k: v for k, v in to_dict(scn).items() if k != "base_dir"},
     }

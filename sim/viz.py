@@ -11,6 +11,10 @@ Entity layout (timelines ``sim_time`` in seconds and ``frame``):
 - ``world/robot/fspf/{plane_points,normals,outliers}`` FSPF output (robot frame).
 - ``world/trajectory/truth`` the driven path, ``world/trajectory/estimate`` the CGR
   estimate, ``world/particles/{first_stage,refined}`` the particles; ``world/waypoints``.
+- ``world/localization/{scene_lines,correspondences,observed}`` the analytic ray cast's
+  scene lines at the estimate and each observed point's line (world frame).
+- ``world/robot/avoidance/{fan,chosen,desired,margin}`` open path lengths (Eq. 4) as a
+  fan, theta* (Eq. 5), the carrot direction and the robot's safety radius.
 - ``metrics/...`` scalars over time (speed, per-stage CPU ms, ...).
 
 Heavy items (depth images, trajectories, people) are logged every ``every``-th frame;
@@ -224,6 +228,67 @@ class Recorder:
                 o = np.column_stack([parts[:, :2], np.full(len(parts), 0.1)])
                 v = np.column_stack([0.3 * np.cos(parts[:, 2]), 0.3 * np.sin(parts[:, 2]), np.zeros(len(parts))])
                 self.rec.log(f"world/particles/{name}", rr.Arrows3D(origins=o, vectors=v, colors=color))
+
+    def log_scene(self, lines: np.ndarray, pose: np.ndarray, points: np.ndarray, line_idx: np.ndarray) -> None:
+        """The analytic ray cast's scene lines at the estimate, and point -> line correspondences.
+
+        ``points`` are the 2D observations in the robot frame, ``line_idx`` the line each
+        corresponds to at ``pose`` (-1: none); a correspondence is drawn from the point
+        (placed with the estimate) to its closest point on the line.
+        """
+        lines = np.asarray(lines, dtype=np.float64).reshape(-1, 4)
+        z = 0.08
+        if len(lines):
+            strips = np.zeros((len(lines), 2, 3), dtype=np.float32)
+            strips[:, 0, :2], strips[:, 1, :2], strips[:, :, 2] = lines[:, :2], lines[:, 2:], z
+            self.rec.log("world/localization/scene_lines", rr.LineStrips3D(strips, colors=(0, 200, 220), radii=0.025))
+        else:
+            self.rec.log("world/localization/scene_lines", rr.Clear(recursive=False))
+        keep = np.asarray(line_idx) >= 0
+        if not keep.any():
+            self.rec.log("world/localization/correspondences", rr.Clear(recursive=False))
+            return
+        c, s_ = math.cos(pose[2]), math.sin(pose[2])
+        pts = np.asarray(points, dtype=np.float64)[keep]
+        wx = pose[0] + c * pts[:, 0] - s_ * pts[:, 1]
+        wy = pose[1] + s_ * pts[:, 0] + c * pts[:, 1]
+        seg = lines[np.asarray(line_idx)[keep]]
+        d = seg[:, 2:] - seg[:, :2]
+        l2 = np.maximum(np.einsum("ij,ij->i", d, d), 1e-12)
+        t = np.clip(((wx - seg[:, 0]) * d[:, 0] + (wy - seg[:, 1]) * d[:, 1]) / l2, 0.0, 1.0)
+        strips = np.zeros((len(pts), 2, 3), dtype=np.float32)
+        strips[:, 0, 0], strips[:, 0, 1] = wx, wy
+        strips[:, 1, 0], strips[:, 1, 1] = seg[:, 0] + t * d[:, 0], seg[:, 1] + t * d[:, 1]
+        strips[:, :, 2] = z
+        self.rec.log("world/localization/correspondences", rr.LineStrips3D(strips, colors=(255, 60, 200), radii=0.008))
+        self.rec.log(
+            "world/localization/observed",
+            rr.Points3D(np.column_stack([wx, wy, np.full(len(wx), z)]), colors=(255, 60, 200), radii=0.02),
+        )
+
+    def log_avoidance(
+        self, angles: np.ndarray, lengths: np.ndarray, theta_star: float, desired: float, radius_m: float, cap_m: float = 4.0
+    ) -> None:
+        """Open path lengths as a fan (robot frame), the chosen and desired directions, the margin."""
+        a = np.asarray(angles, dtype=np.float64)
+        d = np.minimum(np.asarray(lengths, dtype=np.float64), cap_m)
+        if len(a):
+            strips = np.zeros((len(a), 2, 3), dtype=np.float32)
+            strips[:, 1, 0], strips[:, 1, 1] = d * np.cos(a), d * np.sin(a)
+            strips[:, :, 2] = 0.12
+            t = np.clip(d / cap_m, 0.0, 1.0)
+            colors = np.column_stack([255 * (1 - t), 200 * t, np.full(len(t), 60)]).astype(np.uint8)
+            self.rec.log("world/robot/avoidance/fan", rr.LineStrips3D(strips, colors=colors, radii=0.01))
+        for name, th, color in (("chosen", theta_star, (40, 220, 40)), ("desired", desired, (220, 220, 40))):
+            self.rec.log(
+                f"world/robot/avoidance/{name}",
+                rr.Arrows3D(origins=[[0, 0, 0.14]], vectors=[[math.cos(th), math.sin(th), 0.0]], colors=color, radii=0.02),
+            )
+        ring = np.linspace(0, 2 * np.pi, 37)
+        self.rec.log(
+            "world/robot/avoidance/margin",
+            rr.LineStrips3D([np.column_stack([radius_m * np.cos(ring), radius_m * np.sin(ring), np.full(37, 0.12)])], colors=(120, 120, 255)),
+        )
 
     def log_people(self, xyh: np.ndarray, radius_m: float = 0.22, height_m: float = 1.75) -> None:
         if len(xyh):

@@ -169,6 +169,8 @@ class World:
     furniture: tuple[Furniture, ...] = ()
     wall_geom_start: int = 0
     _robot_in_contact: bool = field(default=False, repr=False)
+    collision_log: list[dict] = field(default_factory=list, repr=False)
+    """One entry per collision event: time, robot x/y, and what was touched."""
 
     @property
     def n_walls(self) -> int:
@@ -183,6 +185,7 @@ class World:
         self.people.update(self.data, t)
         mujoco.mj_forward(self.model, self.data)
         self._robot_in_contact = False
+        self.collision_log.clear()
 
     def robot_contacts(self) -> list[int]:
         """Geom ids currently touching the robot (walls, furniture, people)."""
@@ -207,8 +210,33 @@ class World:
             touching = self.data.ncon > 0 and bool(self.robot_contacts())
             if touching and not self._robot_in_contact:
                 events += 1
+                self.collision_log.append(self._describe_contact())
             self._robot_in_contact = touching
         return events
+
+    def contact_kind(self, geom_id: int) -> str:
+        """What a geom belongs to: 'wall', 'furniture', 'person' or 'other'."""
+        body = mujoco.mj_id2name(self.model, mujoco.mjtObj.mjOBJ_BODY, int(self.model.geom_bodyid[geom_id])) or ""
+        if body.startswith("person_"):
+            return "person"
+        if body.startswith("furniture_"):
+            return "furniture"
+        if self.wall_geom_start <= geom_id < self.wall_geom_start + self.n_walls:
+            return "wall"
+        return "other"
+
+    def _describe_contact(self) -> dict:
+        geoms = self.robot_contacts()
+        pose = self.robot.pose(self.data)
+        v = self.robot.velocity_body(self.data)
+        return {
+            "t": round(float(self.data.time), 3),
+            "x": round(float(pose[0]), 3),
+            "y": round(float(pose[1]), 3),
+            "speed_mps": round(float(np.hypot(v[0], v[1])), 3),
+            "with": sorted({self.contact_kind(g) for g in geoms}),
+            "bodies": sorted({mujoco.mj_id2name(self.model, mujoco.mjtObj.mjOBJ_BODY, int(self.model.geom_bodyid[g])) or "world" for g in geoms}),
+        }
 
     def geom_name(self, geom_id: int) -> str:
         return mujoco.mj_id2name(self.model, mujoco.mjtObj.mjOBJ_GEOM, geom_id) or f"geom_{geom_id}"
@@ -246,7 +274,7 @@ def build_world(
         vectormap=vectormap,
         config=world,
         robot=RobotHandle.from_model(model, robot),
-        people=PeopleController.from_model(model, tuple(people), np.asarray(vectormap.segments)),
+        people=PeopleController.from_model(model, tuple(people), np.asarray(vectormap.segments), robot.radius_m),
         camera_id=mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, KINECT_CAMERA),
         intrinsics=intrinsics,
         mount=mount,

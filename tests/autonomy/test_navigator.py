@@ -40,10 +40,30 @@ def test_steers_around_an_obstacle_and_stops_for_a_wall() -> None:
     box = np.array([[1.2, y] for y in np.linspace(-0.3, 0.3, 13)])
     cmd = nav.command(np.zeros(3), box, 0.0)
     assert cmd.state == "driving" and abs(cmd.theta_star_rad) > 0.2
-    # A wall across the whole fan, 0.4 m ahead: blocked, no translation.
+    # A wall across the whole fan, 0.4 m ahead: blocked, no translation (current frame only).
     wall = np.array([[0.4, y] for y in np.linspace(-3, 3, 121)])
+    nav = Navigator(line_graph(), NavigatorConfig(memory_s=0.0))
+    nav.set_goal(5, np.zeros(3))
     cmd = nav.command(np.zeros(3), wall, 0.0)
     assert cmd.state == "blocked" and np.hypot(*cmd.velocity[:2]) == 0.0
+
+
+def test_backs_off_until_a_remembered_obstacle_in_the_blind_zone_is_in_view() -> None:
+    nav = Navigator(line_graph(), NavigatorConfig(backoff_time_s=0.5))
+    nav.set_goal(5, np.zeros(3))
+    # Seen 0.4 m ahead (closer than the camera's 0.8 m minimum range: the next frames see nothing).
+    wall = np.array([[0.4, y] for y in np.linspace(-1, 1, 41)])
+    cmd = nav.command(np.zeros(3), wall, 0.0)
+    assert cmd.state == "recovering" and cmd.velocity[0] < 0
+    x, t = 0.0, 0.0
+    while cmd.state == "recovering" and t < 20:
+        t += 1 / 30
+        x += cmd.velocity[0] / 30
+        cmd = nav.command(np.array([x, 0.0, 0.0]), np.zeros((0, 2)), t)
+    # It backed off past backoff_time_s, until the wall's place came into view (and was
+    # seen empty), then drove on.
+    assert t > 0.5 and 0.4 - x > NavigatorConfig().camera_min_range_m + NavigatorConfig().camera_forward_m
+    assert cmd.state == "driving"
 
 
 def test_slows_down_to_stop_before_an_obstacle() -> None:
@@ -57,7 +77,7 @@ def test_slows_down_to_stop_before_an_obstacle() -> None:
 def test_no_progress_triggers_back_off_and_replan() -> None:
     nav = Navigator(line_graph(), NavigatorConfig(stuck_time_s=2.0))
     nav.set_goal(5, np.zeros(3))
-    states = [nav.command(np.zeros(3), np.zeros((0, 2)), t).state for t in np.arange(0, 4, 1 / 30)]
+    states = [nav.command(np.zeros(3), np.zeros((0, 2)), t).state for t in np.arange(0, 5, 1 / 30)]
     assert "recovering" in states and nav.recoveries >= 1 and nav.replans >= 1
     i = states.index("recovering")
     assert states[i + 1] == "recovering"  # backs off for a while, then drives again

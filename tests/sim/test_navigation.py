@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from autonomy.vectormap import NavEdge, NavGraph, NavNode, VectorMap, save_navgraph, save_vectormap
 from sim.runner import run_scenario
@@ -43,3 +44,44 @@ def test_navigator_reaches_a_goal_on_the_estimate(tmp_path: Path) -> None:
     m = rep["metrics"]
     assert m["waypoints_reached"] == 1 and m["collisions"] == 0 and m["resets"] == 0
     assert m["distance_m"] > 12.0
+
+
+def _people_scenario(tmp_path: Path, people: str, seed: int = 3) -> dict:
+    last = corridor_files(tmp_path)
+    scn = load_scenario(
+        _scenario(
+            tmp_path,
+            f'name = "people"\n[map]\nvectormap = "c.vectormap.txt"\nnavgraph = "c.navigation.json"\n'
+            f"[mission]\nwaypoints = [{last}]\nstart_node = 0\nmax_duration_s = 60.0\n{people}",
+        )
+    )
+    return run_scenario(scn, tmp_path / "out", seed=seed, progress=False)
+
+
+@pytest.mark.slow
+def test_person_stepping_into_the_path_is_not_hit(tmp_path: Path) -> None:
+    """A person walks along the wall, steps across the corridor right in front of the
+    robot (into the camera's blind zone), then walks on ahead of it."""
+    people = "[[actors.people]]\nroute = [[9.0, 0.4], [6.0, 0.4], [6.0, 2.0], [15.0, 2.0]]\nspeed_mps = 0.7\n"
+    rep = _people_scenario(tmp_path, people)
+    m = rep["metrics"]
+    assert m["collisions"] == 0, rep["collision_events"]
+    assert m["waypoints_reached"] == 1 and m["resets"] == 0
+
+
+@pytest.mark.slow
+def test_person_standing_in_the_corridor_is_steered_around(tmp_path: Path) -> None:
+    people = "[[actors.people]]\nroute = [[10.0, 0.75], [10.01, 0.75]]\nspeed_mps = 0.0\n"
+    rep = _people_scenario(tmp_path, people)
+    m = rep["metrics"]
+    assert m["collisions"] == 0, rep["collision_events"]
+    assert m["waypoints_reached"] == 1
+
+
+@pytest.mark.slow
+def test_person_walking_head_on_is_passed_without_contact(tmp_path: Path) -> None:
+    people = "[[actors.people]]\nroute = [[14.5, 1.2], [1.5, 1.2]]\nspeed_mps = 1.2\n"
+    rep = _people_scenario(tmp_path, people, seed=5)
+    m = rep["metrics"]
+    assert m["collisions"] == 0, rep["collision_events"]
+    assert m["waypoints_reached"] == 1

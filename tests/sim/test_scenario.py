@@ -25,10 +25,26 @@ BASE = 'name = "t"\n[map]\nname = "small_floor"\n'
 def test_every_shipped_scenario_parses() -> None:
     items = list_scenarios()
     assert items, "no scenarios shipped"
+    from sim.experiments import load_experiment
+
     for path, desc in items:
-        scn = load_scenario(path)
-        assert isinstance(scn, Scenario)
-        assert desc, f"{path.name} has no description"
+        exp, cfg = load_experiment(path)
+        assert isinstance(cfg, exp.config_type)
+        if exp.kind == "mission":
+            assert isinstance(cfg, Scenario)
+        assert cfg.name and desc, f"{path.name} has no name or description"
+
+
+def test_kinds_are_checked(tmp_path: Path) -> None:
+    from sim.experiments import load_experiment
+
+    p = tmp_path / "k.toml"
+    p.write_text('kind = "teleport"\nname = "x"\n')
+    with pytest.raises(InputError, match="unknown experiment kind 'teleport'"):
+        load_experiment(p)
+    p.write_text('kind = "mapping_wall"\nname = "x"\n')
+    with pytest.raises(InputError, match="not a mission scenario"):
+        load_scenario(p)
 
 
 def test_defaults_are_the_papers_and_design_values(tmp_path: Path) -> None:

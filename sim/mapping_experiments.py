@@ -1,0 +1,807 @@
+"""Seed 003's three experiments as scenario kinds: ``mapping_cuboid``, ``mapping_wall``, ``mapping_corridor``.
+
+- I, cuboid angle (III-A, Table II): a cuboid seen from the four arm views of Table I;
+  both detectors report the angle between the two side faces they find.
+- II, wall distance (III-B, Table III): the camera facing a flat wall at 1.06 m and
+  1.56 m; the standard deviation of the error in rho of the wall's points.
+- III, corridor mapping (III-C, IV-C): the robot drives a corridor loop with the camera
+  looking right; planes from both detectors are registered into octree maps at the
+  odometry pose (no loop closure), exported and drawn; time to the first plane, per
+  plane, and the maps' sizes.
+
+Every run writes ``report.json`` with ``metrics`` (ours) and ``paper`` (the seed's
+figures under the same names). A sweep trial is one seeded noise draw of the whole
+experiment; the summary gives each metric's mean, std, min and max over trials.
+
+Point clouds are handed to the detectors in a sensor-centred frame with z up (the
+camera's rotation to the world applied, its position not), so rho is the distance from
+the camera and the Hough accumulator's pole points at the ceiling.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import platform
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from autonomy.camera import CameraIntrinsics
+from autonomy.errors import InputError
+from autonomy.planes import (
+    HoughConfig,
+    OctreeConfig,
+    PlaneDetection,
+    PlaneOctree,
+    RansacConfig,
+    SparseAccumulator,
+    accumulator_nbytes,
+    angle_between_planes_deg,
+    dense_accumulator_nbytes,
+    depth_to_cloud,
+    detection_frame,
+    hough_planes,
+    ransac_planes,
+    register_planes,
+)
+from sim.config import to_dict
+from sim.experiments import Experiment
+from sim.kinect_noise import KinectNoiseConfig
+from sim.robot import OdometryConfig, RobotConfig
+from sim.scenes.corridor import CorridorScene
+from sim.scenes.cuboid import TABLE_I_VIEWS, ArmView, CuboidScene
+from sim.scenes.wall import WallScene
+
+REPORT_VERSION = 1
+ALGORITHMS = ("ransac", "hough")
+
+#: The seed's figures, under our metric names.
+PAPER: dict[str, dict[str, float]] = {
+    # Table II: angle between the two detected faces of the cuboid, views 1-4.
+    "mapping_cuboid": {
+        "ransac_angle_view1_deg": 87.7,
+        "ransac_angle_view2_deg": 88.3,
+        "ransac_angle_view3_deg": 87.3,
+        "ransac_angle_view4_deg": 87.1,
+        "hough_angle_view1_deg": 87.1,
+        "hough_angle_view2_deg": 87.4,
+        "hough_angle_view3_deg": 87.2,
+        "hough_angle_view4_deg": 86.3,
+    },
+    # Table III: standard deviation of the measurement error in rho at 106 and 156 cm.
+    "mapping_wall": {
+        "ransac_rho_std_mm_106cm": 3.9,
+        "ransac_rho_std_mm_156cm": 8.8,
+        "hough_rho_std_mm_106cm": 2.5,
+        "hough_rho_std_mm_156cm": 7.4,
+    },
+    # IV-C: RANSAC 50 ms to the first plane, Hough 170 ms a plane (Core 2 Duo, 2.8 GHz).
+    "mapping_corridor": {"ransac_first_plane_ms": 50.0, "hough_per_plane_ms": 170.0},
+}
+
+
+# -- configuration ----------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SensorConfig:
+    """The depth camera of a rig: intrinsics, noise model and rendering backend."""
+
+    intrinsics: CameraIntrinsics = field(default_factory=CameraIntrinsics)
+    """Pinhole intrinsics (640 x 480, f = 580 px)."""
+    noise: KinectNoiseConfig = field(default_factory=KinectNoiseConfig)
+    """Kinect noise model (every term switchable)."""
+    backend: str = "auto"
+    """auto, gl or raycast (see sim.kinect)."""
+
+    def kinect(self):
+        from sim.kinect import KinectConfig
+
+        return KinectConfig(intrinsics=self.intrinsics, noise=self.noise, backend=self.backend)
+
+
+@dataclass(frozen=True)
+class DetectorsConfig:
+    """Both plane detectors and how their point clouds are made."""
+
+    ransac: RansacConfig = field(default_factory=RansacConfig)
+    """Multi-plane RANSAC (Section II-B2)."""
+    hough: HoughConfig = field(default_factory=HoughConfig)
+    """Randomized Hough transform (Section II-B1)."""
+    stride: int = 1
+    """Use every stride-th pixel in both directions (1 = the whole 640 x 480 frame)."""
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.stride, int) and self.stride >= 1):
+            raise InputError(f"detectors.stride: expected an integer >= 1, got {self.stride!r}")
+
+
+@dataclass(frozen=True)
+class CuboidExperiment:
+    """Experiment I: the angle between two faces of a cuboid (III-A, Tables I and II)."""
+
+    name: str = "mapping_cuboid"
+    """Scenario name."""
+    description: str = ""
+    """One line on what it shows."""
+    seed: int = 0
+    """Seed of the noise draws and the detectors."""
+    base_dir: str = "."
+    """Directory of the scenario file (set by the loader)."""
+    views: tuple[ArmView, ...] = TABLE_I_VIEWS
+    """Arm joint angles of each view (Table I)."""
+    frames_per_view: int = 10
+    """Noisy frames per view (one detection each; the angle is their mean)."""
+    scene: CuboidScene = field(default_factory=CuboidScene)
+    """Cuboid and arm geometry."""
+    sensor: SensorConfig = field(default_factory=SensorConfig)
+    """The Kinect."""
+    detectors: DetectorsConfig = field(default_factory=DetectorsConfig)
+    """RANSAC and Hough parameters."""
+    match_angle_deg: float = 15.0
+    """A detected plane is a face if its normal is within this angle of the face's ..."""
+    match_distance_m: float = 0.05
+    """... and its rho within this distance of the face's."""
+
+    def __post_init__(self) -> None:
+        if not self.views:
+            raise InputError("views: expected at least one view")
+        if not (isinstance(self.frames_per_view, int) and self.frames_per_view >= 1):
+            raise InputError(f"frames_per_view: expected an integer >= 1, got {self.frames_per_view!r}")
+        _positive(self, "match_angle_deg", "match_distance_m")
+
+
+@dataclass(frozen=True)
+class WallExperiment:
+    """Experiment II: the error in rho of a flat wall's points (III-B, Table III)."""
+
+    name: str = "mapping_wall"
+    """Scenario name."""
+    description: str = ""
+    """One line on what it shows."""
+    seed: int = 0
+    """Seed of the noise draws and the detectors."""
+    base_dir: str = "."
+    """Directory of the scenario file (set by the loader)."""
+    distances_m: tuple[float, ...] = (1.06, 1.56)
+    """Camera-to-wall distances (106 cm, then 50 cm further)."""
+    frames: int = 20
+    """Noisy frames per distance."""
+    gate_m: float = 0.05
+    """Points within this distance of the detected wall count as the wall's measurements."""
+    scene: WallScene = field(default_factory=WallScene)
+    """Wall rig geometry."""
+    sensor: SensorConfig = field(default_factory=SensorConfig)
+    """The Kinect."""
+    detectors: DetectorsConfig = field(default_factory=DetectorsConfig)
+    """RANSAC and Hough parameters."""
+
+    def __post_init__(self) -> None:
+        if not self.distances_m or not all(d > 0 for d in self.distances_m):
+            raise InputError(f"distances_m: expected positive distances, got {self.distances_m!r}")
+        if not (isinstance(self.frames, int) and self.frames >= 1):
+            raise InputError(f"frames: expected an integer >= 1, got {self.frames!r}")
+        _positive(self, "gate_m")
+
+
+@dataclass(frozen=True)
+class CorridorExperiment:
+    """Experiment III: octree plane maps of a corridor loop from odometry (III-C, IV-C)."""
+
+    name: str = "mapping_corridor"
+    """Scenario name."""
+    description: str = ""
+    """One line on what it shows."""
+    seed: int = 0
+    """Seed of odometry noise, sensor noise and the detectors."""
+    base_dir: str = "."
+    """Directory of the scenario file (set by the loader)."""
+    scene: CorridorScene = field(default_factory=CorridorScene)
+    """Corridor loop and camera placement (looking right, level)."""
+    laps: float = 1.0
+    """Fraction of laps to drive (1 = once round the loop)."""
+    speed_mps: float = 0.5
+    """Cruise speed along the loop."""
+    map_rate_hz: float = 5.0
+    """Frames processed per second (the paper recorded at 5 Hz)."""
+    pose_source: str = "odometry"
+    """odometry (the paper: no loop closure) or truth (planes at the true pose)."""
+    odometry: OdometryConfig = field(
+        default_factory=lambda: OdometryConfig(translation_noise=0.1, rotation_noise=0.1, rotation_per_translation_rad_per_m=0.05)
+    )
+    """Odometry noise (modest; the sim's default is 20% per increment)."""
+    robot: RobotConfig = field(default_factory=RobotConfig)
+    """The base."""
+    octree: OctreeConfig = field(default_factory=OctreeConfig)
+    """Map parameters (the ``policy`` named here is the main map; the other is built too)."""
+    sensor: SensorConfig = field(default_factory=SensorConfig)
+    """The Kinect."""
+    detectors: DetectorsConfig = field(default_factory=DetectorsConfig)
+    """RANSAC and Hough parameters."""
+    export: bool = True
+    """Write the maps (JSON, PLY, GLB) and the top-view PNG."""
+
+    def __post_init__(self) -> None:
+        _positive(self, "laps", "speed_mps", "map_rate_hz")
+        if self.pose_source not in ("odometry", "truth"):
+            raise InputError(f"pose_source: expected 'odometry' or 'truth', got {self.pose_source!r}")
+
+
+def _positive(cfg: Any, *names: str) -> None:
+    for name in names:
+        v = getattr(cfg, name)
+        if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+            raise InputError(f"{name}: expected a positive number, got {v!r}")
+
+
+# -- shared helpers ---------------------------------------------------------------------
+
+
+def _detect(alg: str, pts: np.ndarray, det: DetectorsConfig, seed: int, acc: SparseAccumulator | None = None) -> PlaneDetection:
+    if alg == "ransac":
+        return ransac_planes(pts, det.ransac, seed)
+    return hough_planes(pts, det.hough, seed, acc)
+
+
+def _seeds(seed: int, n: int) -> list[int]:
+    return [int(s) for s in np.random.SeedSequence(int(seed)).generate_state(n, dtype=np.uint32)]
+
+
+def _finite(v: float) -> float | None:
+    return round(float(v), 4) if v is not None and math.isfinite(float(v)) else None
+
+
+def _progress(progress: bool | None, total: int, desc: str):
+    show = progress if progress is not None else sys.stderr.isatty()
+    if not show:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, unit="frame", leave=False)
+
+
+def _clean(obj: Any) -> Any:
+    """JSON-safe copy: NaN and infinities become null, numpy scalars plain numbers."""
+    if isinstance(obj, dict):
+        return {k: _clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_clean(v) for v in obj]
+    if isinstance(obj, (np.floating, float)):
+        return float(obj) if math.isfinite(float(obj)) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    return obj
+
+
+def _write_report(out_dir: Path, report: dict) -> None:
+    out_dir.mkdir(parents=True, exist_ok=True)
+    text = json.dumps(_clean(report), indent=2, allow_nan=False) + "\n"
+    (out_dir / "report.json").write_text(text, encoding="utf-8")
+
+
+def _report(kind: str, cfg: Any, seed: int, metrics: dict, details: dict, interrupted: bool, files: list[str], wall_s: float) -> dict:
+    return {
+        "version": REPORT_VERSION,
+        "scenario": cfg.name,
+        "kind": kind,
+        "seed": seed,
+        "interrupted": interrupted,
+        "metrics": {k: _finite(v) for k, v in metrics.items()},
+        "paper": PAPER[kind],
+        "details": details,
+        "files": files,
+        "wall_time_s": round(wall_s, 2),
+        "machine": f"Python {platform.python_version()}, {os.cpu_count()} cores, {platform.processor() or platform.machine()}",
+        "config": to_dict(cfg),
+    }
+
+
+# -- Experiment I: cuboid angle ------------------------------------------------------------
+
+
+def _match_face(det: PlaneDetection, n_true: np.ndarray, rho_true: float, max_angle_deg: float, max_dist_m: float) -> int:
+    """Index of the detected plane best matching a face (normal, rho), or -1."""
+    best, best_ang = -1, max_angle_deg
+    for k, p in enumerate(det.planes):
+        ang = math.degrees(math.acos(min(1.0, float(p.normal @ n_true))))
+        if ang <= best_ang and abs(p.rho - rho_true) <= max_dist_m:
+            best, best_ang = k, ang
+    return best
+
+
+def measure_cuboid(cfg: CuboidExperiment, seed: int, progress: bool | None = False) -> tuple[dict, dict, bool]:
+    """Run Experiment I: (metrics, details, interrupted)."""
+    from sim.scenes.cuboid import build_cuboid_rig, visible_side_faces
+
+    kcfg = cfg.sensor.kinect()
+    intr = cfg.sensor.intrinsics
+    n_frames = cfg.frames_per_view
+    seeds = _seeds(seed, 2 * n_frames * len(cfg.views))
+    angles: dict[str, list[list[float]]] = {a: [[] for _ in cfg.views] for a in ALGORITHMS}
+    times: dict[str, list[float]] = {a: [] for a in ALGORITHMS}
+    planes_found: dict[str, list[int]] = {a: [] for a in ALGORITHMS}
+    bar = _progress(progress, n_frames * len(cfg.views), cfg.name)
+    interrupted = False
+    acc = SparseAccumulator(cfg.detectors.hough)
+    try:
+        for vi, view in enumerate(cfg.views):
+            rig = build_cuboid_rig(cfg.scene, view, intr)
+            cam = rig.camera(kcfg)
+            rot, pos = rig.world_from_camera[:3, :3], rig.world_from_camera[:3, 3]
+            # The two side faces in the sensor-centred frame, normals away from the camera.
+            faces = []
+            for n_out, d in visible_side_faces(cfg.scene, view):
+                n, rho = -n_out, -(d - float(n_out @ pos))
+                faces.append((n, rho) if rho >= 0 else (-n, -rho))
+            try:
+                for f in range(n_frames):
+                    s = seeds[2 * (vi * n_frames + f)]
+                    depth = cam.capture(rig.data, s % (2**31))
+                    pts, _ = depth_to_cloud(depth, intr, rot, stride=cfg.detectors.stride)
+                    for alg in ALGORITHMS:
+                        det = _detect(alg, pts, cfg.detectors, seeds[2 * (vi * n_frames + f) + 1], acc)
+                        times[alg].append(det.total_ms)
+                        planes_found[alg].append(len(det.planes))
+                        k1 = _match_face(det, *faces[0], cfg.match_angle_deg, cfg.match_distance_m)
+                        k2 = _match_face(det, *faces[1], cfg.match_angle_deg, cfg.match_distance_m)
+                        if k1 >= 0 and k2 >= 0 and k1 != k2:
+                            angles[alg][vi].append(angle_between_planes_deg(det.planes[k1].normal, det.planes[k2].normal))
+                    if bar is not None:
+                        bar.update(1)
+            finally:
+                cam.close()
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        if bar is not None:
+            bar.close()
+    metrics: dict[str, float] = {}
+    details: dict[str, Any] = {"views": [to_dict(v) for v in cfg.views], "per_view": {}}
+    for alg in ALGORITHMS:
+        errs = []
+        found = 0
+        for vi in range(len(cfg.views)):
+            a = angles[alg][vi]
+            metrics[f"{alg}_angle_view{vi + 1}_deg"] = float(np.mean(a)) if a else float("nan")
+            errs += [abs(x - 90.0) for x in a]
+            found += len(a)
+            details["per_view"][f"{alg}_view{vi + 1}"] = {
+                "angles_deg": [round(x, 3) for x in a],
+                "std_deg": round(float(np.std(a)), 4) if a else None,
+            }
+        total = n_frames * len(cfg.views)
+        metrics[f"{alg}_faces_found_fraction"] = found / total
+        metrics[f"{alg}_mean_abs_error_deg"] = float(np.mean(errs)) if errs else float("nan")
+        metrics[f"{alg}_frame_ms"] = float(np.median(times[alg])) if times[alg] else float("nan")
+        details[f"{alg}_planes_per_frame"] = float(np.mean(planes_found[alg])) if planes_found[alg] else 0.0
+    return metrics, details, interrupted
+
+
+# -- Experiment II: wall distance ------------------------------------------------------------
+
+
+def measure_wall(cfg: WallExperiment, seed: int, progress: bool | None = False) -> tuple[dict, dict, bool]:
+    """Run Experiment II: (metrics, details, interrupted)."""
+    from sim.scenes.wall import build_wall_rig
+
+    kcfg = cfg.sensor.kinect()
+    intr = cfg.sensor.intrinsics
+    seeds = _seeds(seed, 2 * cfg.frames * len(cfg.distances_m))
+    bar = _progress(progress, cfg.frames * len(cfg.distances_m), cfg.name)
+    metrics: dict[str, float] = {}
+    details: dict[str, Any] = {}
+    interrupted = False
+    acc = SparseAccumulator(cfg.detectors.hough)
+    try:
+        for di, dist in enumerate(cfg.distances_m):
+            tag = f"{round(dist * 100)}cm"
+            rig = build_wall_rig(dist, cfg.scene, intr)
+            cam = rig.camera(kcfg)
+            rot = rig.world_from_camera[:3, :3]
+            n_true = np.array([1.0, 0.0, 0.0])
+            resid: dict[str, list[np.ndarray]] = {a: [] for a in ALGORITHMS}
+            inl_resid: dict[str, list[np.ndarray]] = {a: [] for a in ALGORITHMS}
+            rho_err: dict[str, list[float]] = {a: [] for a in ALGORITHMS}
+            try:
+                for f in range(cfg.frames):
+                    k = 2 * (di * cfg.frames + f)
+                    depth = cam.capture(rig.data, seeds[k] % (2**31))
+                    pts, _ = depth_to_cloud(depth, intr, rot, stride=cfg.detectors.stride)
+                    for alg in ALGORITHMS:
+                        det = _detect(alg, pts, cfg.detectors, seeds[k + 1], acc)
+                        best = -1
+                        for j, p in enumerate(det.planes):
+                            if p.normal @ n_true > math.cos(math.radians(10)) and abs(p.rho - dist) < cfg.gate_m:
+                                if best < 0 or p.n_points > det.planes[best].n_points:
+                                    best = j
+                        if best < 0:
+                            continue
+                        p = det.planes[best]
+                        rho_err[alg].append(p.rho - dist)
+                        r = pts @ p.normal.astype(np.float32) - np.float32(p.rho)
+                        resid[alg].append(r[np.abs(r) < cfg.gate_m])
+                        inl_resid[alg].append(r[det.labels == best])
+                    if bar is not None:
+                        bar.update(1)
+            finally:
+                cam.close()
+            for alg in ALGORITHMS:
+                rr = np.concatenate(resid[alg]) if resid[alg] else np.zeros(0)
+                ri = np.concatenate(inl_resid[alg]) if inl_resid[alg] else np.zeros(0)
+                e = np.array(rho_err[alg])
+                metrics[f"{alg}_rho_std_mm_{tag}"] = float(np.std(rr)) * 1e3 if len(rr) else float("nan")
+                metrics[f"{alg}_inlier_rho_std_mm_{tag}"] = float(np.std(ri)) * 1e3 if len(ri) else float("nan")
+                metrics[f"{alg}_frame_rho_std_mm_{tag}"] = float(np.std(e)) * 1e3 if len(e) else float("nan")
+                metrics[f"{alg}_rho_bias_mm_{tag}"] = float(np.mean(e)) * 1e3 if len(e) else float("nan")
+                details[f"{alg}_{tag}"] = {
+                    "frames_with_wall": len(e),
+                    "points_per_frame": round(len(rr) / max(len(e), 1)),
+                    "rho_m": [round(dist + x, 6) for x in e],
+                }
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        if bar is not None:
+            bar.close()
+    return metrics, details, interrupted
+
+
+# -- Experiment III: corridor mapping ------------------------------------------------------------
+
+
+class LoopDriver:
+    """Carrot follower along the closed corridor path (ground truth: the robot drives, the map uses odometry)."""
+
+    def __init__(self, path: np.ndarray, laps: float, speed: float, lookahead: float = 0.6) -> None:
+        seg = np.diff(path, axis=0)
+        self.lengths = np.hypot(seg[:, 0], seg[:, 1])
+        self.lap_m = float(self.lengths.sum())
+        self.path = path
+        self.cum = np.concatenate([[0.0], np.cumsum(self.lengths)])
+        self.goal_m = laps * self.lap_m
+        self.speed = speed
+        self.lookahead = lookahead
+        self.s = 0.0
+
+    def point(self, s: float) -> tuple[np.ndarray, float]:
+        s = s % self.lap_m
+        k = min(int(np.searchsorted(self.cum, s, side="right")) - 1, len(self.lengths) - 1)
+        d = (self.path[k + 1] - self.path[k]) / self.lengths[k]
+        return self.path[k] + d * (s - self.cum[k]), math.atan2(d[1], d[0])
+
+    def command(self, pose: np.ndarray) -> np.ndarray | None:
+        """Body velocity (vx, vy, w), or None when the distance is driven."""
+        # Progress: the nearest path point within a window ahead of the last one.
+        cand = self.s + np.linspace(-0.2, 1.0, 61)
+        pts = np.array([self.point(c)[0] for c in cand])
+        self.s = max(self.s, float(cand[int(np.argmin(np.hypot(*(pts - pose[:2]).T)))]))
+        if self.s >= self.goal_m:
+            return None
+        target, _ = self.point(self.s + self.lookahead)
+        _, heading = self.point(self.s + 0.3)
+        d = target - pose[:2]
+        v = d / max(float(np.hypot(*d)), 1e-9) * self.speed
+        err = math.atan2(math.sin(heading - pose[2]), math.cos(heading - pose[2]))
+        w = max(-1.0, min(1.0, 2.0 * err))
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        return np.array([c * v[0] + s * v[1], -s * v[0] + c * v[1], w])
+
+
+def _segment_distance(p: np.ndarray, segs: np.ndarray) -> float:
+    a, b = segs[:, :2], segs[:, 2:]
+    ab = b - a
+    t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-12), 0.0, 1.0)
+    return float(np.min(np.hypot(*(a + t[:, None] * ab - p).T)))
+
+
+def map_wall_error(tree: PlaneOctree, segs: np.ndarray) -> float:
+    """Median distance (m) of the map's wall planes (normal within 30 degrees of horizontal) to the nearest true wall."""
+    d = [
+        _segment_distance(np.asarray(p.centroid[:2]), segs)
+        for p in tree.planes()
+        if abs(p.normal[2]) < math.sin(math.radians(30.0))
+    ]
+    return float(np.median(d)) if d else float("nan")
+
+
+def draw_maps(path: Path, maps: dict[str, PlaneOctree], segs: np.ndarray, truth: np.ndarray, odom: np.ndarray, title: str) -> Path:
+    """Top view PNG: true walls, trajectories and each map's plane patches (one panel a map)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.collections import LineCollection, PolyCollection
+    from matplotlib.figure import Figure
+
+    cols = min(len(maps), 2)
+    rows = -(-len(maps) // cols)
+    fig = Figure(figsize=(6.5 * cols, 5.0 * rows))
+    FigureCanvasAgg(fig)
+    for k, (name, tree) in enumerate(maps.items()):
+        ax = fig.add_subplot(rows, cols, k + 1)
+        ax.add_collection(LineCollection(segs.reshape(-1, 2, 2), colors="#bbbbbb", linewidths=2.0, label="true walls"))
+        lines, colors, polys = [], [], []
+        for lf in tree.leaves():
+            p = lf.entry.plane
+            if len(p.hull) < 2:
+                continue
+            if abs(p.normal[2]) < 0.5:  # a wall: its footprint, the hull's extent along the wall
+                t = np.array([-p.normal[1], p.normal[0]])
+                t /= np.linalg.norm(t)
+                s = p.hull[:, :2] @ t
+                base = p.centroid[:2] - (p.centroid[:2] @ t) * t
+                lines.append([base + s.min() * t, base + s.max() * t])
+                colors.append("#08306b")
+            else:
+                polys.append(p.hull[:, :2])
+        if polys:
+            ax.add_collection(PolyCollection(polys, facecolors="#9ecae1", edgecolors="none", alpha=0.4))
+        if lines:
+            ax.add_collection(LineCollection(lines, colors=colors, linewidths=1.2, label="wall planes"))
+        ax.plot(truth[:, 0], truth[:, 1], "-", color="#2ca02c", lw=0.8, label="true path")
+        ax.plot(odom[:, 0], odom[:, 1], "--", color="#d62728", lw=0.8, label="odometry")
+        ax.set_aspect("equal")
+        ax.autoscale()
+        ax.set_title(f"{name}: {tree.n_leaves} planes")
+        ax.set_xlabel("x [m]")
+        ax.set_ylabel("y [m]")
+        ax.legend(loc="upper right", fontsize=7)
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    return path
+
+
+def measure_corridor(cfg: CorridorExperiment, seed: int, progress: bool | None = False, out_dir: Path | None = None) -> tuple[dict, dict, bool, list[str]]:
+    """Run Experiment III: (metrics, details, interrupted, files written)."""
+    import dataclasses
+
+    from sim.kinect import KinectCamera
+    from sim.robot import Odometry
+    from sim.scenes.corridor import build_corridor_world, corridor_path, robot_from_camera
+
+    intr = cfg.sensor.intrinsics
+    ss = np.random.SeedSequence(int(seed))
+    rng_odom = np.random.default_rng(ss.spawn(1)[0])
+    noise_base, det_base = (int(v) for v in np.random.default_rng(ss.spawn(1)[0]).integers(0, 2**31, 2))
+    world = build_corridor_world(cfg.scene, robot=cfg.robot, intrinsics=intr)
+    cam = KinectCamera(world.model, world.camera_id, cfg.sensor.kinect())
+    r_from_c = robot_from_camera(cfg.scene)
+    start = world.robot.pose(world.data)
+    odom = Odometry(cfg.odometry, rng_odom, start)
+    driver = LoopDriver(corridor_path(cfg.scene), cfg.laps, cfg.speed_mps)
+    other = "merge" if cfg.octree.policy == "overwrite" else "overwrite"
+    maps = {
+        (alg, pol): PlaneOctree(dataclasses.replace(cfg.octree, policy=pol)) for alg in ALGORITHMS for pol in (cfg.octree.policy, other)
+    }
+    frame_dt = 1.0 / 30.0
+    n_sub = max(1, round(frame_dt / world.config.timestep_s))
+    every = max(1, round(30.0 / cfg.map_rate_hz))
+    acc = SparseAccumulator(cfg.detectors.hough)
+    stats: dict[str, dict[str, list[float]]] = {a: {"first": [], "per_plane": [], "frame": [], "planes": []} for a in ALGORITHMS}
+    render_ms: list[float] = []
+    truth, est = [start.copy()], [odom.pose.copy()]
+    distance = 0.0
+    frame = 0
+    mapped = 0
+    max_frames = int(4.0 * driver.goal_m / max(cfg.speed_mps, 1e-3) * 30) + 300
+    bar = _progress(progress, max_frames, cfg.name)
+    interrupted = False
+    try:
+        while frame < max_frames:
+            pose = world.robot.pose(world.data)
+            cmd = driver.command(pose)
+            if cmd is None:
+                break
+            world.robot.command(world.data, cmd, frame_dt)
+            world.step_frame(n_sub)
+            new = world.robot.pose(world.data)
+            odom.update(new)
+            distance += float(np.hypot(*(new[:2] - pose[:2])))
+            truth.append(new)
+            est.append(odom.pose.copy())
+            frame += 1
+            if bar is not None:
+                bar.update(1)
+            if frame % every:
+                continue
+            t0 = time.perf_counter()
+            depth = cam.capture(world.data, (noise_base + frame) % (2**31))
+            render_ms.append((time.perf_counter() - t0) * 1e3)
+            rot, w_from_sensor = detection_frame(new if cfg.pose_source == "truth" else odom.pose, r_from_c)
+            pts, _ = depth_to_cloud(depth, intr, rot, stride=cfg.detectors.stride)
+            for alg in ALGORITHMS:
+                det = _detect(alg, pts, cfg.detectors, det_base + 2 * frame + (alg == "hough"), acc)
+                st = stats[alg]
+                st["frame"].append(det.total_ms)
+                st["planes"].append(len(det.planes))
+                if det.planes:
+                    st["first"].append(det.first_plane_ms)
+                    st["per_plane"].append(sum(det.plane_ms) / len(det.planes))
+                for pol in (cfg.octree.policy, other):
+                    register_planes(maps[(alg, pol)], det, w_from_sensor, stamp=frame, source=alg)
+            mapped += 1
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        cam.close()
+        if bar is not None:
+            bar.close()
+    truth_a, est_a = np.array(truth), np.array(est)
+    end_err = float(np.hypot(*(truth_a[-1, :2] - est_a[-1, :2])))
+    head_err = math.degrees(abs(math.atan2(math.sin(truth_a[-1, 2] - est_a[-1, 2]), math.cos(truth_a[-1, 2] - est_a[-1, 2]))))
+    segs = np.asarray(world.vectormap.segments)
+    med = lambda xs: float(np.median(xs)) if xs else float("nan")  # noqa: E731
+    metrics: dict[str, float] = {
+        "frames_mapped": mapped,
+        "distance_m": distance,
+        "duration_s": frame * frame_dt,
+        "odometry_end_error_m": end_err,
+        "odometry_end_heading_error_deg": head_err,
+        "render_ms": med(render_ms),
+    }
+    details: dict[str, Any] = {"policies": [cfg.octree.policy, other], "maps": {}}
+    for alg in ALGORITHMS:
+        st = stats[alg]
+        metrics[f"{alg}_first_plane_ms"] = med(st["first"])
+        metrics[f"{alg}_per_plane_ms"] = med(st["per_plane"])
+        metrics[f"{alg}_frame_ms"] = med(st["frame"])
+        metrics[f"{alg}_planes_per_frame"] = float(np.mean(st["planes"])) if st["planes"] else 0.0
+        main, alt = maps[(alg, cfg.octree.policy)], maps[(alg, other)]
+        metrics[f"{alg}_map_planes"] = main.n_leaves
+        metrics[f"{alg}_map_planes_{other}"] = alt.n_leaves
+        metrics[f"{alg}_map_wall_error_m"] = map_wall_error(main, segs)
+        metrics[f"{alg}_map_wall_error_m_{other}"] = map_wall_error(alt, segs)
+        size = main.size()
+        metrics[f"{alg}_map_json_kb"] = size["json_bytes"] / 1024
+        details["maps"][alg] = {cfg.octree.policy: size, other: alt.size(), f"{other}_stats": vars(alt.stats), f"{cfg.octree.policy}_stats": vars(main.stats)}
+    details["hough_accumulator_mb"] = accumulator_nbytes(cfg.detectors.hough) / 1e6
+    details["hough_dense_accumulator_mb"] = dense_accumulator_nbytes(dataclasses.replace(cfg.detectors.hough, equal_area=False)) / 1e6
+    files: list[str] = []
+    if out_dir is not None and cfg.export:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        for (alg, pol), tree in maps.items():
+            stem = f"map_{alg}" if pol == cfg.octree.policy else f"map_{alg}_{pol}"
+            for ext in (".json", ".ply", ".glb"):
+                f = out_dir / f"{stem}{ext}"
+                tree.save_json(f) if ext == ".json" else tree.export_mesh(f)
+                files.append(f.name)
+        draw_maps(
+            out_dir / "map_top.png",
+            {f"{alg} ({pol})": maps[(alg, pol)] for pol in (cfg.octree.policy, other) for alg in ALGORITHMS},
+            segs, truth_a, est_a,
+            f"{cfg.name}: plane maps at the {cfg.pose_source} pose, {distance:.1f} m driven",
+        )
+        files.append("map_top.png")
+    return metrics, details, interrupted, files
+
+
+# -- run / sweep entry points ----------------------------------------------------------
+
+
+def _measure(kind: str, cfg: Any, seed: int, progress: bool | None, out: Path | None) -> tuple[dict, dict, bool, list[str]]:
+    if kind == "mapping_cuboid":
+        return (*measure_cuboid(cfg, seed, progress), [])
+    if kind == "mapping_wall":
+        return (*measure_wall(cfg, seed, progress), [])
+    return measure_corridor(cfg, seed, progress, out)
+
+
+def _run(kind: str, cfg: Any, out_dir: str | Path, seed: int | None, rrd, spawn: bool, progress: bool | None) -> dict:
+    out = Path(out_dir)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"{out}: cannot create the output directory: {exc.strerror or exc}") from None
+    seed = cfg.seed if seed is None else int(seed)
+    t0 = time.perf_counter()
+    metrics, details, interrupted, files = _measure(kind, cfg, seed, progress, out)
+    if rrd or spawn:
+        details["note"] = "no rerun recording for mapping experiments yet (PlaneOctree.patches() gives the arrays)"
+    report = _report(kind, cfg, seed, metrics, details, interrupted, files, time.perf_counter() - t0)
+    _write_report(out, report)
+    return report
+
+
+def run_cuboid(cfg: CuboidExperiment, out_dir: str | Path, *, seed: int | None = None, rrd=None, spawn: bool = False, progress: bool | None = None) -> dict:
+    """Experiment I: writes out_dir/report.json; returns the report."""
+    return _run("mapping_cuboid", cfg, out_dir, seed, rrd, spawn, progress)
+
+
+def run_wall(cfg: WallExperiment, out_dir: str | Path, *, seed: int | None = None, rrd=None, spawn: bool = False, progress: bool | None = None) -> dict:
+    """Experiment II: writes out_dir/report.json; returns the report."""
+    return _run("mapping_wall", cfg, out_dir, seed, rrd, spawn, progress)
+
+
+def run_corridor(cfg: CorridorExperiment, out_dir: str | Path, *, seed: int | None = None, rrd=None, spawn: bool = False, progress: bool | None = None) -> dict:
+    """Experiment III: writes report.json, the maps (JSON, PLY, GLB) and map_top.png; returns the report."""
+    return _run("mapping_corridor", cfg, out_dir, seed, rrd, spawn, progress)
+
+
+def trials(cfg: Any, n: int, seed: int) -> list[dict]:
+    """``n`` trials, each one seeded noise draw of the whole experiment."""
+    return [{"id": f"trial-{i:04d}", "seed": s} for i, s in enumerate(_seeds(seed, n))]
+
+
+def _trial(kind: str, cfg: Any, spec: dict) -> dict:
+    import dataclasses
+
+    s = int(spec["seed"])
+    if kind == "mapping_corridor":
+        cfg = dataclasses.replace(cfg, export=False)
+    metrics, _, interrupted, _ = _measure(kind, cfg, s, False, None)
+    if interrupted:
+        raise KeyboardInterrupt
+    return {"seed": s, "metrics": {k: _finite(v) for k, v in metrics.items()}}
+
+
+def trial_cuboid(cfg: CuboidExperiment, spec: dict) -> dict:
+    """One seeded draw of Experiment I: its metrics."""
+    return _trial("mapping_cuboid", cfg, spec)
+
+
+def trial_wall(cfg: WallExperiment, spec: dict) -> dict:
+    """One seeded draw of Experiment II: its metrics."""
+    return _trial("mapping_wall", cfg, spec)
+
+
+def trial_corridor(cfg: CorridorExperiment, spec: dict) -> dict:
+    """One seeded run of Experiment III (no files): its metrics."""
+    return _trial("mapping_corridor", cfg, spec)
+
+
+def _summarize(kind: str, cfg: Any, results: list[dict], out_dir: Path) -> dict:
+    out = Path(out_dir)
+    keys = sorted({k for r in results for k in r["metrics"]})
+    per: dict[str, dict[str, float | None]] = {}
+    metrics: dict[str, float | None] = {"trials": len(results)}
+    for k in keys:
+        v = np.array([r["metrics"][k] for r in results if r["metrics"].get(k) is not None], dtype=np.float64)
+        if not len(v):
+            per[k] = {"mean": None, "std": None, "min": None, "max": None, "n": 0}
+            metrics[k] = None
+            continue
+        per[k] = {"mean": _finite(v.mean()), "std": _finite(v.std()), "min": _finite(v.min()), "max": _finite(v.max()), "n": len(v)}
+        metrics[k] = _finite(v.mean())
+    report = {
+        "version": REPORT_VERSION,
+        "scenario": cfg.name,
+        "kind": kind,
+        "trials": len(results),
+        "interrupted": False,
+        "metrics": metrics,
+        "per_metric": per,
+        "paper": PAPER[kind],
+        "seeds": [r["seed"] for r in results],
+        "config": to_dict(cfg),
+    }
+    _write_report(out, report)
+    return report
+
+
+def summarize_cuboid(cfg: CuboidExperiment, results: list[dict], out_dir: Path) -> dict:
+    """Mean, std, min and max of every Experiment I metric over trials; writes report.json."""
+    return _summarize("mapping_cuboid", cfg, results, out_dir)
+
+
+def summarize_wall(cfg: WallExperiment, results: list[dict], out_dir: Path) -> dict:
+    """Mean, std, min and max of every Experiment II metric over trials; writes report.json."""
+    return _summarize("mapping_wall", cfg, results, out_dir)
+
+
+def summarize_corridor(cfg: CorridorExperiment, results: list[dict], out_dir: Path) -> dict:
+    """Mean, std, min and max of every Experiment III metric over trials; writes report.json."""
+    return _summarize("mapping_corridor", cfg, results, out_dir)
+
+
+EXPERIMENTS = {
+    "mapping_cuboid": Experiment("mapping_cuboid", CuboidExperiment, run_cuboid, trials, trial_cuboid, summarize_cuboid),
+    "mapping_wall": Experiment("mapping_wall", WallExperiment, run_wall, trials, trial_wall, summarize_wall),
+    "mapping_corridor": Experiment("mapping_corridor", CorridorExperiment, run_corridor, trials, trial_corridor, summarize_corridor),
+}

@@ -1,0 +1,4 @@
+"""Scene building blocks: the cuboid, wall and corridor rigs of seed 003's experiments.
+
+Import ``sim`` (not ``mujoco``) first: the package sets the headless GL backend.
+"""

@@ -223,13 +223,32 @@ def print_table(results: dict[str, Result]) -> None:
         )
 
 
+GROUP_NAMES = ["maps", "localization", "sim", "planes", "env", "scans"]
+
+
+def _groups() -> dict[str, Callable[[dict[str, Result], bool], None]]:
+    """Every benchmark group; the subsystem ones live beside this file."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from env_bench import bench_env
+    from planes_bench import bench_planes
+
+    groups = {"maps": bench_maps, "localization": bench_localization, "sim": bench_sim, "planes": bench_planes, "env": bench_env}
+    try:
+        from loc_bench import bench_scans
+
+        groups["scans"] = bench_scans
+    except ImportError:  # pragma: no cover - until the scan baselines land
+        pass
+    return groups
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--out", default=str(ROOT / "bench" / "results.json"))
     ap.add_argument("--quick", action="store_true", help="fewer repetitions (smoke test)")
-    ap.add_argument("--only", nargs="*", choices=["maps", "localization", "sim"], help="run only these groups")
+    ap.add_argument("--only", nargs="*", choices=GROUP_NAMES, help="run only these groups")
     args = ap.parse_args(argv)
-    groups = {"maps": bench_maps, "localization": bench_localization, "sim": bench_sim}
+    groups = _groups()
     results: dict[str, Result] = {}
     for name, fn in groups.items():
         if args.only and name not in args.only:

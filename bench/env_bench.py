@@ -1,0 +1,103 @@
+"""Benchmarks of the gymnasium environment DepthNav-v0 (``bench_env``, a group of bench/run.py).
+
+- ``env_step``: one env step of the default DepthNav-v0 (small_floor, 120 x 160 depth,
+  Kinect noise, FSPF + CGR localization), random actions, in this process. Target 6.67 ms
+  (150 steps/s). Resets (after collisions or the step limit) are timed apart.
+- ``env_async2_step``: one step of an ``AsyncVectorEnv`` of two such envs (spawned
+  workers); its steps/s (two env steps per vector step) go to stderr.
+
+Run alone: ``.venv/bin/python bench/env_bench.py [--quick]``.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import numpy as np  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+Result = dict[str, float | None]
+
+
+def _entry(samples: list[float], target: float | None = None, paper: float | None = None) -> Result:
+    return {
+        "median_ms": round(float(np.median(samples)), 4),
+        "min_ms": round(float(np.min(samples)), 4),
+        "max_ms": round(float(np.max(samples)), 4),
+        "target_ms": target,
+        "paper_ms": paper,
+    }
+
+
+def bench_env(results: dict[str, Result], quick: bool) -> None:
+    import gymnasium as gym
+
+    import sim  # noqa: F401  (registers DepthNav-v0)
+    from sim.env import DepthNavEnv
+
+    n = 300 if quick else 2000
+    env = gym.make("DepthNav-v0")
+    env.action_space.seed(0)
+    env.reset(seed=0)
+    for _ in range(30):  # warm-up: GL context, numba kernels
+        if any(env.step(env.action_space.sample())[2:4]):
+            env.reset()
+    steps: list[float] = []
+    resets: list[float] = []
+    t_all = time.perf_counter()
+    for _ in range(n):
+        a = env.action_space.sample()
+        t = time.perf_counter()
+        _, _, term, trunc, _ = env.step(a)
+        steps.append((time.perf_counter() - t) * 1e3)
+        if term or trunc:
+            t = time.perf_counter()
+            env.reset()
+            resets.append((time.perf_counter() - t) * 1e3)
+    wall = time.perf_counter() - t_all
+    env.close()
+    results["env_step"] = _entry(steps, target=round(1000.0 / 150.0, 2))
+    print(
+        f"  env_step: {1000.0 / np.median(steps):.0f} steps/s (median step), {n / wall:.0f} steps/s overall "
+        f"including {len(resets)} resets (median reset {np.median(resets) if resets else 0.0:.1f} ms)",
+        file=sys.stderr,
+    )
+
+    # Spawned workers: a forked child cannot render once this process has used EGL.
+    venv = gym.vector.AsyncVectorEnv([functools.partial(DepthNavEnv)] * 2, context="spawn")
+    venv.action_space.seed(0)
+    venv.reset(seed=[0, 1])
+    for _ in range(30):
+        venv.step(venv.action_space.sample())
+    m = 200 if quick else 1000
+    vsteps: list[float] = []
+    t_all = time.perf_counter()
+    for _ in range(m):
+        a = venv.action_space.sample()
+        t = time.perf_counter()
+        venv.step(a)
+        vsteps.append((time.perf_counter() - t) * 1e3)
+    wall = time.perf_counter() - t_all
+    venv.close()
+    results["env_async2_step"] = _entry(vsteps)
+    print(
+        f"  env_async2_step: {2000.0 / np.median(vsteps):.0f} env steps/s (median vector step), "
+        f"{2 * m / wall:.0f} env steps/s overall, 2 workers",
+        file=sys.stderr,
+    )
+
+
+if __name__ == "__main__":
+    res: dict[str, Result] = {}
+    bench_env(res, "--quick" in sys.argv)
+    for k, v in res.items():
+        print(k, v)

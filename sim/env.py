@@ -133,6 +133,11 @@ class EnvConfig:
     """Success when the true position is this close to the goal."""
     max_steps: int = 1000
     """Truncate an episode after this many steps (1000 frames = 33 s at 30 Hz)."""
+    rrd: str = ""
+    """Write a rerun recording of every step to this .rrd file (made lazily in the process
+    that steps the env; in a vector env give each env its own file)."""
+    rrd_every: int = 5
+    """Log the heavy items (depth, FSPF points, particles) every Nth step."""
     terminate_on_success: bool = True
     """End the episode (terminated) on reaching the goal."""
     terminate_on_collision: bool = True
@@ -210,6 +215,7 @@ class EnvConfig:
         )
         need(self.goal_radius_m > 0, "goal_radius_m", "a positive number")
         need(self.max_steps >= 1, "max_steps", "an integer >= 1")
+        need(self.rrd_every >= 1, "rrd_every", "an integer >= 1")
         h, w = self.depth_shape
         need(h >= 8 and w >= 8, "depth_shape", "(rows, columns), each >= 8")
         intr = self.kinect.intrinsics
@@ -592,6 +598,10 @@ class DepthNavEnv(gym.Env):
         self._site: _Site | None = None
         self._episodes_on_site = 0
         self._ready = False
+        self._recorder = None
+        self._rrd_frame = 0
+        self._rrd_time = 0.0
+        self._rrd_site: _Site | None = None
 
     # -- buildings ------------------------------------------------------------------
     def _make_site(self, building: Building, seed: int | None) -> _Site:
@@ -791,6 +801,8 @@ class DepthNavEnv(gym.Env):
         self._ready = True
         self._sense()
         self._phi, _ = self._field.distance(self._pose[:2])
+        if cfg_rrd := self.config.rrd:
+            self._log_rrd(cfg_rrd, new_episode=True)
         return self._observation(), self._info(None)
 
     def step(self, action):
@@ -814,6 +826,8 @@ class DepthNavEnv(gym.Env):
         self._collisions += events
         self._collided = events > 0
         self._sense()
+        if cfg.rrd:
+            self._log_rrd(cfg.rrd, new_episode=False)
 
         phi, _ = self._field.distance(self._pose[:2])
         reached = math.hypot(*(self._pose[:2] - self.goal)) <= cfg.goal_radius_m
@@ -1001,7 +1015,41 @@ class DepthNavEnv(gym.Env):
         draw_segments(img, np.array([[ru, rv]]), head, ROBOT, thickness=2)
         return img
 
+    def _log_rrd(self, path: str, new_episode: bool) -> None:
+        """Stream this step to the rerun recording (sim.viz.Recorder), made on first use."""
+        from sim.viz import Recorder
+
+        site = self._site
+        assert site is not None
+        if self._recorder is None:
+            self._recorder = Recorder(path, every=self.config.rrd_every, depth_downsample=1, application_id="depthnav-env")
+            self._recorder.log_camera_model(self.intrinsics, self.config.kinect.mount)
+            self._recorder.log_robot_shape(self.config.robot.radius_m, self.config.robot.height_m)
+        rec = self._recorder
+        if site is not self._rrd_site:
+            rec.log_map(site.building.vectormap, site.building.navgraph, self.config.world.wall_height_m)
+            self._rrd_site = site
+        if new_episode:
+            rec.set_time(self._rrd_frame, self._rrd_time)
+            rec.log_waypoints(np.asarray(self.goal, dtype=np.float64).reshape(1, 2), static=False)
+            rec.reset_trajectory()
+        self._rrd_frame += 1
+        self._rrd_time += self.frame_dt
+        rec.set_time(self._rrd_frame, self._rrd_time)
+        rec.log_pose(self._rrd_frame, self._pose)
+        if rec.heavy(self._rrd_frame):
+            rec.log_depth(self._depth)
+            if self._planes is not None:
+                rec.log_fspf(self._planes)
+            if self._localizer is not None:
+                rec.log_localization([self._estimate, self._estimate], self._localizer.before_refinement, self._localizer.particles)
+            rec.log_people(site.world.people.positions())
+            rec.log_scalars({"env/steps": float(self._steps), "env/collisions": float(self._collisions)})
+
     def close(self) -> None:
+        if self._recorder is not None:
+            self._recorder.close()
+            self._recorder = None
         if self._site is not None:
             self._site.camera.close()
             self._site = None

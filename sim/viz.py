@@ -168,10 +168,10 @@ class Recorder:
             static=True,
         )
 
-    def log_waypoints(self, xy: np.ndarray) -> None:
+    def log_waypoints(self, xy: np.ndarray, static: bool = True) -> None:
         if len(xy):
             pts = np.column_stack([xy, np.full(len(xy), 0.05)])
-            self.rec.log("world/waypoints", rr.Points3D(pts, radii=0.15, colors=(220, 40, 160)), static=True)
+            self.rec.log("world/waypoints", rr.Points3D(pts, radii=0.15, colors=(220, 40, 160)), static=static)
 
     # -- per frame ---------------------------------------------------------------------
     def set_time(self, frame: int, sim_time_s: float) -> None:
@@ -188,6 +188,10 @@ class Recorder:
         if self.heavy(frame) and len(self._truth) > 1:
             strip = np.column_stack([np.asarray(self._truth), np.full(len(self._truth), 0.03)])
             self.rec.log("world/trajectory/truth", rr.LineStrips3D([strip], colors=TRUTH_COLOR, radii=0.03))
+
+    def reset_trajectory(self) -> None:
+        """Start a new driven-path strip (a new episode)."""
+        self._truth.clear()
 
     def log_depth(self, depth: np.ndarray) -> None:
         """Depth as uint16 millimetres (the Kinect's own format), every k-th pixel."""

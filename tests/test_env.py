@@ -414,3 +414,23 @@ def test_async_vector_env_with_two_workers_steps_like_single_envs() -> None:
     assert obs["depth"].shape == (2, 120, 160) and obs["points"].shape == (2, 32, 8)
     venv.close()
     single.close()
+
+
+def test_rrd_flag_records_the_episode(tmp_path) -> None:
+    """With ``rrd`` set, every step streams to a rerun recording readable by rerun."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    path = tmp_path / "env.rrd"
+    env = gym.make("DepthNav-v0", building="small_floor", rrd=str(path), rrd_every=2, max_steps=20)
+    env.reset(seed=1)
+    for _ in range(6):
+        env.step(env.action_space.sample())
+    env.close()
+    assert path.stat().st_size > 10_000
+    rerun = Path(sys.executable).with_name("rerun")
+    out = subprocess.run([str(rerun), "rrd", "stats", str(path)], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    with pytest.raises(InputError, match="rrd_every"):
+        gym.make("DepthNav-v0", building="small_floor", rrd_every=0)

@@ -66,9 +66,10 @@ class NavigatorConfig:
     Kinect sees +-29 degrees and nothing closer than 0.8 m, so a person beside or right
     in front of the robot is out of view exactly when it matters); 0 = react to the
     current frame only, as the paper."""
-    side_hysteresis: float = 0.7
+    side_hysteresis: float = 1.0
     """Keep swerving to the side chosen before while a direction there scores at least
-    this fraction of Eq. 5's best (1 = no hysteresis, as the paper)."""
+    this fraction of Eq. 5's best (1 = off, as the paper; 0.7 steadied the approach to a
+    standing person but swerved into a person coming round a corner in the 200 m run)."""
     memory_cell_m: float = 0.05
     """Remembered points are kept on a grid of this size (one point per cell)."""
     memory_radius_m: float = 2.0

@@ -151,6 +151,27 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 130 if report["interrupted"] else 0
 
 
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from sim.sweep import SweepError, run_sweep
+
+    try:
+        report = run_sweep(
+            args.scenario, args.set or [], args.out, trials=args.trials, engine=args.engine,
+            workers=args.workers, address=args.address, resume=args.resume,
+            progress=sys.stderr.isatty(), seed=args.seed,
+        )
+    except SweepError as exc:
+        print(f"depthnav: error: {exc}", file=sys.stderr)
+        return 1
+    if report["interrupted"]:
+        return 130
+    m = report["metrics"]
+    print(f"{report.get('scenario', args.scenario)}: " + ", ".join(f"{k}={v}" for k, v in m.items()))
+    out = Path(report["sweep"]["out_dir"])
+    print(f"wrote {out / 'report.json'} ({report['sweep']['trials']} trials in {out / report['sweep']['trials_file']})")
+    return 0
+
+
 def cmd_scenarios(args: argparse.Namespace) -> int:
     from sim.scenario import SCENARIOS_DIR, list_scenarios
 
@@ -200,6 +221,18 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--rrd", help="write a rerun recording to this file")
     c.add_argument("--spawn", action="store_true", help="open the rerun viewer (needs a display)")
     c.set_defaults(func=cmd_run)
+
+    c = sub.add_parser("sweep", help="run many seeded trials of a scenario (process pool or Ray), resumably")
+    c.add_argument("scenario", help="a scenario TOML file")
+    c.add_argument("--trials", type=int, help="number of trials (localization_comparison: replays per approach; default: the scenario's replays, else 10)")
+    c.add_argument("--engine", default="local", choices=["local", "ray"], help="local process pool (default) or Ray tasks")
+    c.add_argument("--address", help="Ray cluster address (default: start a local Ray instance)")
+    c.add_argument("--workers", type=int, help="worker processes / local Ray CPUs (default: one per core)")
+    c.add_argument("--out", help="output directory (default runs/<name>-sweep)")
+    c.add_argument("--resume", action="store_true", help="finish the sweep in --out, keeping its finished trials")
+    c.add_argument("--seed", type=int, help="override the scenario's seed")
+    c.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a scenario key (repeatable)")
+    c.set_defaults(func=cmd_sweep)
 
     c = sub.add_parser("scenarios", help="list the scenario files")
     c.add_argument("--dir", help="directory (default: the project's scenarios/)")

@@ -1,0 +1,143 @@
+"""Benchmarks of the localization comparison (seed 000, VI-A): scan simulation and replay frames.
+
+``bench_scans(results, quick)`` times, on real noisy Kinect frames of the corridor
+building, the simulated laser scans per frame (KR: one row, KS: 2,000 samples, KC: the
+whole cloud, each with its down-projection to 2D points) and one replay frame per
+approach (observation + CGR predict/update/estimate). Paper figures: the CPU loads of
+VI-A times the 33.3 ms frame period (KR 0.01%, KS 3.6%, KC 56.6%, FSPF 16.3%).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import numpy as np  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+FRAME_MS = 1000.0 / 30.0
+#: Paper: CPU load x frame period.
+PAPER_MS = {"kr": 0.0001 * FRAME_MS, "ks": 0.036 * FRAME_MS, "kc": 0.566 * FRAME_MS, "fspf": 0.163 * FRAME_MS}
+
+
+def _timeit(fn: Callable[[], object], repeat: int, warmup: int = 2) -> list[float]:
+    for _ in range(warmup):
+        fn()
+    out = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        fn()
+        out.append((time.perf_counter() - t) * 1e3)
+    return out
+
+
+def _entry(samples: list[float], target: float | None, paper: float | None) -> dict:
+    return {
+        "median_ms": round(float(np.median(samples)), 4),
+        "min_ms": round(float(np.min(samples)), 4),
+        "max_ms": round(float(np.max(samples)), 4),
+        "target_ms": target,
+        "paper_ms": None if paper is None else round(paper, 4),
+    }
+
+
+def _frames(n: int) -> tuple[list[np.ndarray], list[np.ndarray], object, object]:
+    """``n`` noisy uint16-millimetre frames along a corridor of the shipped building, with poses."""
+    from sim import blueprints
+    from sim.kinect import KinectCamera, KinectConfig
+    from sim.world import build_world
+
+    bp = blueprints.load_blueprint(ROOT / "sim" / "assets" / "corridor_loop")
+    cfg = KinectConfig()
+    world = build_world(bp.vectormap, intrinsics=cfg.intrinsics, mount=cfg.mount, start_pose=(10.0, 6.3, 0.0))
+    cam = KinectCamera(world.model, world.camera_id, cfg)
+    frames, poses = [], []
+    for i in range(n):
+        pose = (10.0 + 0.3 * i, 6.3, 0.05 * math.sin(i))
+        world.robot.set_pose(world.data, pose)
+        import mujoco
+
+        mujoco.mj_forward(world.model, world.data)
+        d = cam.capture(world.data, seed=i)
+        frames.append(np.clip(np.rint(d * 1000.0), 0, 65535).astype(np.uint16))
+        poses.append(np.array(pose))
+    cam.close()
+    return frames, poses, bp, cfg
+
+
+def bench_scans(results: dict, quick: bool) -> None:
+    from autonomy.cgr import CGRLocalizer
+    from autonomy.fspf import FSPFConfig, fspf, project_to_floor
+    from autonomy.raycast import SceneQuery, VisibilityGridConfig, load_or_build
+    from autonomy.scans import (
+        ScanConfig,
+        complete_scan,
+        drop_floor,
+        raster_scan,
+        sampling_scan,
+        scan_points,
+    )
+
+    frames, poses, bp, kcfg = _frames(4 if quick else 12)
+    intr, mount = kcfg.intrinsics, kcfg.mount
+    scfg, fcfg = ScanConfig(), FSPFConfig()
+    rep = 20 if quick else 200
+    it = iter(range(10**9))
+
+    def frame() -> np.ndarray:
+        return frames[next(it) % len(frames)]
+
+    results["scan_kr"] = _entry(_timeit(lambda: scan_points(raster_scan(frame(), intr, mount, scfg), mount, scfg), rep), 0.5, PAPER_MS["kr"])
+    results["scan_ks"] = _entry(
+        _timeit(lambda: scan_points(sampling_scan(frame(), intr, mount, scfg, seed=next(it)), mount, scfg), rep), 1.0, PAPER_MS["ks"]
+    )
+    results["scan_kc"] = _entry(
+        _timeit(lambda: scan_points(complete_scan(frame(), intr, mount, scfg), mount, scfg), max(5, rep // 4)), 20.0, PAPER_MS["kc"]
+    )
+
+    vm = bp.vectormap
+    query = SceneQuery(vm, load_or_build(vm, ROOT / "sim" / "assets" / "corridor_loop.vectormap.txt", VisibilityGridConfig(cell_m=0.5, max_range_m=6.0)))
+    depth_m = np.empty((intr.height, intr.width), np.float32)
+    cached = {a: [fn(f, intr, mount, scfg) for f in frames] for a, fn in (("kr", raster_scan), ("kc", complete_scan))}
+    for approach in ("fspf", "kr", "ks", "kc"):
+        loc = CGRLocalizer(lambda x, y: query.scene_lines(x, y)[0], rng=np.random.default_rng(0))
+        loc.reset(poses[0])
+        k = [0]
+
+        def one(approach: str = approach, loc: CGRLocalizer = loc, k: list[int] = k) -> None:
+            i = k[0] % len(frames)
+            k[0] += 1
+            if i == 0:
+                loc.reset(poses[0])
+            f = frames[i]
+            if approach == "fspf":
+                np.multiply(f, np.float32(0.001), out=depth_m, casting="unsafe")
+                res = fspf(depth_m, intr, fcfg, seed=k[0], mount=mount)
+                pts, nrm = project_to_floor(*drop_floor(res.points, res.normals, scfg), fcfg.max_vertical_normal_angle_rad)
+            elif approach == "ks":
+                pts, nrm = scan_points(sampling_scan(f, intr, mount, scfg, seed=k[0]), mount, scfg), None
+            else:
+                pts, nrm = scan_points(cached[approach][i], mount, scfg), None
+            inc = poses[i] - poses[i - 1] if i else np.zeros(3)
+            loc.predict(inc)
+            loc.update(pts, nrm)
+            loc.estimate()
+
+        # Budget: 400 replays of a 60-120 s log in 15 min on 2 cores: ~1.5-2.5 ms a frame.
+        results[f"replay_frame_{approach}"] = _entry(_timeit(one, rep), 2.5, None)
+
+
+if __name__ == "__main__":
+    import json
+
+    res: dict = {}
+    bench_scans(res, "--quick" in sys.argv)
+    print(json.dumps(res, indent=2))

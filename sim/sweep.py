@@ -1,0 +1,450 @@
+"""Sweeps: many seeded trials of any experiment kind, on this machine or on a Ray cluster.
+
+``depthnav sweep SCENARIO.toml [--trials N] [--engine local|ray] [--address ADDR]
+[--workers K] [--out DIR] [--resume]`` asks the scenario's kind (:mod:`sim.experiments`)
+for ``N`` seeded trial specs, runs each with the kind's ``trial`` and hands all results
+to its ``summarize`` (report.json and figures). Engines:
+
+- ``local`` (default): a process pool (spawn start method) of ``K`` workers on this
+  machine (``K = 1`` runs the trials in this process); nothing else needed.
+- ``ray``: the same trials as Ray tasks (``max_retries`` for lost workers) on the
+  cluster at ``--address``, or on a local Ray instance with ``K`` CPUs when no address
+  is given. Ray is imported only here (``pip install 'depthnav[ray]'``).
+
+Workers receive (scenario path, overrides, spec) and parse the scenario themselves
+(:func:`sim.experiments.load_experiment`; parsed once per process), so every node
+needs the project installed and the scenario file at the same path. ``depthnav run``
+of a sweepable kind ships the parsed config instead.
+
+Bookkeeping in the output directory: ``sweep.json`` (kind, scenario, overrides, trial
+count, seed and a hash of the parsed config) and ``trials.jsonl``, one line per finished
+trial (``{"id", "spec", "result", "wall_s", "host", "pid"}``), appended, flushed and
+fsynced as each trial finishes. ``--resume`` checks that ``sweep.json`` describes the
+same sweep, keeps every finished trial and runs only the others; a line cut short by a
+kill is dropped. Ctrl-C stops the sweep, keeps what finished and prints how to resume.
+A kind whose module defines ``prepare(cfg, progress)`` (e.g. record a log once) has it
+called in this process before any trial is dispatched.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib
+import json
+import math
+import os
+import signal
+import socket
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from autonomy.errors import InputError
+from sim.config import to_dict
+from sim.experiments import KINDS, Experiment, experiment, load_experiment
+
+ENGINES = ("local", "ray")
+SWEEP_VERSION = 1
+#: Default trial count for kinds whose config has no ``replays``.
+DEFAULT_TRIALS = 10
+RAY_MAX_RETRIES = 3
+
+
+class SweepError(RuntimeError):
+    """Some trials raised; the finished ones are kept, the sweep can be resumed."""
+
+
+# --------------------------------------------------------------------------- workers
+
+_LOADED: dict[Any, tuple[Experiment, Any]] = {}
+
+
+def _load(source: tuple, kind: str, module: str) -> tuple[Experiment, Any]:
+    if kind not in KINDS:  # a kind registered at run time in the parent (plugins, tests)
+        KINDS[kind] = module
+    if source[0] == "config":
+        return experiment(kind), source[1]
+    key = (source[1], tuple(source[2]))
+    if key not in _LOADED:
+        _LOADED[key] = load_experiment(source[1], list(source[2]))
+    return _LOADED[key]
+
+
+def execute_trial(source: tuple, kind: str, module: str, spec: dict) -> dict:
+    """Run one trial in whatever process this is; the trials.jsonl record."""
+    exp, cfg = _load(source, kind, module)
+    t0 = time.perf_counter()
+    result = exp.trial(cfg, spec)
+    return {
+        "id": spec["id"],
+        "spec": spec,
+        "result": result,
+        "wall_s": round(time.perf_counter() - t0, 4),
+        "host": socket.gethostname(),
+        "pid": os.getpid(),
+    }
+
+
+def _worker_init() -> None:
+    # The parent handles Ctrl-C and stops the workers itself.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+# --------------------------------------------------------------------------- bookkeeping
+
+
+def _json_safe(x: Any) -> Any:
+    if isinstance(x, float) and not math.isfinite(x):
+        return str(x)
+    if isinstance(x, dict):
+        return {k: _json_safe(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_json_safe(v) for v in x]
+    return x
+
+
+def config_hash(cfg: Any) -> str:
+    d = to_dict(cfg)
+    if isinstance(d, dict):
+        d = {k: v for k, v in d.items() if k != "base_dir"}
+    return hashlib.sha256(json.dumps(_json_safe(d), sort_keys=True).encode()).hexdigest()[:16]
+
+
+def read_trials(path: Path, ids: set[str] | None = None) -> tuple[dict[str, dict], bool]:
+    """Finished trials from a trials.jsonl (first record per id; unparsable lines, e.g. a
+    line cut short by a kill, are skipped); and whether any line was skipped."""
+    done: dict[str, dict] = {}
+    skipped = False
+    if not path.is_file():
+        return done, False
+    with open(path, encoding="utf-8") as f:
+        for line in f:
+            line = line.strip()
+            if not line:
+                continue
+            try:
+                rec = json.loads(line)
+            except json.JSONDecodeError:
+                skipped = True
+                continue
+            if not isinstance(rec, dict) or "id" not in rec or "result" not in rec:
+                skipped = True
+                continue
+            if ids is not None and rec["id"] not in ids:
+                skipped = True
+                continue
+            if rec["id"] in done:
+                skipped = True
+                continue
+            done[rec["id"]] = rec
+    return done, skipped
+
+
+def _rewrite(path: Path, records: list[dict]) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w", encoding="utf-8") as f:
+        for r in records:
+            f.write(json.dumps(r) + "\n")
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+class _Appender:
+    def __init__(self, path: Path) -> None:
+        self.f = open(path, "a", encoding="utf-8")
+
+    def write(self, rec: dict) -> None:
+        self.f.write(json.dumps(rec) + "\n")
+        self.f.flush()
+        os.fsync(self.f.fileno())
+
+    def close(self) -> None:
+        self.f.close()
+
+
+# --------------------------------------------------------------------------- engines
+
+
+def _run_local(source, kind, module, specs, workers, on_done, on_error) -> None:
+    if workers <= 1:
+        for s in specs:
+            try:
+                rec = execute_trial(source, kind, module, s)
+            except KeyboardInterrupt:
+                raise
+            except Exception as exc:  # noqa: BLE001 - a failing trial must not lose the others
+                on_error(s, exc)
+                continue
+            on_done(rec)
+        return
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    pool = ProcessPoolExecutor(max_workers=min(workers, len(specs)), mp_context=mp.get_context("spawn"), initializer=_worker_init)
+    try:
+        futs = {pool.submit(execute_trial, source, kind, module, s): s for s in specs}
+        for fut in as_completed(futs):
+            try:
+                rec = fut.result()
+            except Exception as exc:  # noqa: BLE001
+                on_error(futs[fut], exc)
+                continue
+            on_done(rec)
+    except KeyboardInterrupt:
+        procs = list(getattr(pool, "_processes", {}).values())
+        pool.shutdown(wait=False, cancel_futures=True)
+        for p in procs:  # our own workers, by their handles
+            if p.is_alive():
+                p.terminate()
+        raise
+    pool.shutdown(wait=True)
+
+
+def _import_ray():
+    try:
+        import ray
+    except ImportError:
+        raise InputError("--engine ray: Ray is not installed (pip install 'depthnav[ray]')") from None
+    return ray
+
+
+def _run_ray(source, kind, module, specs, workers, address, on_done, on_error) -> None:
+    ray = _import_ray()
+    started = False
+    if not ray.is_initialized():
+        if address:
+            try:
+                ray.init(address=address, log_to_driver=False)
+            except (ConnectionError, ValueError, RuntimeError) as exc:
+                raise InputError(f"--address {address}: cannot connect to a Ray cluster ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
+        else:
+            # Local workers must import this project (and anything on our path) as we do.
+            old = os.environ.get("PYTHONPATH")
+            paths = [p for p in sys.path if p and Path(p).is_dir()]
+            os.environ["PYTHONPATH"] = os.pathsep.join(dict.fromkeys([os.getcwd(), *paths]))
+            try:
+                ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False, configure_logging=False)
+            finally:
+                if old is None:
+                    os.environ.pop("PYTHONPATH", None)
+                else:
+                    os.environ["PYTHONPATH"] = old
+        started = True
+    remote = ray.remote(num_cpus=1, max_retries=RAY_MAX_RETRIES)(execute_trial)
+    refs = {}
+    try:
+        for s in specs:
+            refs[remote.remote(source, kind, module, s)] = s
+        pending = list(refs)
+        while pending:
+            ready, pending = ray.wait(pending, num_returns=1)
+            for r in ready:
+                try:
+                    rec = ray.get(r)
+                except Exception as exc:  # noqa: BLE001 - RayTaskError wraps the trial's exception
+                    on_error(refs[r], exc)
+                    continue
+                on_done(rec)
+    except KeyboardInterrupt:
+        for r in refs:
+            try:
+                ray.cancel(r, force=True)
+            except Exception:  # noqa: BLE001 - best effort
+                pass
+        raise
+    finally:
+        if started:
+            ray.shutdown()
+
+
+# --------------------------------------------------------------------------- the sweep
+
+
+def default_trials(cfg: Any) -> int:
+    n = getattr(cfg, "replays", None)
+    return int(n) if isinstance(n, int) and n > 0 else DEFAULT_TRIALS
+
+
+def run_experiment(
+    exp: Experiment,
+    cfg: Any,
+    out_dir: str | Path,
+    *,
+    trials: int | None = None,
+    seed: int | None = None,
+    engine: str = "local",
+    workers: int | None = None,
+    address: str | None = None,
+    resume: bool | str = False,
+    progress: bool = True,
+    source: tuple | None = None,
+    scenario: str | None = None,
+    overrides: list[str] | None = None,
+    resume_hint: str | None = None,
+) -> dict:
+    """Run (or finish) a sweep of ``exp`` over ``cfg``; returns the report.
+
+    ``resume``: True finishes the sweep in ``out_dir`` (error if it is another sweep);
+    False refuses a directory that already holds finished trials; "auto" resumes when
+    ``sweep.json`` matches and starts afresh otherwise.
+    """
+    if engine not in ENGINES:
+        raise InputError(f"--engine {engine!r}: expected one of {', '.join(ENGINES)}")
+    n = default_trials(cfg) if trials is None else int(trials)
+    if n < 1:
+        raise InputError(f"--trials {trials}: expected an integer >= 1")
+    if workers is not None and workers < 1:
+        raise InputError(f"--workers {workers}: expected an integer >= 1")
+    if address and engine != "ray":
+        raise InputError("--address: only with --engine ray")
+    workers = workers or os.cpu_count() or 1
+    seed = int(getattr(cfg, "seed", 0)) if seed is None else int(seed)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    specs = exp.trials(cfg, n, seed)
+    ids = [s["id"] for s in specs]
+    if len(set(ids)) != len(ids):
+        raise RuntimeError(f"experiment kind {exp.kind!r} produced duplicate trial ids")
+    meta = {
+        "version": SWEEP_VERSION,
+        "kind": exp.kind,
+        "scenario": scenario or getattr(cfg, "name", ""),
+        "overrides": list(overrides or []),
+        "trials": n,
+        "seed": seed,
+        "config_hash": config_hash(cfg),
+        "trial_ids": len(ids),
+    }
+    meta_path = out / "sweep.json"
+    trials_path = out / "trials.jsonl"
+    old = None
+    if meta_path.is_file():
+        try:
+            old = json.loads(meta_path.read_text(encoding="utf-8"))
+        except (json.JSONDecodeError, UnicodeDecodeError):
+            old = None
+    same = old is not None and all(old.get(k) == meta[k] for k in ("version", "kind", "trials", "seed", "config_hash"))
+    done: dict[str, dict] = {}
+    if resume is True:
+        if old is not None and not same:
+            diff = [k for k in ("kind", "trials", "seed", "config_hash") if old.get(k) != meta[k]]
+            what = ", ".join(f"{k} {old.get(k)!r} there vs {meta[k]!r} now" for k in diff) or "an older sweep format"
+            raise InputError(f"--resume: {out} holds a different sweep ({what})")
+    elif resume == "auto":
+        if not same:
+            trials_path.unlink(missing_ok=True)
+    else:
+        existing, _ = read_trials(trials_path)
+        if existing:
+            raise InputError(f"--out {out}: already holds a sweep with {len(existing)} finished trials (pass --resume to finish it, or choose another --out)")
+    if trials_path.is_file():
+        done, skipped = read_trials(trials_path, set(ids))
+        if skipped:
+            _rewrite(trials_path, list(done.values()))
+    meta_path.write_text(json.dumps(meta, indent=2) + "\n", encoding="utf-8")
+    pending = [s for s in specs if s["id"] not in done]
+    resumed = len(done)
+    kind_module = KINDS.get(exp.kind, "")
+    if source is None:
+        source = ("config", cfg)
+
+    if pending:
+        prep: Callable | None = getattr(importlib.import_module(kind_module), "prepare", None) if kind_module else None
+        if prep is not None:
+            prep(cfg, progress)
+    bar = None
+    if progress and pending:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(specs), initial=resumed, unit="trial", desc=f"{meta['scenario']} ({engine}, {workers} workers)", file=sys.stderr, smoothing=0.05)
+    errors: list[tuple[str, str]] = []
+    appender = _Appender(trials_path)
+
+    def on_done(rec: dict) -> None:
+        appender.write(rec)
+        done[rec["id"]] = rec
+        if bar is not None:
+            bar.update(1)
+
+    def on_error(spec: dict, exc: BaseException) -> None:
+        msg = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
+        errors.append((spec["id"], f"{type(exc).__name__}: {msg}"))
+        print(f"depthnav sweep: trial {spec['id']} failed: {type(exc).__name__}: {msg}", file=sys.stderr)
+
+    hint = resume_hint or f"depthnav sweep {meta['scenario']} --out {out} --resume" + (f" --trials {n}" if trials is not None else "")
+    t0 = time.perf_counter()
+    interrupted = False
+    try:
+        if pending:
+            if engine == "local":
+                _run_local(source, exp.kind, kind_module, pending, workers, on_done, on_error)
+            else:
+                _run_ray(source, exp.kind, kind_module, pending, workers, address, on_done, on_error)
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        appender.close()
+        if bar is not None:
+            bar.close()
+    wall = time.perf_counter() - t0
+    if interrupted:
+        print(f"interrupted: {len(done)} of {len(specs)} trials finished and kept in {trials_path}; resume with: {hint}", file=sys.stderr)
+        partial = {
+            "scenario": meta["scenario"],
+            "kind": exp.kind,
+            "interrupted": True,
+            "metrics": {"trials_done": len(done), "trials_total": len(specs)},
+            "resume": hint,
+            "sweep": {"engine": engine, "workers": workers, "trials": len(specs), "trials_file": trials_path.name, "out_dir": str(out), "wall_s": round(wall, 2)},
+        }
+        (out / "report.json").write_text(json.dumps(partial, indent=2) + "\n", encoding="utf-8")
+        return partial
+    if errors:
+        raise SweepError(f"{len(errors)} of {len(specs)} trials failed (first: {errors[0][0]}: {errors[0][1]}); the {len(done)} finished are kept in {trials_path}; fix and resume with: {hint}")
+    results = [done[i]["result"] for i in ids]
+    report = exp.summarize(cfg, results, out)
+    report["sweep"] = {
+        "engine": engine,
+        "workers": workers,
+        "address": address,
+        "trials": len(specs),
+        "run_now": len(pending),
+        "resumed": resumed,
+        "seed": seed,
+        "wall_s": round(wall, 2),
+        "trials_file": trials_path.name,
+        "out_dir": str(out),
+    }
+    report.setdefault("metrics", {})["sweep_wall_s"] = round(wall, 2)
+    report.setdefault("interrupted", False)
+    (out / "report.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    return report
+
+
+def run_sweep(
+    scenario_path: str | Path,
+    overrides: list[str] | None,
+    out_dir: str | Path | None,
+    trials: int | None = None,
+    engine: str = "local",
+    workers: int | None = None,
+    address: str | None = None,
+    resume: bool = False,
+    progress: bool = True,
+    seed: int | None = None,
+) -> dict:
+    """``depthnav sweep``: load the scenario and run its sweep (see the module docstring)."""
+    overrides = list(overrides or [])
+    exp, cfg = load_experiment(scenario_path, overrides)
+    out = Path(out_dir) if out_dir else Path("runs") / f"{cfg.name}-sweep"
+    path = str(Path(scenario_path).resolve())
+    sets = "".join(f" --set {o}" for o in overrides)
+    hint = f"depthnav sweep {scenario_path} --out {out} --resume" + (f" --trials {trials}" if trials is not None else "") + (f" --seed {seed}" if seed is not None else "") + sets + (f" --engine {engine}" if engine != "local" else "")
+    return run_experiment(
+        exp, cfg, out, trials=trials, seed=seed, engine=engine, workers=workers, address=address,
+        resume=resume, progress=progress, source=("path", path, overrides), scenario=str(scenario_path),
+        overrides=overrides, resume_hint=hint,
+    )

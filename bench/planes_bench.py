@@ -22,8 +22,6 @@ from __future__ import annotations
 
 import os
 import sys
-import time
-from collections.abc import Callable
 from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "egl")
@@ -34,30 +32,8 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-Result = dict[str, float | None]
-
-
-def timeit(fn: Callable[[], object], repeat: int, warmup: int = 1) -> list[float]:
-    """Wall times (ms) of ``repeat`` calls after ``warmup`` calls (bench/run.py's helper)."""
-    for _ in range(warmup):
-        fn()
-    out = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        out.append((time.perf_counter() - t) * 1e3)
-    return out
-
-
-def entry(samples: list[float], target: float | None = None, paper: float | None = None) -> Result:
-    """bench/run.py's result entry."""
-    return {
-        "median_ms": round(float(np.median(samples)), 4),
-        "min_ms": round(float(np.min(samples)), 4),
-        "max_ms": round(float(np.max(samples)), 4),
-        "target_ms": target,
-        "paper_ms": paper,
-    }
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import Result, entry, timeit  # noqa: E402
 
 
 def corridor_frames(n: int = 8, seed: int = 0) -> tuple[list[np.ndarray], list[np.ndarray], object]:

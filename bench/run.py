@@ -33,28 +33,8 @@ from sim.kinect_noise import apply_kinect_noise  # noqa: E402
 from sim.runner import random_people  # noqa: E402
 from sim.world import build_world  # noqa: E402
 
-Result = dict[str, float | None]
-
-
-def timeit(fn: Callable[[], object], repeat: int, warmup: int = 1) -> list[float]:
-    for _ in range(warmup):
-        fn()
-    out = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        out.append((time.perf_counter() - t) * 1e3)
-    return out
-
-
-def entry(samples: list[float], target: float | None = None, paper: float | None = None) -> Result:
-    return {
-        "median_ms": round(float(np.median(samples)), 4),
-        "min_ms": round(float(np.min(samples)), 4),
-        "max_ms": round(float(np.max(samples)), 4),
-        "target_ms": target,
-        "paper_ms": paper,
-    }
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import Result, entry, timeit  # noqa: E402
 
 
 def bench_maps(results: dict[str, Result], quick: bool) -> None:

@@ -121,6 +121,21 @@ def from_dict(cls: type, data: dict, *, source: str, prefix: str = "") -> Any:
         raise InputError(msg if msg.startswith(source) else f"{source}: {msg}") from None
 
 
+def read_toml(path: Any) -> dict:
+    """A TOML file as a dict, or an InputError naming the file (missing, invalid, not UTF-8)."""
+    from pathlib import Path
+
+    path, src = Path(path), str(path)
+    if not path.is_file():
+        raise InputError(f"{src}: scenario file not found")
+    try:
+        return tomllib.loads(path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{src}: invalid TOML: {exc}") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{src}: not a UTF-8 text file") from None
+
+
 def to_dict(obj: Any) -> Any:
     """A dataclass tree as plain TOML/JSON-able values (tuples become lists)."""
     if dataclasses.is_dataclass(obj):

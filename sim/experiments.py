@@ -14,14 +14,13 @@ what that kind needs.
 from __future__ import annotations
 
 import importlib
-import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from autonomy.errors import InputError
-from sim.config import apply_overrides, from_dict
+from sim.config import apply_overrides, from_dict, read_toml
 
 #: kind → module that defines ``EXPERIMENTS[kind]``.
 KINDS: dict[str, str] = {
@@ -63,14 +62,7 @@ def load_experiment(path: str | Path, overrides: list[str] | None = None) -> tup
     """Read a scenario file of any kind: (its Experiment, its parsed config)."""
     path = Path(path)
     src = str(path)
-    if not path.is_file():
-        raise InputError(f"{src}: scenario file not found")
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"{src}: invalid TOML: {exc}") from None
-    except UnicodeDecodeError:
-        raise InputError(f"{src}: not a UTF-8 text file") from None
+    data = read_toml(path)
     kind = data.pop("kind", "mission")
     if not isinstance(kind, str):
         raise InputError(f"{src}: key 'kind' expected a string, got {kind!r}")

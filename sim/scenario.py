@@ -19,7 +19,7 @@ from autonomy.navigator import NavigatorConfig
 from autonomy.observation import ObservationConfig
 from autonomy.raycast import VisibilityGridConfig
 from sim.actors import Furniture, Person
-from sim.config import apply_overrides, from_dict
+from sim.config import apply_overrides, from_dict, read_toml
 from sim.kinect import KinectConfig
 from sim.robot import OdometryConfig, RobotConfig
 from sim.world import WorldConfig
@@ -181,14 +181,7 @@ def load_scenario(path: str | Path, overrides: list[str] | None = None) -> Scena
     """Read and strictly parse a scenario file, applying ``--set`` overrides."""
     path = Path(path)
     src = str(path)
-    if not path.is_file():
-        raise InputError(f"{src}: scenario file not found")
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"{src}: invalid TOML: {exc}") from None
-    except UnicodeDecodeError:
-        raise InputError(f"{src}: not a UTF-8 text file") from None
+    data = read_toml(path)
     if "base_dir" in data:
         raise InputError(f"{src}: unknown key 'base_dir' (it is set from the file's location)")
     if data.get("kind", "mission") != "mission":

@@ -136,6 +136,10 @@ class CGRLocalizer:
         self.particles = np.zeros((cfg.n_particles, 3))
         self.weights = np.full(cfg.n_particles, 1.0 / cfg.n_particles)
         self.before_refinement = self.particles.copy()
+        self.after_refinement = self.particles.copy()
+        """Particles after refinement and acceptance, before resampling (for viewers)."""
+        self.refined_weights = self.weights.copy()
+        """Their normalised importance weights (Alg. 1 line 7)."""
         self.last = UpdateStats()
 
     # -- belief ------------------------------------------------------------------------
@@ -150,6 +154,8 @@ class CGRLocalizer:
         self.particles = p
         self.weights = np.full(n, 1.0 / n)
         self.before_refinement = p.copy()
+        self.after_refinement = p.copy()
+        self.refined_weights = self.weights.copy()
 
     def estimate(self) -> Estimate:
         p, w = self.particles, self.weights
@@ -251,6 +257,8 @@ class CGRLocalizer:
             self.weights = np.full(n, 1.0 / n)
             return stats
         self.weights = w / total
+        self.after_refinement = self.particles.copy()
+        self.refined_weights = self.weights.copy()
         stats.observation = True
         idx = low_variance_resample(self.weights, self.rng)
         self.particles = self.particles[idx]

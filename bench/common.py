@@ -29,5 +29,5 @@ def entry(samples: list[float], target: float | None = None, paper: float | None
         "min_ms": round(float(np.min(samples)), 4),
         "max_ms": round(float(np.max(samples)), 4),
         "target_ms": target,
-        "paper_ms": paper,
+        "paper_ms": None if paper is None else round(paper, 4),
     }

@@ -25,17 +25,10 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-Result = dict[str, float | None]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-
-def _entry(samples: list[float], target: float | None = None, paper: float | None = None) -> Result:
-    return {
-        "median_ms": round(float(np.median(samples)), 4),
-        "min_ms": round(float(np.min(samples)), 4),
-        "max_ms": round(float(np.max(samples)), 4),
-        "target_ms": target,
-        "paper_ms": paper,
-    }
+from common import Result  # noqa: E402
+from common import entry as _entry  # noqa: E402
 
 
 def bench_env(results: dict[str, Result], quick: bool) -> None:

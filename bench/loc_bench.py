@@ -12,8 +12,6 @@ from __future__ import annotations
 import math
 import os
 import sys
-import time
-from collections.abc import Callable
 from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "egl")
@@ -22,31 +20,19 @@ import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from common import entry as _entry  # noqa: E402
+from common import timeit as _timeit_base  # noqa: E402
+
+
+def _timeit(fn, repeat: int) -> list[float]:
+    return _timeit_base(fn, repeat, warmup=2)
+
 
 FRAME_MS = 1000.0 / 30.0
 #: Paper: CPU load x frame period.
 PAPER_MS = {"kr": 0.0001 * FRAME_MS, "ks": 0.036 * FRAME_MS, "kc": 0.566 * FRAME_MS, "fspf": 0.163 * FRAME_MS}
-
-
-def _timeit(fn: Callable[[], object], repeat: int, warmup: int = 2) -> list[float]:
-    for _ in range(warmup):
-        fn()
-    out = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        out.append((time.perf_counter() - t) * 1e3)
-    return out
-
-
-def _entry(samples: list[float], target: float | None, paper: float | None) -> dict:
-    return {
-        "median_ms": round(float(np.median(samples)), 4),
-        "min_ms": round(float(np.min(samples)), 4),
-        "max_ms": round(float(np.max(samples)), 4),
-        "target_ms": target,
-        "paper_ms": None if paper is None else round(paper, 4),
-    }
 
 
 def _frames(n: int) -> tuple[list[np.ndarray], list[np.ndarray], object, object]:

@@ -203,23 +203,26 @@ def print_table(results: dict[str, Result]) -> None:
         )
 
 
-GROUP_NAMES = ["maps", "localization", "sim", "planes", "env", "scans"]
+GROUP_NAMES = ["maps", "localization", "sim", "planes", "env", "scans", "viz"]
 
 
 def _groups() -> dict[str, Callable[[dict[str, Result], bool], None]]:
     """Every benchmark group; the subsystem ones live beside this file."""
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from env_bench import bench_env
+    from loc_bench import bench_scans
     from planes_bench import bench_planes
+    from viz_bench import bench_viz
 
-    groups = {"maps": bench_maps, "localization": bench_localization, "sim": bench_sim, "planes": bench_planes, "env": bench_env}
-    try:
-        from loc_bench import bench_scans
-
-        groups["scans"] = bench_scans
-    except ImportError:  # pragma: no cover - until the scan baselines land
-        pass
-    return groups
+    return {
+        "maps": bench_maps,
+        "localization": bench_localization,
+        "sim": bench_sim,
+        "planes": bench_planes,
+        "env": bench_env,
+        "scans": bench_scans,
+        "viz": bench_viz,
+    }
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1037,12 +1037,14 @@ class DepthNavEnv(gym.Env):
         self._rrd_time += self.frame_dt
         rec.set_time(self._rrd_frame, self._rrd_time)
         rec.log_pose(self._rrd_frame, self._pose)
+        if self._localizer is not None:
+            rec.log_estimate(self._rrd_frame, self._estimate)
         if rec.heavy(self._rrd_frame):
             rec.log_depth(self._depth)
             if self._planes is not None:
                 rec.log_fspf(self._planes)
             if self._localizer is not None:
-                rec.log_localization([self._estimate, self._estimate], self._localizer.before_refinement, self._localizer.particles)
+                rec.log_localization(self._localizer.before_refinement, self._localizer.after_refinement, self._localizer.refined_weights)
             rec.log_people(site.world.people.positions())
             rec.log_scalars({"env/steps": float(self._steps), "env/collisions": float(self._collisions)})
 

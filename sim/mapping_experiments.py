@@ -226,9 +226,13 @@ class CorridorExperiment:
     """RANSAC and Hough parameters."""
     export: bool = True
     """Write the maps (JSON, PLY, GLB) and the top-view PNG."""
+    rrd_every: int = 5
+    """With ``--rrd``: log the growing plane maps every this many mapped frames (1 s at 5 Hz)."""
 
     def __post_init__(self) -> None:
         _positive(self, "laps", "speed_mps", "map_rate_hz")
+        if not (isinstance(self.rrd_every, int) and self.rrd_every >= 1):
+            raise InputError(f"rrd_every: expected an integer >= 1, got {self.rrd_every!r}")
         if self.pose_source not in ("odometry", "truth"):
             raise InputError(f"pose_source: expected 'odometry' or 'truth', got {self.pose_source!r}")
 
@@ -315,8 +319,8 @@ def _match_face(det: PlaneDetection, n_true: np.ndarray, rho_true: float, max_an
     return best
 
 
-def measure_cuboid(cfg: CuboidExperiment, seed: int, progress: bool | None = False) -> tuple[dict, dict, bool]:
-    """Run Experiment I: (metrics, details, interrupted)."""
+def measure_cuboid(cfg: CuboidExperiment, seed: int, progress: bool | None = False, rec=None) -> tuple[dict, dict, bool]:
+    """Run Experiment I: (metrics, details, interrupted); ``rec`` (sim.viz.Recorder) logs each frame's detections."""
     from sim.scenes.cuboid import build_cuboid_rig, visible_side_faces
 
     kcfg = cfg.sensor.kinect()
@@ -344,8 +348,12 @@ def measure_cuboid(cfg: CuboidExperiment, seed: int, progress: bool | None = Fal
                     s = seeds[2 * (vi * n_frames + f)]
                     depth = cam.capture(rig.data, s % (2**31))
                     pts, _ = depth_to_cloud(depth, intr, rot, stride=cfg.detectors.stride)
+                    if rec is not None:
+                        rec.set_time(vi * n_frames + f, float(vi * n_frames + f))
                     for alg in ALGORITHMS:
                         det = _detect(alg, pts, cfg.detectors, seeds[2 * (vi * n_frames + f) + 1], acc)
+                        if rec is not None:
+                            rec.log_detection(alg, pts, det.labels, det.planes, origin=pos)
                         times[alg].append(det.total_ms)
                         planes_found[alg].append(len(det.planes))
                         k1 = _match_face(det, *faces[0], cfg.match_angle_deg, cfg.match_distance_m)
@@ -386,8 +394,8 @@ def measure_cuboid(cfg: CuboidExperiment, seed: int, progress: bool | None = Fal
 # -- Experiment II: wall distance ------------------------------------------------------------
 
 
-def measure_wall(cfg: WallExperiment, seed: int, progress: bool | None = False) -> tuple[dict, dict, bool]:
-    """Run Experiment II: (metrics, details, interrupted)."""
+def measure_wall(cfg: WallExperiment, seed: int, progress: bool | None = False, rec=None) -> tuple[dict, dict, bool]:
+    """Run Experiment II: (metrics, details, interrupted); ``rec`` (sim.viz.Recorder) logs each frame's detections."""
     from sim.scenes.wall import build_wall_rig
 
     kcfg = cfg.sensor.kinect()
@@ -413,8 +421,12 @@ def measure_wall(cfg: WallExperiment, seed: int, progress: bool | None = False) 
                     k = 2 * (di * cfg.frames + f)
                     depth = cam.capture(rig.data, seeds[k] % (2**31))
                     pts, _ = depth_to_cloud(depth, intr, rot, stride=cfg.detectors.stride)
+                    if rec is not None:
+                        rec.set_time(di * cfg.frames + f, float(di * cfg.frames + f))
                     for alg in ALGORITHMS:
                         det = _detect(alg, pts, cfg.detectors, seeds[k + 1], acc)
+                        if rec is not None:
+                            rec.log_detection(alg, pts, det.labels, det.planes, origin=rig.world_from_camera[:3, 3])
                         best = -1
                         for j, p in enumerate(det.planes):
                             if p.normal @ n_true > math.cos(math.radians(10)) and abs(p.rho - dist) < cfg.gate_m:
@@ -558,8 +570,14 @@ def draw_maps(path: Path, maps: dict[str, PlaneOctree], segs: np.ndarray, truth:
     return path
 
 
-def measure_corridor(cfg: CorridorExperiment, seed: int, progress: bool | None = False, out_dir: Path | None = None) -> tuple[dict, dict, bool, list[str]]:
-    """Run Experiment III: (metrics, details, interrupted, files written)."""
+def measure_corridor(
+    cfg: CorridorExperiment, seed: int, progress: bool | None = False, out_dir: Path | None = None, rec=None
+) -> tuple[dict, dict, bool, list[str]]:
+    """Run Experiment III: (metrics, details, interrupted, files written).
+
+    ``rec`` (sim.viz.Recorder) logs the corridor, the true and odometry paths, each mapped
+    frame's detections and the growing plane maps (every ``rrd_every`` mapped frames).
+    """
     import dataclasses
 
     from sim.kinect import KinectCamera
@@ -593,6 +611,8 @@ def measure_corridor(cfg: CorridorExperiment, seed: int, progress: bool | None =
     max_frames = int(4.0 * driver.goal_m / max(cfg.speed_mps, 1e-3) * 30) + 300
     bar = _progress(progress, max_frames, cfg.name)
     interrupted = False
+    if rec is not None:
+        rec.log_map(world.vectormap, None, world.config.wall_height_m)
     try:
         while frame < max_frames:
             pose = world.robot.pose(world.data)
@@ -609,6 +629,10 @@ def measure_corridor(cfg: CorridorExperiment, seed: int, progress: bool | None =
             frame += 1
             if bar is not None:
                 bar.update(1)
+            if rec is not None:
+                rec.set_time(frame, frame * frame_dt)
+                rec.log_pose(frame, new)
+                rec.log_estimate(frame, odom.pose)
             if frame % every:
                 continue
             t0 = time.perf_counter()
@@ -626,13 +650,21 @@ def measure_corridor(cfg: CorridorExperiment, seed: int, progress: bool | None =
                     st["per_plane"].append(sum(det.plane_ms) / len(det.planes))
                 for pol in (cfg.octree.policy, other):
                     register_planes(maps[(alg, pol)], det, w_from_sensor, stamp=frame, source=alg)
+                if rec is not None:
+                    rec.log_detection(alg, pts, det.labels, det.planes, origin=w_from_sensor[:3, 3])
             mapped += 1
+            if rec is not None and mapped % cfg.rrd_every == 0:
+                for alg in ALGORITHMS:
+                    rec.log_plane_map(maps[(alg, cfg.octree.policy)], alg)
     except KeyboardInterrupt:
         interrupted = True
     finally:
         cam.close()
         if bar is not None:
             bar.close()
+    if rec is not None:
+        for (alg, pol), tree in maps.items():
+            rec.log_plane_map(tree, alg if pol == cfg.octree.policy else f"{alg}_{pol}")
     truth_a, est_a = np.array(truth), np.array(est)
     end_err = float(np.hypot(*(truth_a[-1, :2] - est_a[-1, :2])))
     head_err = math.degrees(abs(math.atan2(math.sin(truth_a[-1, 2] - est_a[-1, 2]), math.cos(truth_a[-1, 2] - est_a[-1, 2]))))
@@ -685,12 +717,12 @@ def measure_corridor(cfg: CorridorExperiment, seed: int, progress: bool | None =
 # -- run / sweep entry points ----------------------------------------------------------
 
 
-def _measure(kind: str, cfg: Any, seed: int, progress: bool | None, out: Path | None) -> tuple[dict, dict, bool, list[str]]:
+def _measure(kind: str, cfg: Any, seed: int, progress: bool | None, out: Path | None, rec=None) -> tuple[dict, dict, bool, list[str]]:
     if kind == "mapping_cuboid":
-        return (*measure_cuboid(cfg, seed, progress), [])
+        return (*measure_cuboid(cfg, seed, progress, rec), [])
     if kind == "mapping_wall":
-        return (*measure_wall(cfg, seed, progress), [])
-    return measure_corridor(cfg, seed, progress, out)
+        return (*measure_wall(cfg, seed, progress, rec), [])
+    return measure_corridor(cfg, seed, progress, out, rec)
 
 
 def _run(kind: str, cfg: Any, out_dir: str | Path, seed: int | None, rrd, spawn: bool, progress: bool | None) -> dict:
@@ -701,9 +733,19 @@ def _run(kind: str, cfg: Any, out_dir: str | Path, seed: int | None, rrd, spawn:
         raise InputError(f"{out}: cannot create the output directory: {exc.strerror or exc}") from None
     seed = cfg.seed if seed is None else int(seed)
     t0 = time.perf_counter()
-    metrics, details, interrupted, files = _measure(kind, cfg, seed, progress, out)
+    rec = None
     if rrd or spawn:
-        details["note"] = "no rerun recording for mapping experiments yet (PlaneOctree.patches() gives the arrays)"
+        from sim.viz import Recorder
+
+        rec = Recorder(rrd, spawn=spawn, every=max(1, round(30.0 / getattr(cfg, "map_rate_hz", 30.0))), recording_id=f"{cfg.name}-{seed}")
+    try:
+        metrics, details, interrupted, files = _measure(kind, cfg, seed, progress, out, rec)
+    finally:
+        if rec is not None:
+            rec.close()
+    if rrd:
+        rp = Path(rrd)
+        files.append(rp.name if rp.parent.resolve() == out.resolve() else str(rp))
     report = _report(kind, cfg, seed, metrics, details, interrupted, files, time.perf_counter() - t0)
     _write_report(out, report)
     return report

@@ -16,10 +16,16 @@ Entity layout (timelines ``sim_time`` in seconds and ``frame``):
 - ``world/robot/avoidance/{fan,chosen,desired,margin}`` open path lengths (Eq. 4) as a
   fan, theta* (Eq. 5), the carrot direction and the robot's safety radius.
 - ``metrics/...`` scalars over time (speed, per-stage CPU ms, ...).
+- ``world/plane_map/<name>/{patches,leaves,normals}`` an octree plane map (mapping
+  experiments): plane patches as one mesh coloured by normal direction, the occupied
+  leaves as wire boxes, and each plane's normal at its centre;
+  ``world/detections/<name>/{points,boundaries}`` one frame's detected planes.
 
 Heavy items (depth images, trajectories, people) are logged every ``every``-th frame;
 depth goes in as uint16 millimetres at half resolution (with a matching pinhole), which
-keeps a 150 s demo near 50 MB.
+keeps a 150 s demo near 50 MB. Trajectories are cut into strips of at most
+``TRAIL_CHUNK`` points (``world/trajectory/truth/<k>``), so a multi-kilometre run logs
+each point a bounded number of times instead of re-logging the whole path.
 """
 
 from __future__ import annotations
@@ -36,6 +42,45 @@ from autonomy.vectormap import NavGraph, VectorMap
 
 TRUTH_COLOR = (40, 170, 60)
 ESTIMATE_COLOR = (230, 90, 30)
+TRAIL_CHUNK = 600
+"""Points per trajectory strip; a full strip is frozen and a new one started."""
+
+
+def label_colors(labels: np.ndarray) -> np.ndarray:
+    """A fixed, well-spread RGB colour per non-negative label (golden-angle hue); grey for -1."""
+    ids = np.asarray(labels, dtype=np.int64)
+    hue = (ids * 0.618033988749895) % 1.0
+    colors = (255 * np.column_stack([0.5 + 0.5 * np.cos(2 * np.pi * (hue + k / 3)) for k in range(3)])).astype(np.uint8)
+    colors[ids < 0] = 140
+    return colors
+
+
+class _Trail:
+    """A growing path logged as a chain of bounded line strips under ``path/<k>``."""
+
+    def __init__(self, path: str, color: tuple[int, int, int], z: float) -> None:
+        self.path, self.color, self.z = path, color, z
+        self.points: list[tuple[float, float]] = []
+        self.chunk = 0
+
+    def append(self, x: float, y: float) -> None:
+        self.points.append((float(x), float(y)))
+
+    def log(self, rec: rr.RecordingStream) -> None:
+        if len(self.points) < 2:
+            return
+        strip = np.column_stack([np.asarray(self.points), np.full(len(self.points), self.z)])
+        rec.log(f"{self.path}/{self.chunk}", rr.LineStrips3D([strip], colors=self.color, radii=0.03))
+        if len(self.points) >= TRAIL_CHUNK:
+            self.points = self.points[-1:]
+            self.chunk += 1
+
+    def reset(self, rec: rr.RecordingStream | None = None) -> None:
+        """Forget the path (a new episode); clears the logged strips when given the stream."""
+        if rec is not None:
+            rec.log(self.path, rr.Clear(recursive=True))
+        self.points.clear()
+        self.chunk = 0
 
 
 def _yaw_quat_xyzw(yaw: float) -> list[float]:
@@ -92,7 +137,8 @@ class Recorder:
         else:
             self._memory = self.rec.memory_recording()
         self.rec.send_blueprint(default_blueprint())
-        self._truth: list[tuple[float, float]] = []
+        self._truth = _Trail("world/trajectory/truth", TRUTH_COLOR, 0.03)
+        self._estimate = _Trail("world/trajectory/estimate", ESTIMATE_COLOR, 0.05)
 
     # -- static content -------------------------------------------------------------
     def log_map(self, vm: VectorMap, graph: NavGraph | None = None, wall_height_m: float = 2.5) -> None:
@@ -184,14 +230,14 @@ class Recorder:
 
     def log_pose(self, frame: int, pose: np.ndarray) -> None:
         self.rec.log("world/robot", rr.Transform3D(translation=[pose[0], pose[1], 0.0], quaternion=_yaw_quat_xyzw(pose[2])))
-        self._truth.append((float(pose[0]), float(pose[1])))
-        if self.heavy(frame) and len(self._truth) > 1:
-            strip = np.column_stack([np.asarray(self._truth), np.full(len(self._truth), 0.03)])
-            self.rec.log("world/trajectory/truth", rr.LineStrips3D([strip], colors=TRUTH_COLOR, radii=0.03))
+        self._truth.append(pose[0], pose[1])
+        if self.heavy(frame):
+            self._truth.log(self.rec)
 
     def reset_trajectory(self) -> None:
-        """Start a new driven-path strip (a new episode)."""
-        self._truth.clear()
+        """Start a new driven path and estimate (a new episode); the old strips are cleared."""
+        self._truth.reset(self.rec)
+        self._estimate.reset(self.rec)
 
     def log_depth(self, depth: np.ndarray) -> None:
         """Depth as uint16 millimetres (the Kinect's own format), every k-th pixel."""
@@ -202,10 +248,7 @@ class Recorder:
     def log_fspf(self, res, max_arrows: int = 200) -> None:
         """FSPF output in the robot frame: plane points coloured by local plane, outliers, normals."""
         if len(res.points):
-            ids = res.plane_ids.astype(np.int64)
-            # A fixed, well-spread colour per local plane (golden-angle hue).
-            hue = (ids * 0.618033988749895) % 1.0
-            colors = (255 * np.column_stack([0.5 + 0.5 * np.cos(2 * np.pi * (hue + k / 3)) for k in range(3)])).astype(np.uint8)
+            colors = label_colors(res.plane_ids)
             self.rec.log("world/robot/fspf/plane_points", rr.Points3D(res.points, colors=colors, radii=0.015))
             step = max(1, len(res.points) // max_arrows)
             self.rec.log(
@@ -219,19 +262,29 @@ class Recorder:
         else:
             self.rec.log("world/robot/fspf/outliers", rr.Clear(recursive=False))
 
-    def log_localization(self, estimates: list[np.ndarray], before: np.ndarray, after: np.ndarray) -> None:
-        """Estimated trajectory, and the CGR particles before and after refinement (arrows)."""
-        if len(estimates) > 1:
-            e = np.asarray(estimates)
-            strip = np.column_stack([e[:, :2], np.full(len(e), 0.05)])
-            self.rec.log("world/trajectory/estimate", rr.LineStrips3D([strip], colors=ESTIMATE_COLOR, radii=0.03))
-            p = e[-1]
-            self.rec.log("world/estimate", rr.Transform3D(translation=[p[0], p[1], 0.0], quaternion=_yaw_quat_xyzw(p[2])))
+    def log_estimate(self, frame: int, pose: np.ndarray) -> None:
+        """The localization estimate (transform every frame, path strip on heavy frames)."""
+        self.rec.log("world/estimate", rr.Transform3D(translation=[pose[0], pose[1], 0.0], quaternion=_yaw_quat_xyzw(pose[2])))
+        self._estimate.append(pose[0], pose[1])
+        if self.heavy(frame):
+            self._estimate.log(self.rec)
+
+    def log_localization(self, before: np.ndarray, after: np.ndarray, weights: np.ndarray | None = None) -> None:
+        """The CGR particles before and after refinement (pose arrows, Alg. 1 lines 3 and 4-6).
+
+        With ``weights`` the refined particles are coloured by weight relative to the
+        largest (dark: low, bright orange: high).
+        """
         for name, parts, color in (("first_stage", before, (150, 150, 255)), ("refined", after, (255, 140, 0))):
             if len(parts):
                 o = np.column_stack([parts[:, :2], np.full(len(parts), 0.1)])
                 v = np.column_stack([0.3 * np.cos(parts[:, 2]), 0.3 * np.sin(parts[:, 2]), np.zeros(len(parts))])
-                self.rec.log(f"world/particles/{name}", rr.Arrows3D(origins=o, vectors=v, colors=color))
+                c = color
+                if name == "refined" and weights is not None and len(weights) == len(parts):
+                    w = np.asarray(weights, dtype=np.float64)
+                    t = w / w.max() if w.max() > 0 else np.ones_like(w)
+                    c = np.column_stack([80 + 175 * t, 40 + 100 * t, np.full(len(t), 20)]).astype(np.uint8)
+                self.rec.log(f"world/particles/{name}", rr.Arrows3D(origins=o, vectors=v, colors=c))
 
     def log_scene(self, lines: np.ndarray, pose: np.ndarray, points: np.ndarray, line_idx: np.ndarray) -> None:
         """The analytic ray cast's scene lines at the estimate, and point -> line correspondences.
@@ -302,6 +355,61 @@ class Recorder:
                 "world/people",
                 rr.Boxes3D(centers=centers, half_sizes=np.tile([radius_m, radius_m, height_m / 2], (n, 1)), colors=(210, 110, 90), fill_mode="solid"),
             )
+
+    # -- plane maps (mapping experiments) ------------------------------------------------
+    def log_plane_map(self, tree, name: str, leaves: bool = True, normals: bool = True) -> None:
+        """An octree plane map (seed 001, Section II): patches, occupied leaves, normals.
+
+        ``tree`` is an :class:`autonomy.planes.PlaneOctree` (its ``patches()`` and
+        ``leaf_boxes()``); logged at the current time, so a map growing over a run can be
+        scrubbed through.
+        """
+        base = f"world/plane_map/{name}"
+        pa = tree.patches()
+        if len(pa.triangles):
+            vn = np.zeros((len(pa.vertices), 3), dtype=np.float32)
+            for k in range(3):
+                vn[pa.triangles[:, k]] = pa.normals[pa.triangle_patch]
+            self.rec.log(
+                f"{base}/patches",
+                rr.Mesh3D(vertex_positions=pa.vertices, triangle_indices=pa.triangles, vertex_colors=pa.vertex_colors, vertex_normals=vn),
+            )
+        else:
+            self.rec.log(f"{base}/patches", rr.Clear(recursive=False))
+        if leaves:
+            c, h = tree.leaf_boxes()
+            if len(c):
+                self.rec.log(f"{base}/leaves", rr.Boxes3D(centers=c, half_sizes=h, colors=(150, 150, 150, 80), radii=0.004))
+        if normals and len(pa.centres):
+            self.rec.log(f"{base}/normals", rr.Arrows3D(origins=pa.centres, vectors=0.3 * pa.normals, colors=pa.colors))
+
+    def log_detection(
+        self, name: str, points: np.ndarray, labels: np.ndarray, planes, origin: np.ndarray | None = None, max_points: int = 20000
+    ) -> None:
+        """One frame's detected planes: points coloured by plane (grey: none) and boundaries.
+
+        ``points`` (N, 3) and the planes' hulls are in a sensor-centred frame with the
+        world's axes (``autonomy.planes.detection_frame``); ``origin`` is the sensor's
+        position in the world. At most ``max_points`` points are logged (evenly strided).
+        """
+        base = f"world/detections/{name}"
+        off = np.zeros(3) if origin is None else np.asarray(origin, dtype=np.float64)
+        pts = np.asarray(points, dtype=np.float32)
+        lab = np.asarray(labels)
+        step = max(1, len(pts) // max_points)
+        if len(pts):
+            self.rec.log(f"{base}/points", rr.Points3D(pts[::step] + off.astype(np.float32), colors=label_colors(lab[::step]), radii=0.01))
+        hulls = [np.vstack([p.hull, p.hull[:1]]) + off for p in planes if len(p.hull) >= 3]
+        if hulls:
+            colors = label_colors(np.array([k for k, p in enumerate(planes) if len(p.hull) >= 3]))
+            self.rec.log(f"{base}/boundaries", rr.LineStrips3D(hulls, colors=colors, radii=0.01))
+        else:
+            self.rec.log(f"{base}/boundaries", rr.Clear(recursive=False))
+
+    def log_frame_transform(self, path: str, t: np.ndarray) -> None:
+        """A 4 x 4 rigid transform (parent from child) at ``path``."""
+        t = np.asarray(t, dtype=np.float64)
+        self.rec.log(path, rr.Transform3D(translation=t[:3, 3], quaternion=_rot_to_quat_xyzw(t[:3, :3])))
 
     def log_scalars(self, values: dict[str, float]) -> None:
         for name, v in values.items():

@@ -37,3 +37,30 @@ def gl_available() -> bool:
 
 
 GL = gl_available()
+
+
+def rerun_cli() -> str | None:
+    """The ``rerun`` command of this environment, if installed."""
+    import shutil
+    import sys
+    from pathlib import Path
+
+    exe = Path(sys.executable).parent / "rerun"
+    return str(exe) if exe.exists() else shutil.which("rerun")
+
+
+def rrd_chunks(path) -> list[tuple[str, str]]:
+    """(entity path, data columns) of every chunk of an .rrd file, via ``rerun rrd print``.
+
+    Also checks the file with ``rerun rrd verify``.
+    """
+    import re
+    import subprocess
+
+    cli = rerun_cli()
+    assert cli is not None, "rerun CLI not installed"
+    v = subprocess.run([cli, "rrd", "verify", str(path)], capture_output=True, text=True, timeout=120)
+    assert v.returncode == 0, v.stderr
+    p = subprocess.run([cli, "rrd", "print", str(path)], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    return re.findall(r" - (/world[^ ]*) - data columns: \[([^\]]*)\]", p.stdout)

@@ -30,6 +30,7 @@ from sim.scenes.cuboid import (
     cuboid_pose,
     visible_side_faces,
 )
+from tests.helpers import rrd_chunks
 
 SCENARIOS = {k: SCENARIOS_DIR / f"{k}.toml" for k in ("mapping_cuboid", "mapping_wall", "mapping_corridor")}
 
@@ -120,8 +121,15 @@ def test_wall_experiment_reduced(tmp_path) -> None:
 
 def test_cuboid_experiment_reduced(tmp_path) -> None:
     _, cfg = load_experiment(SCENARIOS["mapping_cuboid"], ["frames_per_view=1", "detectors.stride=2"])
-    EXPERIMENTS["mapping_cuboid"].run(cfg, tmp_path)
-    m = _check_report(tmp_path, "mapping_cuboid")["metrics"]
+    EXPERIMENTS["mapping_cuboid"].run(cfg, tmp_path, rrd=tmp_path / "cuboid.rrd")
+    report = _check_report(tmp_path, "mapping_cuboid")
+    m = report["metrics"]
+    assert "cuboid.rrd" in report["files"]
+    chunks = rrd_chunks(tmp_path / "cuboid.rrd")
+    for alg in ("ransac", "hough"):
+        pts = [c for p, c in chunks if p == f"/world/detections/{alg}/points"]
+        assert pts and all("Points3D:positions" in c and "Points3D:colors" in c for c in pts)
+        assert any("LineStrips3D:strips" in c for p, c in chunks if p == f"/world/detections/{alg}/boundaries")
     for alg in ("ransac", "hough"):
         assert m[f"{alg}_faces_found_fraction"] == 1.0
         for v in (1, 2, 3, 4):
@@ -132,7 +140,7 @@ def test_cuboid_experiment_reduced(tmp_path) -> None:
 def test_corridor_experiment_reduced(tmp_path) -> None:
     over = ["laps=0.25", "detectors.stride=4", "map_rate_hz=2.0", "seed=2"]
     _, cfg = load_experiment(SCENARIOS["mapping_corridor"], over)
-    EXPERIMENTS["mapping_corridor"].run(cfg, tmp_path)
+    EXPERIMENTS["mapping_corridor"].run(cfg, tmp_path, rrd=tmp_path / "map.rrd")
     report = _check_report(tmp_path, "mapping_corridor")
     m = report["metrics"]
     assert m["distance_m"] == pytest.approx(0.25 * 42.4, abs=1.5)
@@ -149,6 +157,16 @@ def test_corridor_experiment_reduced(tmp_path) -> None:
 
     tree = PlaneOctree.load_json(tmp_path / "map_ransac.json")
     assert tree.n_leaves == m["ransac_map_planes"]
+    # The recording: the plane maps as meshes and leaf boxes, growing over the run.
+    assert "map.rrd" in report["files"]
+    chunks = rrd_chunks(tmp_path / "map.rrd")
+    paths = {p for p, _ in chunks}
+    for name in ("ransac", "hough", "ransac_merge", "hough_merge"):
+        assert any("Mesh3D:vertex_positions" in c and "Mesh3D:triangle_indices" in c for p, c in chunks if p == f"/world/plane_map/{name}/patches")
+        assert any("Boxes3D:half_sizes" in c for p, c in chunks if p == f"/world/plane_map/{name}/leaves")
+        assert f"/world/plane_map/{name}/normals" in paths
+    for p in ("/world/map/walls", "/world/robot", "/world/estimate", "/world/detections/ransac/points", "/world/trajectory/truth/0"):
+        assert p in paths, p
 
 
 def test_corridor_with_true_poses_is_accurate(tmp_path) -> None:

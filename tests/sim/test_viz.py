@@ -52,3 +52,36 @@ def test_recording_verifies_and_holds_expected_entities(recording: Path) -> None
     # 3 s at 30 Hz, heavy items every 10th frame; rerun batches rows into chunks.
     assert sum(1 for path, _ in chunks if path == "/world/robot/camera/depth") >= 1
     assert counts["/world/robot"] >= 1
+    # Every subsystem of the loop shows up with its archetype.
+    expect = {
+        "/world/trajectory/truth/0": "LineStrips3D:strips",
+        "/world/trajectory/estimate/0": "LineStrips3D:strips",
+        "/world/estimate": "Transform3D:translation",
+        "/world/particles/first_stage": "Arrows3D:vectors",
+        "/world/particles/refined": "Arrows3D:colors",
+        "/world/robot/fspf/plane_points": "Points3D:positions",
+        "/world/robot/fspf/normals": "Arrows3D:vectors",
+        "/world/localization/scene_lines": "LineStrips3D:strips",
+        "/world/robot/avoidance/fan": "LineStrips3D:strips",
+        "/world/robot/avoidance/chosen": "Arrows3D:vectors",
+        "/world/people": "Boxes3D:centers",
+    }
+    for path, column in expect.items():
+        assert any(column in c for p_, c in chunks if p_ == path), path
+
+
+def test_trajectory_strips_are_bounded(tmp_path: Path) -> None:
+    """A long path is logged as a chain of strips of at most TRAIL_CHUNK points each."""
+    import numpy as np
+
+    from sim.viz import TRAIL_CHUNK, Recorder
+
+    rec = Recorder(tmp_path / "t.rrd", every=50)
+    n = 3 * TRAIL_CHUNK + 10
+    for f in range(n):
+        rec.set_time(f, f / 30)
+        rec.log_pose(f, np.array([0.01 * f, 0.0, 0.0]))
+    assert rec._truth.chunk == 3 and len(rec._truth.points) <= TRAIL_CHUNK
+    rec.reset_trajectory()
+    assert rec._truth.chunk == 0 and not rec._truth.points
+    rec.close()

@@ -74,13 +74,16 @@ def test_interrupted_run_still_writes_its_report(tmp_path: Path, monkeypatch: py
 
 @pytest.mark.slow
 def test_demo_scenario_end_to_end_via_cli(tmp_path: Path) -> None:
-    """The README's demo, headless through the CLI, with a rerun recording."""
+    """The README's demo (the long run shortened to 300 m), headless through the CLI with
+    a rerun recording; cut to 60 m here (the 200 m long-run test covers the distance)."""
     out = tmp_path / "demo"
     rrd = out / "demo.rrd"
-    assert main(["run", "scenarios/demo.toml", "--out", str(out), "--rrd", str(rrd)]) == 0
+    assert main(["run", "scenarios/demo.toml", "--out", str(out), "--rrd", str(rrd), "--set", "mission.target_distance_m=60"]) == 0
     rep = json.loads((out / "report.json").read_text())
     m = rep["metrics"]
-    assert m["waypoints_reached"] == 4 and m["waypoints_failed"] == 0
+    assert m["distance_m"] >= 60.0 and m["waypoints_reached"] >= 2 and m["waypoints_failed"] == 0
     assert m["collisions"] == 0 and m["resets"] == 0
     assert m["realtime_factor"] > 1.0
+    assert 0.0 < m["logging_overhead"] and m["recording_flush_s"] >= 0.0
+    assert rep["paper"]["resets_per_km"] == 0.75
     assert rrd.stat().st_size > 100_000

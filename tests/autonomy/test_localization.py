@@ -99,6 +99,31 @@ def test_points_without_lines_or_with_wrong_normals_are_discarded() -> None:
     assert kept == 2 and idx.tolist() == [0, 0, -1, -1]
 
 
+def test_points_short_of_a_small_segment_do_not_match_its_extension() -> None:
+    """A pillar face (x = 3, y in [9.9, 10.1]) seen at a grazing angle; points whose rays
+    hit it but that lie far short of the segment itself (a table in front of it) are
+    discarded, though their distance to the face's infinite line is under the gate; points
+    on or near the face are kept."""
+    segs = np.array([[3.0, 9.9, 3.0, 10.1]])
+    # Rays from the origin through each point hit the face; the first two lie 0.3 / 0.4 m
+    # from x = 3 but 0.9 / 1.2 m along the line short of the face.
+    pts = np.array([[2.7, 9.0], [2.6, 8.69], [2.98, 9.95], [3.05, 10.13], [2.9, 9.65]])
+    idx = np.empty(len(pts), dtype=np.int64)
+    kept = correspond(segs, np.zeros(3), pts, np.zeros_like(pts), False, -1.0, 0.5, idx)
+    assert idx.tolist() == [-1, -1, 0, 0, 0] and kept == 3
+    # Brute force: keep exactly the points within the gate of the segment (not the line).
+    rng = np.random.default_rng(4)
+    q = rng.uniform([2.0, 6.0], [3.5, 11.0], size=(400, 2))
+    idx = np.empty(len(q), dtype=np.int64)
+    correspond(segs, np.zeros(3), q, np.zeros_like(q), False, -1.0, 0.5, idx)
+    for (px, py), j in zip(q, idx, strict=True):
+        t = 3.0 / px  # the ray through the point reaches x = 3 at t * (px, py)
+        hits = px > 0 and 9.9 <= t * py <= 10.1
+        along = py - 10.1 if py > 10.1 else (9.9 - py if py < 9.9 else 0.0)
+        keep = hits and abs(px - 3.0) <= 0.5 and along <= 0.5
+        assert (j == 0) == keep, (px, py)
+
+
 def _run(segs, true_path, start, cfg=CGRConfig(), rng_seed=0, odo_noise=0.2, obs_noise=0.01):
     rng = np.random.default_rng(rng_seed)
     loc = CGRLocalizer(lambda x, y: segs, cfg, ObservationConfig(), np.random.default_rng(rng_seed + 1))

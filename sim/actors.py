@@ -274,6 +274,14 @@ class PeopleController:
             if walk:
                 self._s[i] += p.speed_mps * dt
             new = self._place(i)
+            # People walk; they do not jump. Where the route turns while the person is
+            # stepped aside, the offset point of the next leg lies elsewhere (up to twice
+            # the offset away): walk there at walking plus side-stepping speed.
+            gap = new[:2] - self._state[i, :2]
+            reach = (p.speed_mps + self.side_speed_mps) * dt
+            dist = float(np.hypot(gap[0], gap[1]))
+            if dist > reach:
+                new[:2] = self._state[i, :2] + gap * (reach / dist)
             if robot_xy is not None:
                 keep = self.robot_radius_m + p.radius_m + self.personal_space_m
                 d_new = float(np.hypot(new[0] - robot_xy[0], new[1] - robot_xy[1]))

@@ -66,6 +66,11 @@ class NavigatorConfig:
     Kinect sees +-29 degrees and nothing closer than 0.8 m, so a person beside or right
     in front of the robot is out of view exactly when it matters); 0 = react to the
     current frame only, as the paper."""
+    unseen_speed_mps: float = 0.3
+    """Speed limit while the chosen direction lies outside the camera's field of view: the
+    open length there is known only from memory, so the robot looks (it turns towards the
+    direction) before it drives fast (a person walking into the corridor it was turning
+    into went unseen in the 4 km run); 0 = off (as the paper)."""
     side_hysteresis: float = 1.0
     """Keep swerving to the side chosen before while a direction there scores at least
     this fraction of Eq. 5's best (1 = off, as the paper; 0.7 steadied the approach to a
@@ -85,6 +90,8 @@ class NavigatorConfig:
     """Camera position ahead of the base centre."""
 
     def __post_init__(self) -> None:
+        if self.unseen_speed_mps < 0:
+            raise InputError(f"navigator.unseen_speed_mps: expected a number >= 0, got {self.unseen_speed_mps!r}")
         for name in ("cruise_speed_mps", "lookahead_m", "arrival_radius_m", "heading_gain", "max_turn_rate_rad_s", "stuck_time_s"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
@@ -307,6 +314,8 @@ class Navigator:
             # Wait (turning towards the carrot): people step aside; stuck detection recovers.
             return NavCommand(np.array([0.0, 0.0, turn]), "blocked", carrot, desired, res.theta_star, res.open_length_m, fan)
         th = res.theta_star
+        if cfg.unseen_speed_mps > 0 and abs(th) > 0.5 * cfg.camera_fov_rad:
+            speed = min(speed, cfg.unseen_speed_mps)
         # Look where the robot goes: turn towards the chosen direction.
         omega = float(np.clip(cfg.heading_gain * th, -cfg.max_turn_rate_rad_s, cfg.max_turn_rate_rad_s))
         v = np.array([speed * math.cos(th), speed * math.sin(th), omega])

@@ -26,6 +26,26 @@ def test_drives_towards_the_carrot_at_cruise_speed() -> None:
     np.testing.assert_allclose(cmd.velocity, [0.75, 0.0, 0.0], atol=1e-9)
 
 
+def test_slows_down_while_driving_where_the_camera_does_not_look() -> None:
+    """The carrot 40 degrees to the left (inside the turn-in-place threshold) but outside
+    the camera's +-29 degrees: drive there slowly while turning to look; once the
+    direction is in view, at cruise speed again."""
+    nav = Navigator(line_graph())
+    nav.set_goal(5, np.zeros(3))
+    pose = np.array([0.0, 0.0, -math.radians(40.0)])
+    cmd = nav.command(pose, np.zeros((0, 2)), 0.0)
+    assert cmd.state == "driving" and abs(cmd.theta_star_rad) > math.radians(29.0)
+    assert np.hypot(*cmd.velocity[:2]) == pytest.approx(0.3) and cmd.velocity[2] > 0
+    nav = Navigator(line_graph(), NavigatorConfig(unseen_speed_mps=0.0))
+    nav.set_goal(5, np.zeros(3))
+    assert np.hypot(*nav.command(pose, np.zeros((0, 2)), 0.0).velocity[:2]) == pytest.approx(0.75)
+    nav = Navigator(line_graph())
+    nav.set_goal(5, np.zeros(3))
+    assert np.hypot(*nav.command(np.array([0.0, 0.0, -0.3]), np.zeros((0, 2)), 0.0).velocity[:2]) == pytest.approx(0.75)
+    with pytest.raises(InputError, match="unseen_speed_mps"):
+        NavigatorConfig(unseen_speed_mps=-1.0)
+
+
 def test_turns_in_place_when_the_goal_is_behind() -> None:
     nav = Navigator(line_graph())
     nav.set_goal(0, np.array([6.0, 0.0, 0.0]))

@@ -215,3 +215,14 @@ def test_mission_kind_is_sweepable(tmp_path: Path) -> None:
     res = results(tmp_path / "out")
     assert sorted(res) == ["trial-0000", "trial-0001"]
     assert all(r["metrics"]["frames"] > 0 for r in res.values())
+    # One trial of the sweep, recorded: `depthnav run --seed <its seed> --rrd` is the same run.
+    from sim.cli import main
+    from tests.helpers import rrd_chunks
+
+    one = res["trial-0001"]
+    rrd = tmp_path / "one" / "trial.rrd"
+    assert main(["run", str(scn), "--out", str(tmp_path / "one"), "--seed", str(one["seed"]), "--rrd", str(rrd)]) == 0
+    again = json.loads((tmp_path / "one" / "report.json").read_text())["metrics"]
+    for k in ("frames", "distance_m", "collisions", "waypoints_reached"):
+        assert again[k] == one["metrics"][k], k
+    assert any(p == "/world/robot" for p, _ in rrd_chunks(rrd))

@@ -1,0 +1,33 @@
+"""The benchmark harness (`make bench`) runs and writes its results file: a smoke test of
+one quick group (the numbers themselves are measured by `make bench`, never asserted)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def test_bench_harness_writes_results(tmp_path: Path) -> None:
+    out = tmp_path / "results.json"
+    p = subprocess.run(
+        [sys.executable, str(ROOT / "bench" / "run.py"), "--quick", "--only", "maps", "--out", str(out)],
+        capture_output=True, text=True, timeout=300, cwd=ROOT,
+    )
+    assert p.returncode == 0, p.stderr
+    res = json.loads(out.read_text())
+    assert {"map_load_9000", "world_compile_9000"} <= set(res)
+    for row in res.values():
+        assert {"median_ms", "min_ms", "max_ms", "target_ms", "paper_ms"} <= set(row)
+        assert row["min_ms"] <= row["median_ms"] <= row["max_ms"]
+    assert "benchmark" in p.stdout and "map_load_9000" in p.stdout
+
+
+def test_every_group_is_registered() -> None:
+    sys.path.insert(0, str(ROOT / "bench"))
+    import run
+
+    assert list(run._groups()) == run.GROUP_NAMES

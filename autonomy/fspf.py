@@ -34,8 +34,7 @@ import numpy as np
 
 from autonomy.camera import CameraIntrinsics, CameraMount
 from autonomy.errors import InputError
-
-_MASK64 = (1 << 64) - 1
+from autonomy.rng import MASK64, randint, seed_u64
 
 
 @dataclass(frozen=True)
@@ -122,32 +121,7 @@ def project_to_floor(points: np.ndarray, normals: np.ndarray, max_vertical_angle
     return np.ascontiguousarray(points[keep][ok, :2]), n2[ok] / norm[ok, None]
 
 
-# -- random stream shared by the kernel and the reference ------------------------------
-
-
-@numba.njit(cache=True, inline="always")
-def _next(state):  # pragma: no cover - numba
-    x = state[0]
-    x ^= x >> np.uint64(12)
-    x ^= x << np.uint64(25)
-    x ^= x >> np.uint64(27)
-    state[0] = x
-    return (x * np.uint64(2685821657736338717)) >> np.uint64(11)
-
-
-@numba.njit(cache=True, inline="always")
-def _randint(state, lo, hi):  # pragma: no cover - numba
-    """Uniform integer in [lo, hi]."""
-    return lo + np.int64(_next(state) % np.uint64(hi - lo + 1))
-
-
-def _seed_state(seed: int) -> int:
-    """A non-zero 64-bit state from any integer seed (splitmix64)."""
-    z = (int(seed) + 0x9E3779B97F4A7C15) & _MASK64
-    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & _MASK64
-    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & _MASK64
-    z ^= z >> 31
-    return z or 1
+# -- random stream: autonomy.rng (shared with the plane kernels) ---------------------
 
 
 # -- the kernel -------------------------------------------------------------------------
@@ -217,8 +191,8 @@ def _draw_valid(depth, state, v0, u0, half_v, half_u, max_redraws, out):  # prag
     """Draw a pixel within (half_v, half_u) of (v0, u0) with valid depth; False if none."""
     h, w = depth.shape
     for _ in range(max_redraws + 1):
-        v = v0 + _randint(state, -half_v, half_v)
-        u = u0 + _randint(state, -half_u, half_u)
+        v = v0 + randint(state, -half_v, half_v)
+        u = u0 + randint(state, -half_u, half_u)
         if v < 0 or v >= h or u < 0 or u >= w:
             continue
         z = depth[v, u]
@@ -408,7 +382,7 @@ def fspf(
         _fspf_kernel(
             depth, float(intr.fx), float(intr.fy), float(intr.cx), float(intr.cy), cfg.n_max, cfg.k_max, cfg.l,
             cfg.eta_px, float(cfg.plane_size_m), float(cfg.epsilon_m), float(cfg.alpha_in), cfg.max_redraws,
-            cfg.o_max, np.uint64(_seed_state(seed)), rot, trans, out_p, out_r, out_id, out_o, stats,
+            cfg.o_max, np.uint64(seed_u64(seed)), rot, trans, out_p, out_r, out_id, out_o, stats,
         )
     n, m, k, planes = (int(v) for v in stats)
     return FSPFResult(
@@ -428,15 +402,15 @@ class _PyStream:
     """The kernel's xorshift64* stream in plain Python."""
 
     def __init__(self, seed: int) -> None:
-        self.x = _seed_state(seed)
+        self.x = seed_u64(seed)
 
     def randint(self, lo: int, hi: int) -> int:
         x = self.x
         x ^= x >> 12
-        x ^= (x << 25) & _MASK64
+        x ^= (x << 25) & MASK64
         x ^= x >> 27
         self.x = x
-        r = ((x * 2685821657736338717) & _MASK64) >> 11
+        r = ((x * 2685821657736338717) & MASK64) >> 11
         return lo + r % (hi - lo + 1)
 
 

@@ -42,8 +42,8 @@ import numpy as np
 
 from autonomy.camera import CameraIntrinsics, CameraMount
 from autonomy.errors import InputError
-from autonomy.fspf import _randint, _seed_state
 from autonomy.observation import points_from_scan
+from autonomy.rng import randint, seed_u64
 
 APPROACHES = ("fspf", "kr", "ks", "kc")
 """The four approaches of seed 000, Section VI-A (and Figs. 5-7)."""
@@ -168,8 +168,8 @@ def _sample_kernel(depth, n_samples, max_draws, seed_state, scale, fx, fy, cx, c
     for _ in range(max_draws):
         if valid >= n_samples:
             break
-        v = _randint(state, 0, h - 1)
-        u = _randint(state, 0, w - 1)
+        v = randint(state, 0, h - 1)
+        u = randint(state, 0, w - 1)
         if not depth[v, u] > 0:
             continue
         valid += 1
@@ -211,7 +211,7 @@ def sampling_scan(
 ) -> np.ndarray:
     """Kinect-Sampling (KS): ranges (n_beams,) from ``ks_samples`` random valid pixels; seeded."""
     d, scale, *rest = _prep(depth, intr, mount, cfg)
-    _sample_kernel(d, cfg.ks_samples, cfg.ks_max_draws, np.uint64(_seed_state(seed)), scale, *rest)
+    _sample_kernel(d, cfg.ks_samples, cfg.ks_max_draws, np.uint64(seed_u64(seed)), scale, *rest)
     return rest[-1]
 
 

@@ -37,7 +37,7 @@ from autonomy.planes import (
     to_plane_coords,
 )
 from autonomy.planes import hough as hough_mod
-from autonomy.planes._rng import seed_state
+from autonomy.rng import seed_state
 
 DETECTORS = {
     "ransac": lambda pts, seed=0, **kw: ransac_planes(pts, RansacConfig(**kw), seed),

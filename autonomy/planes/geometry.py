@@ -21,7 +21,7 @@ import numpy as np
 from autonomy.camera import CameraIntrinsics
 from autonomy.errors import InputError
 from autonomy.fspf import smallest_eigvec3
-from autonomy.planes._rng import randbelow
+from autonomy.rng import randbelow
 
 
 @dataclass(frozen=True, eq=False)

@@ -44,7 +44,6 @@ import numba
 import numpy as np
 
 from autonomy.errors import InputError
-from autonomy.planes._rng import randbelow, seed_state
 from autonomy.planes.boundary import plane_hull
 from autonomy.planes.geometry import (
     Plane,
@@ -55,6 +54,7 @@ from autonomy.planes.geometry import (
     inlier_moments,
     take_inliers,
 )
+from autonomy.rng import randbelow, seed_state
 
 _EMPTY = np.int64(-1)
 

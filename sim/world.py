@@ -263,6 +263,26 @@ def build_world(
         furniture=furniture,
         people=people,
     )
+    return compile_world(
+        spec, vectormap, world=world, robot=robot, intrinsics=intrinsics, mount=mount,
+        furniture=furniture, people=people, start_pose=start_pose,
+    )
+
+
+def compile_world(
+    spec: mujoco.MjSpec,
+    vectormap: VectorMap,
+    *,
+    world: WorldConfig,
+    robot: RobotConfig,
+    intrinsics: CameraIntrinsics,
+    mount: CameraMount,
+    furniture: tuple[Furniture, ...] = (),
+    people: tuple[Person, ...] = (),
+    start_pose: tuple[float, float, float] = (0.0, 0.0, 0.0),
+) -> World:
+    """Compile a spec from :func:`build_spec` (possibly edited, e.g. a camera moved) into a
+    :class:`World` with the robot at ``start_pose``."""
     model = spec.compile()
     # Depth precision: near plane at 5 cm, far plane at 60 m (model.vis.map is relative to extent).
     model.vis.map.znear = 0.05 / model.stat.extent

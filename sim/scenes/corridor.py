@@ -15,16 +15,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import mujoco
 import numpy as np
 
 from autonomy.camera import ROBOT_FROM_OPTICAL_LEVEL, CameraIntrinsics, CameraMount
 from autonomy.errors import InputError
 from autonomy.vectormap import VectorMap
-from sim.actors import PeopleController
-from sim.robot import RobotConfig, RobotHandle
+from sim.robot import RobotConfig
 from sim.scenes.rigs import optical_quat
-from sim.world import KINECT_CAMERA, World, WorldConfig, build_spec
+from sim.world import KINECT_CAMERA, World, WorldConfig, build_spec, compile_world
 
 
 @dataclass(frozen=True)
@@ -132,24 +130,7 @@ def build_corridor_world(
     t = robot_from_camera(scene)
     cam.pos = t[:3, 3]
     cam.quat = optical_quat(t[:3, :3])
-    model = spec.compile()
-    model.vis.map.znear = 0.05 / model.stat.extent
-    model.vis.map.zfar = 60.0 / model.stat.extent
-    data = mujoco.MjData(model)
-    w = World(
-        model=model,
-        data=data,
-        vectormap=vm,
-        config=world,
-        robot=RobotHandle.from_model(model, robot),
-        people=PeopleController.from_model(model, (), np.asarray(vm.segments), robot.radius_m),
-        camera_id=mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, KINECT_CAMERA),
-        intrinsics=intrinsics,
-        mount=mount,
-        wall_geom_start=mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "wall_0"),
-    )
     if start_pose is None:
         p = corridor_path(scene)
         start_pose = (float(p[0, 0]), float(p[0, 1]), math.atan2(p[1, 1] - p[0, 1], p[1, 0] - p[0, 0]))
-    w.reset(start_pose)
-    return w
+    return compile_world(spec, vm, world=world, robot=robot, intrinsics=intrinsics, mount=mount, start_pose=start_pose)

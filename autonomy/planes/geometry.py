@@ -21,6 +21,7 @@ import numpy as np
 from autonomy.camera import CameraIntrinsics
 from autonomy.errors import InputError
 from autonomy.fspf import smallest_eigvec3
+from autonomy.planes.boundary import plane_hull
 from autonomy.rng import randbelow
 
 
@@ -345,3 +346,27 @@ class PlaneDetection:
     def first_plane_ms(self) -> float:
         """Time to the first plane (Section IV-C); NaN if none was found."""
         return self.plane_ms[0] if self.plane_ms else float("nan")
+
+
+def refit_plane(
+    pts: np.ndarray, on: np.ndarray, normal, rho: float, thresh: float, rounds: int, first_band: float | None = None
+) -> tuple[np.ndarray, float]:
+    """``rounds`` least-squares refits of a plane over its inliers among the points ``on``
+    (within ``thresh``; the first round within ``first_band`` if given, for a coarse
+    first estimate such as a Hough cell's)."""
+    band = thresh if first_band is None else max(first_band, thresh)
+    for _ in range(rounds):
+        m, mom = inlier_moments(pts, on, len(on), normal[0], normal[1], normal[2], rho, band)
+        if m < 3:
+            break
+        normal, rho, _, _ = fit_from_moments(m, mom, normal[0], normal[1], normal[2], rho)
+        band = thresh
+    return normal, rho
+
+
+def make_plane(pts: np.ndarray, inl: np.ndarray, m: int, mom, normal, rho: float, boundary_column_m: float, boundary_max_points: int) -> Plane:
+    """The final plane from its ``m`` inliers ``inl`` and their moments (from
+    :func:`take_inliers`): least-squares fit, centroid, rms and boundary polygon."""
+    normal, rho, c, rms = fit_from_moments(m, mom, normal[0], normal[1], normal[2], rho)
+    hull = plane_hull(pts, inl, normal, rho, c, boundary_column_m, boundary_max_points) if boundary_column_m > 0 else np.zeros((0, 3))
+    return Plane(np.array(normal, dtype=np.float64), float(rho), np.array(c), int(m), float(rms), hull)

@@ -44,14 +44,13 @@ import numba
 import numpy as np
 
 from autonomy.errors import InputError
-from autonomy.planes.boundary import plane_hull
 from autonomy.planes.geometry import (
     Plane,
     PlaneDetection,
     as_cloud,
     draw_sample,
-    fit_from_moments,
-    inlier_moments,
+    make_plane,
+    refit_plane,
     take_inliers,
 )
 from autonomy.rng import randbelow, seed_state
@@ -509,29 +508,17 @@ def hough_planes(
         )
         if not found:
             break
-        band = max(cfg.refit_band_m, cfg.distance_threshold_m)
         if 0 < cfg.refit_sample < n:
             on = np.empty(cfg.refit_sample, dtype=np.int64)
             draw_sample(idx, n, state, on)
         else:
             on = idx[:n]
-        for _ in range(cfg.refit_iterations):
-            m, mom = inlier_moments(pts, on, len(on), normal[0], normal[1], normal[2], rho, band)
-            if m < 3:
-                break
-            normal, rho, _, _ = fit_from_moments(m, mom, normal[0], normal[1], normal[2], rho)
-            band = cfg.distance_threshold_m
+        normal, rho = refit_plane(pts, on, normal, rho, cfg.distance_threshold_m, cfg.refit_iterations, first_band=cfg.refit_band_m)
         k = len(planes)
         m, n, mom = take_inliers(pts, idx, n, normal[0], normal[1], normal[2], rho, cfg.distance_threshold_m, buf, labels_s, k)
         inl = buf[:m]
         if m >= cfg.min_plane_points:
-            normal, rho, c, rms = fit_from_moments(m, mom, normal[0], normal[1], normal[2], rho)
-            hull = (
-                plane_hull(pts, inl, normal, rho, c, cfg.boundary_column_m, cfg.boundary_max_points)
-                if cfg.boundary_column_m > 0
-                else np.zeros((0, 3))
-            )
-            planes.append(Plane(np.array(normal, dtype=np.float64), float(rho), np.array(c), int(m), float(rms), hull))
+            planes.append(make_plane(pts, inl, m, mom, normal, rho, cfg.boundary_column_m, cfg.boundary_max_points))
         else:
             # Too small to keep: drop its points so the same peak is not found again.
             labels_s[inl] = np.iinfo(np.int32).max

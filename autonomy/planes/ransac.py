@@ -34,14 +34,13 @@ import numba
 import numpy as np
 
 from autonomy.errors import InputError
-from autonomy.planes.boundary import plane_hull
 from autonomy.planes.geometry import (
     Plane,
     PlaneDetection,
     as_cloud,
     draw_sample,
-    fit_from_moments,
-    inlier_moments,
+    make_plane,
+    refit_plane,
     take_inliers,
 )
 from autonomy.rng import randbelow, seed_state
@@ -143,16 +142,6 @@ def _search(pts, idx, n, sample, n_sample, thresh, stop_count, max_iter, min_cro
     return best_n, best_rho, it, best
 
 
-def _refine(pts, on, n_on, normal, rho, thresh: float, rounds: int):
-    """``rounds`` least-squares refits of a plane over its inliers among ``on[:n_on]``."""
-    for _ in range(rounds):
-        m, mom = inlier_moments(pts, on, n_on, normal[0], normal[1], normal[2], rho, thresh)
-        if m < 3:
-            break
-        normal, rho, _, _ = fit_from_moments(m, mom, normal[0], normal[1], normal[2], rho)
-    return normal, rho
-
-
 def ransac_planes(points: np.ndarray, cfg: RansacConfig = RansacConfig(), seed: int = 0) -> PlaneDetection:
     """Detect up to ``cfg.max_planes`` planes in an (N, 3) cloud (metres), seeded.
 
@@ -184,7 +173,7 @@ def ransac_planes(points: np.ndarray, cfg: RansacConfig = RansacConfig(), seed: 
         )
         if best < 0:
             break
-        normal, rho = _refine(pts, sample, len(sample), normal, rho, cfg.distance_threshold_m, cfg.refit_iterations)
+        normal, rho = refit_plane(pts, sample, normal, rho, cfg.distance_threshold_m, cfg.refit_iterations)
         k = len(planes)
         m, rest, mom = take_inliers(pts, idx, n, normal[0], normal[1], normal[2], rho, cfg.distance_threshold_m, buf, labels, k)
         inl = buf[:m]
@@ -192,9 +181,7 @@ def ransac_planes(points: np.ndarray, cfg: RansacConfig = RansacConfig(), seed: 
             labels[inl] = -1
             break
         n = rest
-        normal, rho, c, rms = fit_from_moments(m, mom, normal[0], normal[1], normal[2], rho)
-        hull = plane_hull(pts, inl, normal, rho, c, cfg.boundary_column_m, cfg.boundary_max_points) if cfg.boundary_column_m > 0 else np.zeros((0, 3))
-        planes.append(Plane(np.array(normal, dtype=np.float64), float(rho), np.array(c), int(m), float(rms), hull))
+        planes.append(make_plane(pts, inl, m, mom, normal, rho, cfg.boundary_column_m, cfg.boundary_max_points))
         t = time.perf_counter()
         plane_ms.append((t - t_prev) * 1e3)
         draws.append(int(iters))

@@ -190,6 +190,20 @@ def _median_ms(xs: list[float]) -> float:
     return float(np.median(xs) * 1000.0) if xs else 0.0
 
 
+def collision_incidents(events: list[dict], gap_s: float = 3.0) -> int:
+    """Encounters behind the contact events: contacts with the same bodies less than
+    ``gap_s`` apart are one incident (contact is made and broken many times while the
+    robot and a person push against each other)."""
+    last: dict[tuple, float] = {}
+    n = 0
+    for e in events:
+        key = tuple(e.get("bodies", e.get("with", ())))
+        if key not in last or e["t"] - last[key] > gap_s:
+            n += 1
+        last[key] = e["t"]
+    return n
+
+
 def run_scenario(
     scn: Scenario,
     out_dir: str | Path,
@@ -440,6 +454,7 @@ def run_scenario(
         "duration_s": round(sim_time, 4),
         "collisions": collisions,
         **{f"collisions_{k}": sum(k in c["with"] for c in world.collision_log) for k in ("wall", "furniture", "person")},
+        "collision_incidents": collision_incidents(world.collision_log),
         "waypoints_reached": reached,
         "waypoints_failed": failed,
         "waypoints_unvisited": unvisited,
@@ -492,7 +507,7 @@ def run_scenario(
             graph,
             trajectories={"ground truth": truth_arr[:, :2], **({"CGR estimate": np.array(estimates)[:, :2]} if localizer is not None else {})},
             markers={"waypoints": path_points(graph, mission.waypoints), **({"resets": np.array(reset_points)} if reset_points else {})},
-            title=f"{scn.name} (seed {seed}): {distance:.0f} m, {collisions} collisions",
+            title=f"{scn.name} (seed {seed}): {distance:.0f} m, {resets} resets, {collisions} contacts in {metrics['collision_incidents']} incidents",
         )
         files["trajectory_figure"] = "trajectory.png"
     if recorder is not None:

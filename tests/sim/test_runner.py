@@ -87,3 +87,15 @@ def test_demo_scenario_end_to_end_via_cli(tmp_path: Path) -> None:
     assert 0.0 < m["logging_overhead"] and m["recording_flush_s"] >= 0.0
     assert rep["paper"]["resets_per_km"] == 0.75
     assert rrd.stat().st_size > 100_000
+
+
+def test_collision_incidents_group_contact_events() -> None:
+    from sim.runner import collision_incidents
+
+    ev = [
+        {"t": 1.0, "bodies": ["person_0"]}, {"t": 1.1, "bodies": ["person_0"]}, {"t": 3.9, "bodies": ["person_0"]},
+        {"t": 2.0, "bodies": ["world"]}, {"t": 7.5, "bodies": ["person_0"]}, {"t": 7.6, "bodies": ["person_1"]},
+    ]
+    assert collision_incidents(ev) == 4  # person_0 at 1-3.9 s, the wall, person_0 again, person_1
+    assert collision_incidents([]) == 0
+    assert collision_incidents(ev, gap_s=10.0) == 3

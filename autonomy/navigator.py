@@ -227,9 +227,11 @@ class Navigator:
             cells = np.round(w / cfg.memory_cell_m).astype(np.int64)
             old = np.round(self._mem / cfg.memory_cell_m).astype(np.int64)
             # One point per cell, with the latest time it was seen (new cells come first).
+            # Cells are keyed as one int64 (a 1D unique is ~10x faster than axis=0).
             allc = np.vstack([cells, old])
             allt = np.concatenate([np.full(len(cells), t), self._mem_t])
-            _, first = np.unique(allc, axis=0, return_index=True)
+            off = np.int64(1 << 30)
+            _, first = np.unique((allc[:, 0] + off) * (off << 1) + (allc[:, 1] + off), return_index=True)
             self._mem, self._mem_t = allc[first] * cfg.memory_cell_m, allt[first]
         if not len(self._mem):
             return self._mem.copy()

@@ -136,3 +136,22 @@ def test_obstacle_memory_keeps_points_out_of_view_and_refreshes_points_in_view()
     kept = nav.remember(np.array([0.5, 0.0, 0.0]), np.zeros((0, 2)), 1.0)
     np.testing.assert_allclose(kept, [[-0.5, 0.6]], atol=0.03)  # in the new robot frame
     assert len(nav.remember(np.array([0.5, 0.0, 0.0]), np.zeros((0, 2)), 2.5)) == 0
+
+
+def test_obstacle_memory_keeps_one_point_per_cell_with_its_latest_time() -> None:
+    """Against a dict of cells: every sensed cell once, stamped with the last time seen."""
+    rng = np.random.default_rng(3)
+    nav = Navigator(line_graph(), NavigatorConfig(memory_s=100.0))
+    cell = nav.cfg.memory_cell_m
+    seen: dict[tuple[int, int], float] = {}
+    pose = np.array([-1.0, 0.5, 0.0])
+    for k in range(5):
+        # Points behind the robot (never in view), some cells repeated across frames.
+        pts = np.column_stack([rng.uniform(-1.5, -0.2, 300), rng.uniform(-1.0, 1.0, 300)])
+        pts = np.round(pts / (2 * cell)) * (2 * cell)
+        nav.remember(pose, pts, float(k))
+        for x, y in pts + pose[:2]:
+            seen[(round(x / cell), round(y / cell))] = float(k)
+    got = {(round(x / cell), round(y / cell)): t for (x, y), t in zip(nav._mem, nav._mem_t, strict=True)}
+    assert len(got) == len(nav._mem) == len(seen)
+    assert got == seen

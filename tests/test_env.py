@@ -310,8 +310,8 @@ def test_render_modes() -> None:
 
 def test_from_scenario() -> None:
     cfg = EnvConfig.from_scenario(SCENARIOS_DIR / "demo.toml", ['map.name="small_floor"'], observe_scan=8)
-    assert cfg.building == "small_floor" and cfg.n_people == 4 and cfg.n_furniture == 6
-    assert cfg.odometry.translation_noise == 0.05 and cfg.max_steps == 12000 and cfg.observe_scan == 8
+    assert cfg.building == "small_floor" and cfg.n_people == 6 and cfg.n_furniture == 8
+    assert cfg.odometry.translation_noise == 0.05 and cfg.max_steps == 36000 and cfg.observe_scan == 8
     env = DepthNavEnv(scenario=SCENARIOS_DIR / "demo.toml", max_steps=10)
     assert env.config.building == "corridor_loop"
     obs, info = env.reset(seed=0)

@@ -130,7 +130,11 @@ def test_ctrl_c_keeps_finished_trials_and_says_how_to_resume(tmp_path: Path) -> 
     scn = scenario(tmp_path, sleep_s=0.6, marker_dir=str(marks))  # ~12 s in all: Ctrl-C lands mid-way even on a loaded machine
     out = tmp_path / "out"
     code = (
-        f"import sys; sys.path.insert(0, {str(ROOT)!r})\n"
+        f"import signal, sys; sys.path.insert(0, {str(ROOT)!r})\n"
+        # As in a terminal: a job started in the background by a non-interactive shell
+        # (as CI may run us) inherits SIGINT ignored, and Python then never raises
+        # KeyboardInterrupt.
+        "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
         "from tests.sim import sweep_kind; sweep_kind.register()\n"
         "from sim.cli import main\n"
         f"sys.exit(main(['sweep', {str(scn)!r}, '--trials', '40', '--workers', '2', '--out', {str(out)!r}]))\n"

@@ -38,6 +38,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from autonomy.camera import CameraIntrinsics, CameraMount
+from autonomy.errors import InputError
 from autonomy.vectormap import NavGraph, VectorMap
 
 TRUTH_COLOR = (40, 170, 60)
@@ -130,8 +131,13 @@ class Recorder:
         self.path = Path(path) if path else None
         self._memory = None
         if self.path is not None:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            self.rec.save(str(self.path))
+            if self.path.is_dir():
+                raise InputError(f"{self.path}: expected a file name for the rerun recording, got a directory")
+            try:
+                self.path.parent.mkdir(parents=True, exist_ok=True)
+                self.rec.save(str(self.path))
+            except (OSError, RuntimeError) as exc:
+                raise InputError(f"{self.path}: cannot write the rerun recording: {getattr(exc, 'strerror', None) or exc}") from None
         elif spawn:
             self.rec.spawn()
         else:

@@ -85,3 +85,14 @@ def test_trajectory_strips_are_bounded(tmp_path: Path) -> None:
     rec.reset_trajectory()
     assert rec._truth.chunk == 0 and not rec._truth.points
     rec.close()
+
+
+def test_an_unwritable_recording_path_is_a_one_line_input_error(tmp_path: Path) -> None:
+    from autonomy.errors import InputError
+    from sim.viz import Recorder
+
+    with pytest.raises(InputError, match="expected a file name for the rerun recording, got a directory"):
+        Recorder(tmp_path)
+    (tmp_path / "f").write_text("")
+    with pytest.raises(InputError, match="cannot write the rerun recording"):
+        Recorder(tmp_path / "f" / "run.rrd")  # a file where a directory should be

@@ -147,6 +147,20 @@ def fit_plane_indexed(pts, idx, n):  # pragma: no cover - numba
     return nrm, rho, c, rms
 
 
+@numba.njit(cache=True, inline="always")
+def _add_moments(s, x, y, z):  # pragma: no cover - numba
+    """Add one point (relative to the foot point) to the moments (x, y, z, xx, xy, xz, yy, yz, zz)."""
+    s[0] += x
+    s[1] += y
+    s[2] += z
+    s[3] += x * x
+    s[4] += x * y
+    s[5] += x * z
+    s[6] += y * y
+    s[7] += y * z
+    s[8] += z * z
+
+
 @numba.njit(cache=True)
 def inlier_moments(pts, idx, n, nx, ny, nz, rho, thresh):  # pragma: no cover - numba
     """Count and moments of the entries of ``idx[:n]`` within ``thresh`` of a plane.
@@ -157,27 +171,14 @@ def inlier_moments(pts, idx, n, nx, ny, nz, rho, thresh):  # pragma: no cover - 
     m = 0
     ox, oy, oz = rho * nx, rho * ny, rho * nz
     fx, fy, fz, fr, ft = np.float32(nx), np.float32(ny), np.float32(nz), np.float32(rho), np.float32(thresh)
-    sx = sy = sz = sxx = sxy = sxz = syy = syz = szz = 0.0
+    s = np.zeros(9)
     for k in range(n):
         i = idx[k]
         px, py, pz = pts[i, 0], pts[i, 1], pts[i, 2]
         d = px * fx + py * fy + pz * fz - fr
         if abs(d) < ft:
-            x = px - ox
-            y = py - oy
-            z = pz - oz
-            sx += x
-            sy += y
-            sz += z
-            sxx += x * x
-            sxy += x * y
-            sxz += x * z
-            syy += y * y
-            syz += y * z
-            szz += z * z
+            _add_moments(s, px - ox, py - oy, pz - oz)
             m += 1
-    s = np.empty(9)
-    s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7], s[8] = sx, sy, sz, sxx, sxy, sxz, syy, syz, szz
     return m, s
 
 
@@ -222,7 +223,7 @@ def take_inliers(pts, idx, n, nx, ny, nz, rho, thresh, out, labels, label):  # p
     r = 0
     ox, oy, oz = rho * nx, rho * ny, rho * nz
     fx, fy, fz, fr, ft = np.float32(nx), np.float32(ny), np.float32(nz), np.float32(rho), np.float32(thresh)
-    sx = sy = sz = sxx = sxy = sxz = syy = syz = szz = 0.0
+    s = np.zeros(9)
     for k in range(n):
         i = idx[k]
         px, py, pz = pts[i, 0], pts[i, 1], pts[i, 2]
@@ -231,23 +232,10 @@ def take_inliers(pts, idx, n, nx, ny, nz, rho, thresh, out, labels, label):  # p
             out[m] = i
             m += 1
             labels[i] = label
-            x = px - ox
-            y = py - oy
-            z = pz - oz
-            sx += x
-            sy += y
-            sz += z
-            sxx += x * x
-            sxy += x * y
-            sxz += x * z
-            syy += y * y
-            syz += y * z
-            szz += z * z
+            _add_moments(s, px - ox, py - oy, pz - oz)
         else:
             idx[r] = i
             r += 1
-    s = np.empty(9)
-    s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7], s[8] = sx, sy, sz, sxx, sxy, sxz, syy, syz, szz
     return m, r, s
 
 

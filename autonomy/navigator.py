@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from autonomy.avoidance import AvoidanceConfig, AvoidanceResult, choose_direction
-from autonomy.errors import InputError
+from autonomy.errors import require_non_negative, require_positive
 from autonomy.planner import astar, path_points
 from autonomy.vectormap import NavGraph
 
@@ -90,16 +90,10 @@ class NavigatorConfig:
     """Camera position ahead of the base centre."""
 
     def __post_init__(self) -> None:
-        if self.unseen_speed_mps < 0:
-            raise InputError(f"navigator.unseen_speed_mps: expected a number >= 0, got {self.unseen_speed_mps!r}")
-        for name in ("cruise_speed_mps", "lookahead_m", "arrival_radius_m", "heading_gain", "max_turn_rate_rad_s", "stuck_time_s"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v > 0):
-                raise InputError(f"navigator.{name}: expected a positive number, got {v!r}")
-        for name in ("backoff_time_s", "backoff_speed_mps", "stuck_progress_m", "memory_s"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v >= 0):
-                raise InputError(f"navigator.{name}: expected a number >= 0, got {v!r}")
+        require_positive(
+            self, "navigator.", "cruise_speed_mps", "lookahead_m", "arrival_radius_m", "heading_gain", "max_turn_rate_rad_s", "stuck_time_s"
+        )
+        require_non_negative(self, "navigator.", "backoff_time_s", "backoff_speed_mps", "stuck_progress_m", "memory_s", "unseen_speed_mps")
 
 
 @dataclass

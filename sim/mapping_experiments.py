@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from autonomy.camera import CameraIntrinsics
-from autonomy.errors import InputError
+from autonomy.errors import InputError, require_int, require_positive
 from autonomy.planes import (
     HoughConfig,
     OctreeConfig,
@@ -118,8 +118,7 @@ class DetectorsConfig:
     """Use every stride-th pixel in both directions (1 = the whole 640 x 480 frame)."""
 
     def __post_init__(self) -> None:
-        if not (isinstance(self.stride, int) and self.stride >= 1):
-            raise InputError(f"detectors.stride: expected an integer >= 1, got {self.stride!r}")
+        require_int(self, "detectors.", "stride")
 
 
 @dataclass(frozen=True)
@@ -152,9 +151,8 @@ class CuboidExperiment:
     def __post_init__(self) -> None:
         if not self.views:
             raise InputError("views: expected at least one view")
-        if not (isinstance(self.frames_per_view, int) and self.frames_per_view >= 1):
-            raise InputError(f"frames_per_view: expected an integer >= 1, got {self.frames_per_view!r}")
-        _positive(self, "match_angle_deg", "match_distance_m")
+        require_int(self, "", "frames_per_view")
+        require_positive(self, "", "match_angle_deg", "match_distance_m")
 
 
 @dataclass(frozen=True)
@@ -185,9 +183,8 @@ class WallExperiment:
     def __post_init__(self) -> None:
         if not self.distances_m or not all(d > 0 for d in self.distances_m):
             raise InputError(f"distances_m: expected positive distances, got {self.distances_m!r}")
-        if not (isinstance(self.frames, int) and self.frames >= 1):
-            raise InputError(f"frames: expected an integer >= 1, got {self.frames!r}")
-        _positive(self, "gate_m")
+        require_int(self, "", "frames")
+        require_positive(self, "", "gate_m")
 
 
 @dataclass(frozen=True)
@@ -230,18 +227,10 @@ class CorridorExperiment:
     """With ``--rrd``: log the growing plane maps every this many mapped frames (1 s at 5 Hz)."""
 
     def __post_init__(self) -> None:
-        _positive(self, "laps", "speed_mps", "map_rate_hz")
-        if not (isinstance(self.rrd_every, int) and self.rrd_every >= 1):
-            raise InputError(f"rrd_every: expected an integer >= 1, got {self.rrd_every!r}")
+        require_positive(self, "", "laps", "speed_mps", "map_rate_hz")
+        require_int(self, "", "rrd_every")
         if self.pose_source not in ("odometry", "truth"):
             raise InputError(f"pose_source: expected 'odometry' or 'truth', got {self.pose_source!r}")
-
-
-def _positive(cfg: Any, *names: str) -> None:
-    for name in names:
-        v = getattr(cfg, name)
-        if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-            raise InputError(f"{name}: expected a positive number, got {v!r}")
 
 
 # -- shared helpers ---------------------------------------------------------------------

@@ -43,7 +43,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from autonomy.errors import InputError
+from autonomy.errors import InputError, require_int, require_positive
 from autonomy.planes.geometry import (
     Plane,
     PlaneDetection,
@@ -103,20 +103,11 @@ class HoughConfig:
     """The boundary hull uses at most this many of a plane's inliers (every k-th)."""
 
     def __post_init__(self) -> None:
-        for name in ("rho_step_m", "rho_max_m", "angle_step_deg", "region_radius_m", "distance_threshold_m", "refit_band_m"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise InputError(f"hough.{name}: expected a positive number, got {v!r}")
+        require_positive(self, "hough.", "rho_step_m", "rho_max_m", "angle_step_deg", "region_radius_m", "distance_threshold_m", "refit_band_m")
         if not 0 <= self.min_point_distance_m < self.region_radius_m:
             raise InputError("hough.min_point_distance_m: expected a number in [0, region_radius_m)")
-        for name in ("min_region_points", "vote_threshold", "max_planes", "min_points", "min_plane_points", "max_triples", "boundary_max_points"):
-            v = getattr(self, name)
-            if not (isinstance(v, int) and v >= 1):
-                raise InputError(f"hough.{name}: expected an integer >= 1, got {v!r}")
-        for name in ("refit_iterations", "refit_sample"):
-            v = getattr(self, name)
-            if not (isinstance(v, int) and v >= 0):
-                raise InputError(f"hough.{name}: expected an integer >= 0, got {v!r}")
+        require_int(self, "hough.", "min_region_points", "vote_threshold", "max_planes", "min_points", "min_plane_points", "max_triples", "boundary_max_points")
+        require_int(self, "hough.", "refit_iterations", "refit_sample", minimum=0)
         cap = self.accumulator_capacity
         if not (isinstance(cap, int) and cap >= 2 * self.max_triples and cap & (cap - 1) == 0):
             raise InputError(

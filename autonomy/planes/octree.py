@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from autonomy.errors import InputError
+from autonomy.errors import InputError, require_positive
 from autonomy.planes.boundary import fan_triangles, hull_2d, lift_hull, to_plane_coords
 from autonomy.planes.geometry import Plane
 
@@ -58,10 +58,7 @@ class OctreeConfig:
     """Put a larger root above the old one when a plane falls outside (else drop the plane)."""
 
     def __post_init__(self) -> None:
-        for name in ("root_edge_m", "leaf_edge_m", "merge_angle_deg", "merge_distance_m"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise InputError(f"octree.{name}: expected a positive number, got {v!r}")
+        require_positive(self, "octree.", "root_edge_m", "leaf_edge_m", "merge_angle_deg", "merge_distance_m")
         ratio = self.root_edge_m / self.leaf_edge_m
         depth = round(math.log2(ratio)) if ratio >= 1 else -1
         if depth < 0 or abs(2.0**depth - ratio) > 1e-9 * ratio:

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from autonomy.errors import InputError
+from autonomy.errors import InputError, require_int, require_positive
 from autonomy.planes.geometry import (
     Plane,
     PlaneDetection,
@@ -74,18 +74,9 @@ class RansacConfig:
     """The boundary hull uses at most this many of a plane's inliers (every k-th)."""
 
     def __post_init__(self) -> None:
-        for name in ("distance_threshold_m", "min_triangle_m2"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise InputError(f"ransac.{name}: expected a positive number, got {v!r}")
-        for name in ("inliers_stop", "max_iterations", "max_planes", "min_points", "min_plane_points", "boundary_max_points"):
-            v = getattr(self, name)
-            if not (isinstance(v, int) and v >= 1):
-                raise InputError(f"ransac.{name}: expected an integer >= 1, got {v!r}")
-        for name in ("score_sample", "refit_iterations"):
-            v = getattr(self, name)
-            if not (isinstance(v, int) and v >= 0):
-                raise InputError(f"ransac.{name}: expected an integer >= 0, got {v!r}")
+        require_positive(self, "ransac.", "distance_threshold_m", "min_triangle_m2")
+        require_int(self, "ransac.", "inliers_stop", "max_iterations", "max_planes", "min_points", "min_plane_points", "boundary_max_points")
+        require_int(self, "ransac.", "score_sample", "refit_iterations", minimum=0)
         if not (math.isfinite(self.boundary_column_m) and self.boundary_column_m >= 0):
             raise InputError(f"ransac.boundary_column_m: expected a number >= 0, got {self.boundary_column_m!r}")
 

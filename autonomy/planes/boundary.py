@@ -136,6 +136,14 @@ def polygon_area(poly2d: np.ndarray) -> float:
     return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
 
 
+def plane_frame(normal: np.ndarray, rho: float, origin: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The plane's 2D frame: ``origin`` projected onto n . p = rho, and the basis (u, v)."""
+    u, v = plane_basis(normal)
+    n = np.asarray(normal, dtype=np.float64)
+    c = np.asarray(origin, dtype=np.float64)
+    return c - (c @ n - rho) * n, u, v
+
+
 def plane_hull(
     points: np.ndarray,
     idx: np.ndarray,
@@ -151,10 +159,7 @@ def plane_hull(
     from a depth image that keeps every image row and thins the columns, so the hull
     loses at most k pixel spacings at its left and right ends.
     """
-    u, v = plane_basis(normal)
-    n = np.asarray(normal, dtype=np.float64)
-    c = np.asarray(centroid, dtype=np.float64)
-    c = c - (c @ n - rho) * n  # the centre projected onto the plane
+    c, u, v = plane_frame(normal, rho, centroid)
     stride = max(1, -(-len(idx) // max(int(max_points), 1)))
     h2 = _hull_indexed(points, np.asarray(idx, dtype=np.int64), len(idx), c, u, v, float(column_m), MAX_COLUMNS, stride)
     return c + h2[:, :1] * u + h2[:, 1:2] * v
@@ -162,19 +167,13 @@ def plane_hull(
 
 def lift_hull(hull2d: np.ndarray, normal: np.ndarray, rho: float, origin: np.ndarray) -> np.ndarray:
     """2D plane coordinates (about ``origin`` projected on the plane) back to 3D points."""
-    u, v = plane_basis(normal)
-    n = np.asarray(normal, dtype=np.float64)
-    c = np.asarray(origin, dtype=np.float64)
-    c = c - (c @ n - rho) * n
+    c, u, v = plane_frame(normal, rho, origin)
     return c + hull2d[:, :1] * u + hull2d[:, 1:2] * v
 
 
 def to_plane_coords(pts3: np.ndarray, normal: np.ndarray, rho: float, origin: np.ndarray) -> np.ndarray:
     """3D points (K, 3) to 2D coordinates in the plane's basis about ``origin``."""
-    u, v = plane_basis(normal)
-    n = np.asarray(normal, dtype=np.float64)
-    c = np.asarray(origin, dtype=np.float64)
-    c = c - (c @ n - rho) * n
+    c, u, v = plane_frame(normal, rho, origin)
     d = np.asarray(pts3, dtype=np.float64) - c
     return np.column_stack([d @ u, d @ v])
 

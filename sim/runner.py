@@ -190,6 +190,17 @@ def _median_ms(xs: list[float]) -> float:
     return float(np.median(xs) * 1000.0) if xs else 0.0
 
 
+def _people_in_view(people: np.ndarray, pose: np.ndarray, scn: Scenario) -> np.ndarray:
+    """Which people stand inside the camera's horizontal view (field of view, minimum and
+    maximum range; occlusion ignored), for the collision log's ``person_in_view_s_ago``."""
+    c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
+    rel = people[:, :2] - pose[None, :2]
+    x = c * rel[:, 0] + s * rel[:, 1] - scn.navigator.camera_forward_m
+    y = -s * rel[:, 0] + c * rel[:, 1]
+    r = np.hypot(x, y)
+    return (np.abs(np.arctan2(y, x)) < 0.5 * scn.navigator.camera_fov_rad) & (r > scn.navigator.camera_min_range_m) & (r < scn.navigator.camera_max_range_m)
+
+
 def collision_incidents(events: list[dict], gap_s: float = 3.0) -> int:
     """Encounters behind the contact events: contacts with the same bodies less than
     ``gap_s`` apart are one incident (contact is made and broken many times while the
@@ -315,6 +326,8 @@ def run_scenario(
     obstacles = obstacle_points(np.vstack([planes.points, planes.outliers]), scn.avoidance)
     nav = None
     nav_states: dict[str, int] = {}
+    n_people = len(world.people.people)
+    last_in_view = np.full(n_people, -np.inf)
     try:
         while frame < max_frames and mission.current < len(mission.waypoints):
             t = world.data.time
@@ -356,7 +369,19 @@ def run_scenario(
             t1 = time.perf_counter()
             timing["navigation"].append(t1 - t0)
             world.people.update(world.data, t + frame_dt, pose[:2])
-            collisions += world.step_frame(n_sub)
+            if n_people:
+                last_in_view[_people_in_view(world.people.positions(), pose, scn)] = t + frame_dt
+            new_events = world.step_frame(n_sub)
+            if new_events:
+                # What the robot was doing: the navigator's state and the direction it was
+                # told to move in (robot frame, degrees), to tell blind-zone contacts apart.
+                for ev in world.collision_log[-new_events:]:
+                    ev["nav_state"] = nav.state
+                    ev["cmd_dir_deg"] = round(math.degrees(math.atan2(cmd[1], cmd[0])), 1) if np.hypot(cmd[0], cmd[1]) > 1e-6 else None
+                    for b in ev["bodies"]:
+                        if b.startswith("person_"):
+                            ev["person_in_view_s_ago"] = round(t + frame_dt - float(last_in_view[int(b[7:])]), 2)
+            collisions += new_events
             t2 = time.perf_counter()
             clean = camera.render_clean(world.data)
             t3 = time.perf_counter()

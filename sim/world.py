@@ -229,11 +229,23 @@ class World:
         geoms = self.robot_contacts()
         pose = self.robot.pose(self.data)
         v = self.robot.velocity_body(self.data)
+        # Where on the robot the contact is: bearing of the first contact point in the
+        # robot frame (0 = straight ahead, +90 = left), to tell blind-zone contacts apart.
+        g = self.robot.geom_id
+        n = self.data.ncon
+        idx = [i for i in range(n) if g in (int(self.data.contact.geom1[i]), int(self.data.contact.geom2[i]))]
+        bearing = float("nan")
+        if idx:
+            p = self.data.contact.pos[idx[0]]
+            bearing = math.degrees(math.atan2(p[1] - pose[1], p[0] - pose[0]) - pose[2])
+            bearing = (bearing + 180.0) % 360.0 - 180.0
         return {
             "t": round(float(self.data.time), 3),
             "x": round(float(pose[0]), 3),
             "y": round(float(pose[1]), 3),
             "speed_mps": round(float(np.hypot(v[0], v[1])), 3),
+            "heading_deg": round(math.degrees(float(pose[2])), 1),
+            "bearing_deg": round(bearing, 1),
             "with": sorted({self.contact_kind(g) for g in geoms}),
             "bodies": sorted({mujoco.mj_id2name(self.model, mujoco.mjtObj.mjOBJ_BODY, int(self.model.geom_bodyid[g])) or "world" for g in geoms}),
         }

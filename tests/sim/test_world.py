@@ -47,6 +47,21 @@ def test_robot_hits_wall_and_contact_is_counted() -> None:
     assert "wall_1" in names
     # It stops at the wall: radius 0.3 m, wall face at 10 - 0.01 m.
     assert 9.6 < x < 9.72
+    # The log says where on the robot the contact was: straight ahead.
+    assert abs(w.collision_log[0]["bearing_deg"]) < 5.0
+    assert w.collision_log[0]["with"] == ["wall"]
+
+
+def test_contact_bearing_is_in_the_robot_frame() -> None:
+    # Facing north (+90 deg), driving along world +x = the robot's right: the wall at
+    # x = 10 is hit at bearing -90 deg.
+    w = build_world(box_room(), start_pose=(8.0, 3.0, math.pi / 2))
+    for _ in range(30 * 5):
+        w.robot.command(w.data, np.array([0.0, -0.75, 0.0]), 1 / 30)
+        w.step_frame(8)
+    ev = w.collision_log[0]
+    assert abs(ev["bearing_deg"] + 90.0) < 5.0, ev
+    assert abs(ev["heading_deg"] - 90.0) < 5.0, ev
 
 
 def test_people_and_furniture_collide_but_not_floor() -> None:

@@ -53,6 +53,10 @@ class CGRConfig:
     """Floor on the per-frame rotation noise."""
     step_fraction: float = 0.5
     """kappa: fraction of the preconditioned gradient step taken per refinement."""
+    trust_region_m: float = 0.5
+    """A refinement moves the used points at most this far (rotation counted at their RMS
+    range): the correspondences are fixed where it starts and hold only nearby, so the
+    default is the correspondence gate (observation.max_distance_m) (ours)."""
     share_radius_m: float = 1.0
     """Particles within this distance (and share_angle_rad) of the proposal mean share its
     scene lines and correspondences; others get their own."""
@@ -72,6 +76,8 @@ class CGRConfig:
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
                 raise InputError(f"cgr.{name}: expected a number >= 0, got {v!r}")
+        if not self.trust_region_m > 0:
+            raise InputError(f"cgr.trust_region_m: expected a positive number, got {self.trust_region_m!r}")
         if not 0 < self.step_fraction <= 1:
             raise InputError("cgr.step_fraction: expected a number in (0, 1]")
 
@@ -224,7 +230,7 @@ class CGRLocalizer:
             used = moments(frames_shared, idx_shared, pts, m)
             sel = np.flatnonzero(share)
             o_p, o0, o1 = np.empty((len(sel), 3)), np.empty(len(sel)), np.empty(len(sel))
-            refine_all_m(m, used, np.ascontiguousarray(self.particles[sel]), k, iters, cfg.step_fraction, obs.min_points, o_p, o0, o1)
+            refine_all_m(m, used, np.ascontiguousarray(self.particles[sel]), k, iters, cfg.step_fraction, obs.min_points, o_p, o0, o1, cfg.trust_region_m)
             refined[sel], lnp0[sel], lnpr[sel] = o_p, o0, o1
         for i in np.flatnonzero(~share):
             p = self.particles[i]
@@ -236,7 +242,7 @@ class CGRLocalizer:
                 frames = line_frames(own, p[0], p[1])
             used = moments(frames, idx, pts, m)
             o_p, o0, o1 = np.empty((1, 3)), np.empty(1), np.empty(1)
-            refine_all_m(m, used, p[None, :].copy(), k, iters, cfg.step_fraction, obs.min_points, o_p, o0, o1)
+            refine_all_m(m, used, p[None, :].copy(), k, iters, cfg.step_fraction, obs.min_points, o_p, o0, o1, cfg.trust_region_m)
             refined[i], lnp0[i], lnpr[i] = o_p[0], o0[0], o1[0]
         # Step 3: acceptance test between the refined and first-stage samples.
         u = self.rng.uniform(size=n)

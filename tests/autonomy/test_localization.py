@@ -269,3 +269,42 @@ def test_laser_model_converges_without_normals() -> None:
     assert math.hypot(*(est.pose[:2] - true[:2])) < 0.05
     # Expected ranges are exact on a known scene: straight ahead to the wall x = 6 from x = 3.5.
     assert expected_ranges(segs, np.array([3.5, 2.5, 0.0]), np.array([0.0]))[0] == pytest.approx(2.5)
+
+
+def _refine_once(segs, pose, pts, trust):
+    from autonomy.observation import moments, refine_all_m
+
+    idx = np.empty(len(pts), dtype=np.int64)
+    correspond(segs, pose, pts, np.zeros_like(pts), False, -1.0, 0.5, idx)
+    m = np.empty((5, 5))
+    used = moments(line_frames(segs, pose[0], pose[1]), idx, pts, m)
+    out, l0, lr = np.empty((1, 3)), np.empty(1), np.empty(1)
+    k = ObservationConfig().inv_two_f_sigma2
+    refine_all_m(m, used, pose[None, :].copy(), k, 6, 0.5, 10, out, l0, lr, trust)
+    lever = math.sqrt(float(np.mean(np.sum(pts[idx >= 0] ** 2, axis=1))))
+    moved = math.hypot(*(out[0, :2] - pose[:2])) + lever * abs(out[0, 2] - pose[2])
+    return out[0], moved
+
+
+def test_refinement_stays_within_its_trust_region() -> None:
+    """The frame that broke a replay: ten laser points, eight on a wall within 30 cm and
+    two on a person 0.45 m in front of it. Unbounded Gauss-Newton on the fixed
+    correspondences leaps over a metre; the trust region holds it to the gate."""
+    wall = np.array([[2.0, 1.26, 3.5, 1.26]])  # robot frame = world frame: pose at the origin
+    pose = np.zeros(3)
+    xs = np.linspace(2.6, 2.9, 8)
+    pts = np.vstack([np.column_stack([xs, np.full(8, 1.255)]), [[2.0, 0.80], [2.05, 0.84]]])
+    _, leap = _refine_once(wall, pose, pts, np.inf)
+    assert leap > 1.0
+    out, moved = _refine_once(wall, pose, pts, 0.5)
+    assert moved <= 0.5 + 1e-9
+    # A well-posed observation (a room, 10 cm off) is not held back: same answer as unbounded.
+    rng = np.random.default_rng(2)
+    segs = room()
+    true = np.array([3.5, 2.5, 0.7])
+    pts2, _ = observe(segs, true, rng)
+    start = true + [0.08, -0.05, 0.02]
+    a, _ = _refine_once(segs, start, pts2, np.inf)
+    b, moved2 = _refine_once(segs, start, pts2, 0.5)
+    np.testing.assert_allclose(a, b)
+    assert moved2 < 0.5 and math.hypot(*(b[:2] - true[:2])) < 0.03

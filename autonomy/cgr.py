@@ -55,8 +55,7 @@ class CGRConfig:
     """kappa: fraction of the preconditioned gradient step taken per refinement."""
     trust_region_m: float = 0.5
     """A refinement moves the used points at most this far (rotation counted at their RMS
-    range): the correspondences are fixed where it starts and hold only nearby, so the
-    default is the correspondence gate (observation.max_distance_m) (ours)."""
+    range): the correspondences are fixed where it starts and hold only nearby (ours)."""
     share_radius_m: float = 1.0
     """Particles within this distance (and share_angle_rad) of the proposal mean share its
     scene lines and correspondences; others get their own."""

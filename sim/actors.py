@@ -171,7 +171,12 @@ class PeopleController:
     Nobody walks into the robot: a person whose next step would bring them closer than
     ``personal_space_m`` (plus both radii) to the robot's centre stays put for that
     step — people see a robot coming round a corner even when its camera cannot see
-    them. A robot that drives into a person still collides, and that is counted.
+    them. Nor do people stand still while a robot drives at them: when the robot closes
+    in to within ``retreat_gap_m`` of a person's body, the person steps back, away from
+    it, at ``retreat_speed_mps`` (slower than the robot's cruise, and never into a wall).
+    Without that, a person whose route ran through the robot waited right beside it,
+    out of the camera's view, until the robot drove off sideways into them. A robot that
+    drives into a person still collides, and that is counted.
     """
 
     notice_m = 2.5
@@ -180,6 +185,8 @@ class PeopleController:
     max_wait_s = 2.0
     side_speed_mps = 0.8
     personal_space_m = 0.15
+    retreat_gap_m = 0.3
+    retreat_speed_mps = 0.5
 
     def __init__(
         self, people: tuple[Person, ...], mocap_ids: np.ndarray, walls: np.ndarray | None = None, robot_radius_m: float = 0.3
@@ -205,6 +212,7 @@ class PeopleController:
         self._side = np.zeros(len(self.people))
         self._waited = np.zeros(len(self.people))
         self._t = 0.0
+        self._robot_prev: np.ndarray | None = None
         self._state = np.zeros((len(self.people), 3))
         for i in range(len(self.people)):
             self._state[i] = self._place(i)
@@ -249,11 +257,50 @@ class PeopleController:
             return True
         return float(point_segment_distance(pos, self.walls).min()) > self.people[i].radius_m + 0.05
 
+    def _retreat(self, i: int, robot_xy: np.ndarray, robot_step: np.ndarray, dt: float) -> bool:
+        """Step back from a robot closing in (see the class docstring); True if stepped."""
+        p = self.people[i]
+        rel = self._state[i, :2] - robot_xy
+        dist = float(np.hypot(rel[0], rel[1]))
+        if not (dt > 0 and dist > 1e-9 and dist - self.robot_radius_m - p.radius_m < self.retreat_gap_m):
+            return False
+        away = rel / dist
+        if float(robot_step @ away) < 0.02 * dt:  # the robot is not moving towards them (2 cm/s)
+            return False
+        before = (self._s[i], self._side[i])
+        _, d = self._route_point(i, self._s[i])
+        right = np.array([d[1], -d[0]])
+        step = self.retreat_speed_mps * dt
+        ds, dside = step * float(away @ d), step * float(away @ right)
+        pos_s, _ = self._route_point(i, self._s[i] + ds)
+        if self._side_is_clear(i, pos_s + (self._side[i] + dside) * right):
+            self._s[i] += ds
+            self._side[i] += dside
+        elif self._side_is_clear(i, pos_s + self._side[i] * right):
+            self._s[i] += ds
+        else:
+            return False
+        new = self._place(i)
+        jump = float(np.hypot(*(new[:2] - self._state[i, :2]))) > (self.retreat_speed_mps + 1e-9) * dt * 1.5
+        if jump or float(np.hypot(new[0] - robot_xy[0], new[1] - robot_xy[1])) <= dist:
+            self._s[i], self._side[i] = before  # the route bends there: no step back
+            return False
+        self._state[i] = new
+        return True
+
     def advance(self, t: float, robot_xy: np.ndarray | None = None) -> np.ndarray:
         """Move everyone to time t (reacting to the robot); returns (n, 3) x, y, heading."""
         dt = max(0.0, t - self._t)
         self._t = t
+        robot_step = np.zeros(2)
+        if robot_xy is not None:
+            rxy = np.asarray(robot_xy[:2], dtype=np.float64)
+            if self._robot_prev is not None:
+                robot_step = rxy - self._robot_prev
+            self._robot_prev = rxy.copy()
         for i, p in enumerate(self.people):
+            if robot_xy is not None and self._retreat(i, rxy, robot_step, dt):
+                continue
             pos, d = self._route_point(i, self._s[i])
             before = (self._s[i], self._side[i])
             target_side, walk = 0.0, True

@@ -155,3 +155,33 @@ def test_obstacle_memory_keeps_one_point_per_cell_with_its_latest_time() -> None
     got = {(round(x / cell), round(y / cell)): t for (x, y), t in zip(nav._mem, nav._mem_t, strict=True)}
     assert len(got) == len(nav._mem) == len(seen)
     assert got == seen
+
+
+def test_map_points_are_the_walls_near_the_robot_in_the_robot_frame() -> None:
+    walls = np.array([[-5.0, 1.0, 5.0, 1.0], [-5.0, -3.0, 5.0, -3.0]])
+    nav = Navigator(line_graph(), walls=walls)
+    # Facing +y: the wall y = 1 is 1 m ahead (robot x); the wall y = -3 is out of reach.
+    p = nav.map_points(np.array([0.0, 0.0, math.pi / 2]), 1.5)
+    assert len(p) > 10
+    np.testing.assert_allclose(p[:, 0], 1.0, atol=1e-9)
+    assert np.all(np.hypot(p[:, 0], p[:, 1]) < 1.5) and p[:, 1].min() < -1.0 and p[:, 1].max() > 1.0
+    assert np.max(np.diff(np.sort(p[:, 1]))) <= 0.03 + 1e-9
+
+
+def test_backs_off_away_from_a_wall_behind_it_and_not_into_one() -> None:
+    """Recovery backs off straight back when that is clear, sideways-back when a wall is
+    right behind one side, and not at all when boxed in (walls from the map, unseen)."""
+    cfg = NavigatorConfig(stuck_time_s=0.5)
+    clear = Navigator(line_graph(), cfg, walls=np.zeros((0, 4)))
+    v = clear._backoff_velocity(np.zeros(3), np.zeros((0, 2)))
+    np.testing.assert_allclose(v, [-cfg.backoff_speed_mps, 0.0, 0.0], atol=1e-12)
+    # A wall 0.4 m behind, across: straight back is blocked; so is everything within 75 degrees.
+    behind = Navigator(line_graph(), cfg, walls=np.array([[-0.4, -3.0, -0.4, 3.0]]))
+    np.testing.assert_allclose(behind._backoff_velocity(np.zeros(3), np.zeros((0, 2))), 0.0)
+    # A door frame's end 0.35 m behind-left: back off to the right-back instead.
+    frame = Navigator(line_graph(), cfg, walls=np.array([[-0.35, 0.2, -3.0, 0.2]]))
+    v = frame._backoff_velocity(np.zeros(3), np.zeros((0, 2)))
+    assert v[0] < 0 and v[1] < 0 and math.hypot(v[0], v[1]) == pytest.approx(cfg.backoff_speed_mps)
+    # A remembered obstacle right in front does not stop it backing away.
+    v = clear._backoff_velocity(np.zeros(3), np.array([[0.32, 0.0]]))
+    assert v[0] < 0

@@ -57,3 +57,36 @@ def test_people_never_walk_into_the_robot(rx: float, ry: float, vx: float, vy: f
         moved = np.hypot(*(cur - prev).T) > 1e-12
         assert not np.any(moved & (d_new < keep - 1e-9) & (d_new < d_old - 1e-9))
         prev = cur
+
+
+def test_a_person_steps_back_from_a_slow_robot_but_not_from_a_fast_one() -> None:
+    """A person standing in the open; the robot drives straight at them. At 0.3 m/s
+    (slower than the 0.5 m/s step back) they step aside and back and are never touched;
+    at 2 m/s the robot catches up (contact is the robot's doing, and counted)."""
+    person = Person(route=((0.0, 0.0), (0.01, 0.0)), speed_mps=0.0)
+    pc_r = PeopleController((person,), np.zeros(1, dtype=int))
+    touch = pc_r.robot_radius_m + person.radius_m
+    for speed, caught in ((0.3, False), (2.0, True)):
+        pc = PeopleController((person,), np.zeros(1, dtype=int))
+        gaps = []
+        for k in range(1, 240):
+            robot = np.array([-2.0 + speed * k * DT, 0.05])
+            cur = pc.advance(k * DT, robot)[0, :2]
+            gaps.append(float(np.hypot(*(cur - robot))) - touch)
+        assert (min(gaps) <= 0.0) == caught, (speed, min(gaps))
+        if not caught:
+            assert min(gaps) > 0.1
+
+
+def test_a_person_does_not_step_back_into_a_wall_or_from_a_robot_standing_still() -> None:
+    walls = np.array([[-5.0, 0.3, 5.0, 0.3]])  # a wall right behind (north of) the person
+    person = Person(route=((0.0, 0.0), (0.01, 0.0)), speed_mps=0.0)
+    pc = PeopleController((person,), np.zeros(1, dtype=int), walls)
+    for k in range(1, 60):  # robot comes from the south at 0.3 m/s and stops 0.6 m away
+        robot = np.array([0.0, max(-1.5 + 0.3 * k * DT, -0.6)])
+        cur = pc.advance(k * DT, robot)[0, :2]
+    assert abs(cur[1]) < 1e-9 or cur[1] < 0.3 - person.radius_m - 0.05 + 1e-9
+    still = PeopleController((person,), np.zeros(1, dtype=int))
+    for k in range(1, 60):
+        cur = still.advance(k * DT, np.array([0.0, -0.6]))[0, :2]
+    np.testing.assert_allclose(cur, [0.0, 0.0], atol=1e-12)

@@ -56,6 +56,12 @@ class CGRConfig:
     trust_region_m: float = 0.5
     """A refinement moves the used points at most this far (rotation counted at their RMS
     range): the correspondences are fixed where it starts and hold only nearby (ours)."""
+    gate_sigmas: float = 3.0
+    """The correspondence gate widens to this many standard deviations of the belief at
+    the points when that exceeds observation.max_distance_m (:meth:`CGRLocalizer.gate`;
+    0 = the fixed gate)."""
+    max_gate_m: float = 1.5
+    """... up to this."""
     share_radius_m: float = 1.0
     """Particles within this distance (and share_angle_rad) of the proposal mean share its
     scene lines and correspondences; others get their own."""
@@ -75,6 +81,10 @@ class CGRConfig:
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
                 raise InputError(f"cgr.{name}: expected a number >= 0, got {v!r}")
+        if not (math.isfinite(self.gate_sigmas) and self.gate_sigmas >= 0):
+            raise InputError(f"cgr.gate_sigmas: expected a number >= 0, got {self.gate_sigmas!r}")
+        if not self.max_gate_m > 0:
+            raise InputError(f"cgr.max_gate_m: expected a positive number, got {self.max_gate_m!r}")
         if not self.trust_region_m > 0:
             raise InputError(f"cgr.trust_region_m: expected a positive number, got {self.trust_region_m!r}")
         if not 0 < self.step_fraction <= 1:
@@ -172,6 +182,21 @@ class CGRLocalizer:
         std_th = math.sqrt(max(0.0, -2.0 * math.log(max(r, 1e-12))))
         return Estimate(np.array([mean_xy[0], mean_xy[1], th]), float(math.sqrt(np.trace(cov))), std_th, cov)
 
+    def gate(self, est: Estimate, points: np.ndarray) -> float:
+        """Correspondence gate for this frame: ``observation.max_distance_m``, widened to
+        ``gate_sigmas`` times the belief's spread at the points (position spread plus
+        heading spread times the points' RMS range), as a tracker's validation gate
+        widens with its predicted covariance (ours). A well-localized filter keeps the
+        tight gate that rejects people and furniture near walls; one that has dead-
+        reckoned through a featureless stretch can still match the wall it drifted off.
+        """
+        base = self.obs.max_distance_m
+        k = self.cfg.gate_sigmas
+        if k <= 0 or not len(points):
+            return base
+        r = math.sqrt(float(np.mean(np.einsum("ij,ij->i", points, points))))
+        return max(base, min(self.cfg.max_gate_m, k * (est.std_xy_m + r * est.std_theta_rad)))
+
     # -- CGR steps ---------------------------------------------------------------------
     def predict(self, increment: np.ndarray) -> None:
         """Step 1: sample the motion model for an odometry increment (dx, dy, dtheta)."""
@@ -211,7 +236,8 @@ class CGRLocalizer:
         cos_max = math.cos(obs.theta_max_rad)
         k = obs.inv_two_f_sigma2
         idx_shared = np.empty(len(pts), dtype=np.int64)
-        kept = correspond(lines, shared_pose, pts, nrm, use_n, cos_max, obs.max_distance_m, idx_shared)
+        gate = self.gate(est, pts)
+        kept = correspond(lines, shared_pose, pts, nrm, use_n, cos_max, gate, idx_shared)
         frames_shared = line_frames(lines, shared_pose[0], shared_pose[1])
         stats.used_points = int(kept)
         lnp0 = np.empty(n)
@@ -237,7 +263,7 @@ class CGRLocalizer:
             idx = np.full(len(pts), -1, dtype=np.int64)
             frames = np.zeros((0, 3))
             if len(own):
-                correspond(own, p, pts, nrm, use_n, cos_max, obs.max_distance_m, idx)
+                correspond(own, p, pts, nrm, use_n, cos_max, gate, idx)
                 frames = line_frames(own, p[0], p[1])
             used = moments(frames, idx, pts, m)
             o_p, o0, o1 = np.empty((1, 3)), np.empty(1), np.empty(1)

@@ -44,14 +44,9 @@ class ObservationConfig:
     """f: discount for the correlation between rays, f >= 1 (Eq. 1)."""
     theta_max_rad: float = math.radians(35.0)
     """theta_max: maximum angle between a point's normal and its line's normal."""
-    max_distance_m: float = 0.8
+    max_distance_m: float = 0.5
     """Points farther than this from their line are discarded (ours; the paper keeps every
-    point whose ray hits a line). A gate rejects clutter the normal test lets through, but
-    it also stops CGR recovering from an error larger than itself: after a featureless
-    corridor (along-track drift) and a turn, a 0.5 m gate matched none of the points on
-    the wall beside the robot for 20 s, and 3 of 100 comparison replays were lost. Plane
-    points pass the normal test, so 0.8 m; the laser model, which has none, uses 0.5 m in
-    the localization comparison (docs/localization_comparison.md)."""
+    point whose ray hits a line); CGR widens it with its uncertainty (cgr.gate_sigmas)."""
     min_points: int = 10
     """Fewer usable points than this: no observation update (odometry only)."""
 

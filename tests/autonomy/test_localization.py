@@ -308,3 +308,22 @@ def test_refinement_stays_within_its_trust_region() -> None:
     b, moved2 = _refine_once(segs, start, pts2, 0.5)
     np.testing.assert_allclose(a, b)
     assert moved2 < 0.5 and math.hypot(*(b[:2] - true[:2])) < 0.03
+
+
+def test_gate_widens_with_the_belief_spread() -> None:
+    """The correspondence gate is observation.max_distance_m for a confident belief and
+    gate_sigmas x (position spread + range x heading spread) for an uncertain one."""
+    from autonomy.cgr import Estimate
+
+    loc = CGRLocalizer(lambda x, y: room(), CGRConfig(), ObservationConfig(), np.random.default_rng(0))
+    pts = np.array([[3.0, 0.0], [0.0, 3.0]])  # RMS range 3 m
+    tight = Estimate(np.zeros(3), 0.05, 0.01, np.eye(2))
+    assert loc.gate(tight, pts) == pytest.approx(0.5)
+    loose = Estimate(np.zeros(3), 0.2, 0.03, np.eye(2))
+    assert loc.gate(loose, pts) == pytest.approx(3.0 * (0.2 + 3.0 * 0.03))
+    lost = Estimate(np.zeros(3), 2.0, 0.3, np.eye(2))
+    assert loc.gate(lost, pts) == pytest.approx(CGRConfig().max_gate_m)
+    fixed = CGRLocalizer(lambda x, y: room(), CGRConfig(gate_sigmas=0.0), ObservationConfig(), np.random.default_rng(0))
+    assert fixed.gate(loose, pts) == pytest.approx(0.5)
+    with pytest.raises(InputError, match="gate_sigmas"):
+        CGRConfig(gate_sigmas=-1.0)

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from autonomy.errors import InputError
+from autonomy.errors import InputError, require_int, require_non_negative, require_positive
 from autonomy.observation import ObservationConfig, correspond, line_frames, moments, refine_all_m
 
 SceneLinesFn = Callable[[float, float], np.ndarray]
@@ -75,22 +75,15 @@ class CGRConfig:
     """Heading spread drawn by reset()."""
 
     def __post_init__(self) -> None:
-        if not (isinstance(self.n_particles, int) and self.n_particles >= 1):
-            raise InputError(f"cgr.n_particles: expected an integer >= 1, got {self.n_particles!r}")
-        if not (isinstance(self.refinements, int) and self.refinements >= 0):
-            raise InputError(f"cgr.refinements: expected an integer >= 0, got {self.refinements!r}")
-        for name in ("alpha1", "alpha2_rad_per_m", "alpha3", "min_translation_std_m", "min_rotation_std_rad", "init_std_xy_m", "init_std_theta_rad"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v >= 0):
-                raise InputError(f"cgr.{name}: expected a number >= 0, got {v!r}")
-        if not (math.isfinite(self.gate_sigmas) and self.gate_sigmas >= 0):
-            raise InputError(f"cgr.gate_sigmas: expected a number >= 0, got {self.gate_sigmas!r}")
-        if not self.max_gate_m > 0:
-            raise InputError(f"cgr.max_gate_m: expected a positive number, got {self.max_gate_m!r}")
-        if not self.trust_region_m > 0:
-            raise InputError(f"cgr.trust_region_m: expected a positive number, got {self.trust_region_m!r}")
+        require_int(self, "cgr.", "n_particles")
+        require_int(self, "cgr.", "refinements", minimum=0)
+        require_non_negative(
+            self, "cgr.", "alpha1", "alpha2_rad_per_m", "alpha3", "min_translation_std_m", "min_rotation_std_rad",
+            "init_std_xy_m", "init_std_theta_rad", "gate_sigmas",
+        )
+        require_positive(self, "cgr.", "max_gate_m", "trust_region_m", "step_fraction")
         if not 0 < self.step_fraction <= 1:
-            raise InputError("cgr.step_fraction: expected a number in (0, 1]")
+            raise InputError(f"cgr.step_fraction: expected a number in (0, 1], got {self.step_fraction!r}")
 
 
 @dataclass(frozen=True)

@@ -202,6 +202,10 @@ def test_same_seed_same_filter() -> None:
 def test_bad_config() -> None:
     with pytest.raises(InputError, match="refinements"):
         CGRConfig(refinements=-1)
+    with pytest.raises(InputError, match="trust_region_m"):
+        CGRConfig(trust_region_m="0.5")  # a string is a one-line error, not a TypeError
+    with pytest.raises(InputError, match="max_gate_m"):
+        CGRConfig(max_gate_m=0.0)
     with pytest.raises(InputError, match="correlation_f"):
         ObservationConfig(correlation_f=0.5)
 

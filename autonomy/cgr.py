@@ -5,7 +5,7 @@ A particle filter over (x, y, theta). Each frame (IV-C, steps 1-4):
 1. the particles move through the motion model of an omnidirectional base driven by
    odometry increments: the first-stage proposal q0;
 2. each sample is refined in r iterations along the gradient of the observation
-   log-likelihood (:func:`autonomy.observation.refine`): q1 .. qr, within a trust
+   log-likelihood (:func:`autonomy.observation.refine_all_m`): q1 .. qr, within a trust
    region of its first-stage pose (ours), on correspondences found within a gate that
    widens with the belief's spread (:meth:`CGRLocalizer.gate`, ours);
 3. an acceptance test chooses, per sample, between its refined and its first-stage

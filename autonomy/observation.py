@@ -196,34 +196,6 @@ def loglik_grad(frames, idx, pose, pts, inv_2fs2, out):  # pragma: no cover - nu
 
 
 @numba.njit(cache=True)
-def refine(frames, idx, pose, pts, inv_2fs2, iters, kappa, out_pose, work, trust_m=np.inf):  # pragma: no cover
-    """r steps of preconditioned gradient ascent on ln p(y | x) from ``pose`` (CGR step 2).
-
-    Each step is kappa * (H + lambda I)^-1 g: the gradient preconditioned by the damped
-    Gauss-Newton curvature H (our reading of "refined using the gradients": a plain fixed
-    step zig-zags when x, y and theta are coupled). Along a direction the points do not
-    constrain (a featureless corridor) both H and g vanish, so the sample does not move.
-    The refined pose stays within ``trust_m`` of ``pose`` (:func:`_trust_clip`).
-    """
-    out_pose[0] = pose[0]
-    out_pose[1] = pose[1]
-    out_pose[2] = pose[2]
-    r2 = 0.0
-    n = 0
-    for i in range(pts.shape[0]):
-        if idx[i] >= 0:
-            r2 += pts[i, 0] * pts[i, 0] + pts[i, 1] * pts[i, 1]
-            n += 1
-    lever = math.sqrt(r2 / n) if n > 0 else 0.0
-    for _ in range(iters):
-        loglik_grad(frames, idx, out_pose, pts, inv_2fs2, work)
-        if work[7] == 0 or not _gn_step(work, kappa, out_pose):
-            return
-        if _trust_clip(out_pose, pose, lever, trust_m):
-            return
-
-
-@numba.njit(cache=True)
 def moments(frames, idx, pts, out):  # pragma: no cover - numba
     """The 5 x 5 moment matrix M = sum v_i v_i^T of the used points; returns their count.
 
@@ -341,9 +313,16 @@ def _trust_clip(pose, start, lever_m, trust_m):  # pragma: no cover - numba
 
 @numba.njit(cache=True)
 def refine_all_m(m, n_used, poses, inv_2fs2, iters, kappa, min_points, out_poses, lnp0, lnpr, trust_m=np.inf):  # pragma: no cover
-    """CGR steps 2 for every particle sharing one moment matrix: first-stage and refined
-    log-likelihoods and the refined poses (r preconditioned gradient steps each, within
-    ``trust_m`` of the first-stage pose: :func:`_trust_clip`)."""
+    """CGR step 2 for every particle sharing one moment matrix: first-stage and refined
+    log-likelihoods and the refined poses.
+
+    Each of the r steps is kappa * (H + lambda I)^-1 g: the gradient preconditioned by the
+    damped Gauss-Newton curvature (our reading of "refined using the gradients": a plain
+    fixed step zig-zags when x, y and theta are coupled). Along a direction the points do
+    not constrain (a featureless corridor) both H and g vanish, so the sample does not
+    move. The refined pose stays within ``trust_m`` of the first-stage pose
+    (:func:`_trust_clip`).
+    """
     work = np.zeros(11)
     # m[0, 0] + m[1, 1] = sum (n . p)^2 + (n x p)^2 = sum |p|^2 over the used points.
     lever = math.sqrt((m[0, 0] + m[1, 1]) / n_used) if n_used > 0 else 0.0

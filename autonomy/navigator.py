@@ -215,8 +215,8 @@ class Navigator:
             bx = c * rel[:, 0] + s * rel[:, 1] - cfg.camera_forward_m
             by = -s * rel[:, 0] + c * rel[:, 1]
             rng = np.hypot(bx, by)
-            in_cone = np.abs(np.arctan2(by, bx)) < 0.45 * cfg.camera_fov_rad
-            in_view = in_cone & (rng > cfg.camera_min_range_m + 0.1) & (rng < cfg.camera_max_range_m - 0.2)
+            # A little inside the view's edges, so what is replaced was really seen.
+            in_view = in_camera_view(bx, by, cfg, fov_fraction=0.9, near_pad_m=0.1, far_pad_m=0.2)
             # Right in front but too close to be seen: kept until the place is seen again
             # (the robot backs off or turns), however long that takes.
             blind_ahead = (bx > -cfg.camera_forward_m) & (rng <= cfg.camera_min_range_m + 0.1) & (np.abs(by) < self.avoid.radius_m + 0.2)
@@ -371,6 +371,20 @@ class Navigator:
         omega = float(np.clip(cfg.heading_gain * th, -cfg.max_turn_rate_rad_s, cfg.max_turn_rate_rad_s))
         v = np.array([speed * math.cos(th), speed * math.sin(th), omega])
         return NavCommand(v, "driving", carrot, desired, th, res.open_length_m, fan)
+
+
+def in_camera_view(
+    x: np.ndarray, y: np.ndarray, cfg: NavigatorConfig, fov_fraction: float = 1.0, near_pad_m: float = 0.0, far_pad_m: float = 0.0
+) -> np.ndarray:
+    """Which points (x, y relative to the camera, robot axes) lie inside the camera's
+    horizontal view: within ``fov_fraction`` of its field of view and between its minimum
+    and maximum range (narrowed by the pads). Occlusion is not considered."""
+    r = np.hypot(x, y)
+    return (
+        (np.abs(np.arctan2(y, x)) < 0.5 * fov_fraction * cfg.camera_fov_rad)
+        & (r > cfg.camera_min_range_m + near_pad_m)
+        & (r < cfg.camera_max_range_m - far_pad_m)
+    )
 
 
 def _side_of(theta: float, desired: float, dead_band: float) -> int:

@@ -22,7 +22,7 @@ from autonomy.avoidance import obstacle_points
 from autonomy.cgr import CGRLocalizer
 from autonomy.errors import InputError
 from autonomy.fspf import fspf
-from autonomy.navigator import Navigator
+from autonomy.navigator import Navigator, in_camera_view
 from autonomy.observation import correspond
 from autonomy.planner import astar, path_points
 from autonomy.raycast import SceneQuery, load_or_build
@@ -196,9 +196,7 @@ def _people_in_view(people: np.ndarray, pose: np.ndarray, scn: Scenario) -> np.n
     c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
     rel = people[:, :2] - pose[None, :2]
     x = c * rel[:, 0] + s * rel[:, 1] - scn.navigator.camera_forward_m
-    y = -s * rel[:, 0] + c * rel[:, 1]
-    r = np.hypot(x, y)
-    return (np.abs(np.arctan2(y, x)) < 0.5 * scn.navigator.camera_fov_rad) & (r > scn.navigator.camera_min_range_m) & (r < scn.navigator.camera_max_range_m)
+    return in_camera_view(x, -s * rel[:, 0] + c * rel[:, 1], scn.navigator)
 
 
 def collision_incidents(events: list[dict], gap_s: float = 3.0) -> int:

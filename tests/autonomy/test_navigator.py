@@ -185,3 +185,15 @@ def test_backs_off_away_from_a_wall_behind_it_and_not_into_one() -> None:
     # A remembered obstacle right in front does not stop it backing away.
     v = clear._backoff_velocity(np.zeros(3), np.array([[0.32, 0.0]]))
     assert v[0] < 0
+
+
+def test_in_camera_view_is_the_cone_between_the_ranges() -> None:
+    from autonomy.navigator import in_camera_view
+
+    cfg = NavigatorConfig()
+    ang = np.radians([0.0, 0.0, 0.0, 28.0, 30.0, -28.0, 180.0])
+    rng = np.array([2.0, 0.5, 4.5, 2.0, 2.0, 2.0, 2.0])
+    got = in_camera_view(rng * np.cos(ang), rng * np.sin(ang), cfg)
+    assert got.tolist() == [True, False, False, True, False, True, False]
+    # The memory's narrower test: 28 degrees is outside 90% of the +-28.9 degree view.
+    assert not in_camera_view(np.array([2 * math.cos(math.radians(28))]), np.array([2 * math.sin(math.radians(28))]), cfg, 0.9)[0]

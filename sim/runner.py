@@ -28,6 +28,7 @@ from autonomy.planner import astar, path_points
 from autonomy.raycast import SceneQuery, load_or_build
 from autonomy.vectormap import NavGraph, VectorMap, load_navgraph, load_vectormap
 from sim.actors import Furniture, Person, point_segment_distance
+from sim.blackbox import FlightRecorder, frame_record, render_incidents
 from sim.config import to_dict
 from sim.kinect import KinectCamera
 from sim.kinect_noise import apply_kinect_noise
@@ -326,6 +327,7 @@ def run_scenario(
     nav_states: dict[str, int] = {}
     n_people = len(world.people.people)
     last_in_view = np.full(n_people, -np.inf)
+    blackbox = FlightRecorder(scn.report.incident_seconds, scn.kinect.rate_hz)
     try:
         while frame < max_frames and mission.current < len(mission.waypoints):
             t = world.data.time
@@ -370,6 +372,7 @@ def run_scenario(
             if n_people:
                 last_in_view[_people_in_view(world.people.positions(), pose, scn)] = t + frame_dt
             new_events = world.step_frame(n_sub)
+            blackbox.push(frame_record(world.data.time, world.robot.pose(world.data), control_pose, nav, cmd, obstacles, world.people.positions()))
             if new_events:
                 # What the robot was doing: the navigator's state and the direction it was
                 # told to move in (robot frame, degrees), to tell blind-zone contacts apart.
@@ -379,6 +382,7 @@ def run_scenario(
                     for b in ev["bodies"]:
                         if b.startswith("person_"):
                             ev["person_in_view_s_ago"] = round(t + frame_dt - float(last_in_view[int(b[7:])]), 2)
+                blackbox.on_events(world.collision_log[-new_events:])
             collisions += new_events
             t2 = time.perf_counter()
             clean = camera.render_clean(world.data)
@@ -533,6 +537,12 @@ def run_scenario(
             title=f"{scn.name} (seed {seed}): {distance:.0f} m, {resets} resets, {collisions} contacts in {metrics['collision_incidents']} incidents",
         )
         files["trajectory_figure"] = "trajectory.png"
+    if blackbox.incidents:
+        files["incidents"] = "incidents.json"
+        (out / files["incidents"]).write_text(json.dumps({"seconds": scn.report.incident_seconds, "incidents": blackbox.incidents}) + "\n", encoding="utf-8")
+        if scn.report.figures:
+            render_incidents(blackbox.incidents, np.asarray(vm.segments), out / "incidents.png", scn.robot.radius_m)
+            files["incidents_figure"] = "incidents.png"
     if recorder is not None:
         if rrd:
             files["recording"] = str(Path(rrd).resolve().relative_to(out.resolve())) if Path(rrd).resolve().is_relative_to(out.resolve()) else str(rrd)

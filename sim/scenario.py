@@ -7,6 +7,7 @@ by ``name`` is one of the buildings shipped in ``sim/assets``.
 
 from __future__ import annotations
 
+import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -141,10 +142,15 @@ class ReportConfig:
     """Log depth to rerun at 1/k of the camera resolution."""
     progress: bool = True
     """Show a progress bar on a terminal."""
+    incident_seconds: float = 8.0
+    """The flight recorder keeps this many seconds before each collision incident
+    (``incidents.json``, ``incidents.png``)."""
 
     def __post_init__(self) -> None:
         if self.rrd_every < 1 or self.rrd_depth_downsample < 1:
             raise InputError("report: rrd_every and rrd_depth_downsample must be >= 1")
+        if not (isinstance(self.incident_seconds, (int, float)) and math.isfinite(self.incident_seconds) and self.incident_seconds > 0):
+            raise InputError(f"report.incident_seconds: expected a positive number of seconds, got {self.incident_seconds!r}")
 
 
 @dataclass(frozen=True)

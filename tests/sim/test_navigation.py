@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -112,3 +113,14 @@ def test_collision_log_says_what_the_robot_was_doing(tmp_path: Path) -> None:
     # Seen while approaching; out of view only for the last ~0.3 m (min range 0.8 m
     # from the camera 0.22 m ahead, contact at 0.52 m): well under 2 s.
     assert 0.0 < e["person_in_view_s_ago"] < 2.0, e
+    # The flight recorder kept the seconds before it: the robot drove at the person,
+    # who stood still, and the incident's record ends at the contact.
+    assert rep["files"]["incidents"] == "incidents.json" and (tmp_path / "out" / "incidents.png").stat().st_size > 0
+    inc = json.loads((tmp_path / "out" / "incidents.json").read_text())["incidents"]
+    assert len(inc) == rep["metrics"]["collision_incidents"]
+    tr = inc[0]["trace"]
+    # The last record is the end of the frame the contact was made in (a physics substep).
+    assert 0.0 <= tr[-1]["t"] - e["t"] < 1.0 / 30.0 and tr[-1]["truth"][:2] == pytest.approx([e["x"], e["y"]], abs=0.03)
+    assert 1.0 < tr[-1]["t"] - tr[0]["t"] <= 8.0 + 1e-6
+    xs = [f["truth"][0] for f in tr]
+    assert xs[-1] > xs[0] + 0.5 and all(f["people"][0][0] == pytest.approx(6.0, abs=0.35) for f in tr)

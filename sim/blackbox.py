@@ -1,0 +1,140 @@
+"""A flight recorder for collisions: the last seconds before each incident, kept.
+
+A 4 km run takes half an hour; replaying it to see one contact takes as long again. The
+runner therefore keeps a ring buffer of what mattered each frame (true and estimated
+pose, the navigator's state, command and chosen direction, the nearest sensed obstacle,
+where every person stood) and, when a collision incident begins, freezes a copy of it.
+``incidents.json`` holds those copies and ``incidents.png`` draws each one over the map:
+the robot's track, the people's tracks, where contact was made.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections import deque
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["FlightRecorder", "render_incidents"]
+
+
+class FlightRecorder:
+    """Ring buffer of per-frame records; ``freeze`` copies it out for an incident."""
+
+    def __init__(self, seconds: float, rate_hz: float) -> None:
+        self.frames = max(1, int(round(seconds * rate_hz)))
+        self._buf: deque[dict] = deque(maxlen=self.frames)
+        self.incidents: list[dict] = []
+        self._last: dict[tuple, float] = {}
+
+    def push(self, record: dict) -> None:
+        """One frame's record (JSON-serialisable values)."""
+        self._buf.append(record)
+
+    def on_events(self, events: list[dict], gap_s: float = 3.0) -> None:
+        """Freeze the buffer for each event that starts a new incident (the same bodies
+        not touched in the last ``gap_s``, as ``runner.collision_incidents`` counts)."""
+        for e in events:
+            key = tuple(e.get("bodies", e.get("with", ())))
+            new = key not in self._last or e["t"] - self._last[key] > gap_s
+            self._last[key] = e["t"]
+            if new:
+                self.incidents.append({"event": dict(e), "trace": list(self._buf)})
+
+
+def frame_record(
+    t: float,
+    truth: np.ndarray,
+    estimate: np.ndarray,
+    nav,
+    cmd: np.ndarray,
+    obstacles: np.ndarray,
+    people: np.ndarray,
+) -> dict:
+    """The compact per-frame record: poses, navigator decision, nearest obstacle, people."""
+    near = None
+    if len(obstacles):
+        r = np.hypot(obstacles[:, 0], obstacles[:, 1])
+        k = int(np.argmin(r))
+        near = [round(float(obstacles[k, 0]), 3), round(float(obstacles[k, 1]), 3)]
+    return {
+        "t": round(float(t), 3),
+        "truth": [round(float(v), 4) for v in truth[:3]],
+        "estimate": [round(float(v), 4) for v in estimate[:3]],
+        "state": nav.state,
+        "cmd": [round(float(v), 3) for v in cmd[:3]],
+        "desired_deg": round(math.degrees(nav.desired_rad), 1),
+        "theta_star_deg": round(math.degrees(nav.theta_star_rad), 1),
+        "open_m": round(float(nav.open_length_m), 3) if math.isfinite(nav.open_length_m) else None,
+        "n_obstacles": int(len(obstacles)),
+        "nearest_obstacle": near,
+        "people": [[round(float(p[0]), 3), round(float(p[1]), 3)] for p in people],
+    }
+
+
+def render_incidents(
+    incidents: list[dict], walls: np.ndarray, out_png: str | os.PathLike[str], robot_radius_m: float = 0.3, dpi: int = 110
+) -> Path | None:
+    """One panel per incident (up to 12): walls within 4 m, the robot's true track (its
+    footprint at the contact), each person's track, arrows for the commanded direction."""
+    if not incidents:
+        return None
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.collections import LineCollection
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Circle
+
+    shown = incidents[:12]
+    cols = min(3, len(shown))
+    rows = int(math.ceil(len(shown) / cols))
+    fig = Figure(figsize=(4.2 * cols, 4.2 * rows))
+    FigureCanvasAgg(fig)
+    segs = np.asarray(walls, dtype=np.float64).reshape(-1, 4)
+    for k, inc in enumerate(shown):
+        ax = fig.add_subplot(rows, cols, k + 1)
+        ev, tr = inc["event"], inc["trace"]
+        cx, cy = float(ev["x"]), float(ev["y"])
+        ax.add_collection(LineCollection(segs.reshape(-1, 2, 2), colors="k", linewidths=1.2))
+        if tr:
+            xy = np.array([f["truth"][:2] for f in tr])
+            ax.plot(xy[:, 0], xy[:, 1], "-", color="#1f77b4", lw=1.5, label="robot")
+            est = np.array([f["estimate"][:2] for f in tr])
+            ax.plot(est[:, 0], est[:, 1], ":", color="#1f77b4", lw=1.0, label="estimate")
+            ppl = np.array([f["people"] for f in tr if f["people"]])
+            if ppl.size:
+                for j in range(ppl.shape[1]):
+                    if np.min(np.hypot(ppl[:, j, 0] - cx, ppl[:, j, 1] - cy)) < 4.0:
+                        ax.plot(ppl[:, j, 0], ppl[:, j, 1], "-", color="#d62728", lw=1.0)
+                        ax.plot(ppl[-1, j, 0], ppl[-1, j, 1], "o", color="#d62728", ms=5)
+                        ax.text(ppl[-1, j, 0], ppl[-1, j, 1], f" p{j}", fontsize=7, color="#d62728")
+            for f in tr[:: max(1, len(tr) // 12)]:
+                th = f["truth"][2]
+                vx, vy = f["cmd"][0], f["cmd"][1]
+                wx, wy = math.cos(th) * vx - math.sin(th) * vy, math.sin(th) * vx + math.cos(th) * vy
+                ax.arrow(f["truth"][0], f["truth"][1], wx, wy, width=0.01, color="#2ca02c", length_includes_head=True)
+        ax.add_patch(Circle((cx, cy), robot_radius_m, fill=False, color="#1f77b4", lw=1.5))
+        h = math.radians(ev.get("heading_deg", 0.0))
+        ax.plot([cx, cx + robot_radius_m * math.cos(h)], [cy, cy + robot_radius_m * math.sin(h)], color="#1f77b4")
+        b = ev.get("bearing_deg")
+        if b is not None and math.isfinite(b):
+            a = h + math.radians(b)
+            ax.plot(cx + robot_radius_m * math.cos(a), cy + robot_radius_m * math.sin(a), "x", color="k", ms=8)
+        ax.set_xlim(cx - 3.0, cx + 3.0)
+        ax.set_ylim(cy - 3.0, cy + 3.0)
+        ax.set_aspect("equal")
+        seen = ev.get("person_in_view_s_ago")
+        ax.set_title(
+            f"t={ev['t']:.0f}s {','.join(ev.get('bodies', []))} {ev.get('nav_state', '')}"
+            + (f"\nseen {seen:.1f}s ago" if seen is not None else ""),
+            fontsize=8,
+        )
+        ax.tick_params(labelsize=7)
+    fig.tight_layout()
+    out = Path(out_png)
+    fig.savefig(out, dpi=dpi)
+    return out

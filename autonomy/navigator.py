@@ -8,7 +8,8 @@ Per frame it:
 2. if the carrot is far off the heading, turns in place first (the Kinect sees only
    +-29 degrees, so the robot must look where it is going);
 3. otherwise asks the obstacle avoidance (seed 000, Eq. 3-5) for the direction theta*
-   closest to the carrot with the longest open path, and a speed that can stop within it;
+   closest to the carrot with the longest open path, and a speed that can stop within it
+   (and, ours, no faster than ``corner_speed_mps`` round the plan's corners);
 4. watches progress: no progress for ``stuck_time_s`` triggers a recovery (back off
    briefly, then re-plan from the nearest reachable node).
 
@@ -75,6 +76,19 @@ class NavigatorConfig:
     open length there is known only from memory, so the robot looks (it turns towards the
     direction) before it drives fast (a person walking into the corridor it was turning
     into went unseen in the 4 km run); 0 = off (as the paper)."""
+    corner_speed_mps: float = 0.4
+    """Speed limit round the plan's corners (blind corners): the camera cannot see into
+    the corridor the robot turns into, nor beside itself, so it takes corners slowly
+    enough to stop for a person it meets there (as nav2's regulated pure pursuit slows
+    for curvature; 0 = off, as the paper)."""
+    corner_angle_rad: float = math.radians(35.0)
+    """A plan vertex turning by more than this is a corner."""
+    corner_before_m: float = 1.0
+    """The corner speed holds from this far before a corner (along the plan) ..."""
+    corner_after_m: float = 0.3
+    """... to this far past it ..."""
+    corner_ramp_m: float = 1.0
+    """... and the limit rises linearly to the cruise speed over this distance before that."""
     side_hysteresis: float = 1.0
     """Keep swerving to the side chosen before while a direction there scores at least
     this fraction of Eq. 5's best (1 = off, as the paper; 0.7 steadied the approach to a
@@ -99,7 +113,8 @@ class NavigatorConfig:
         )
         require_non_negative(
             self, "navigator.", "backoff_time_s", "backoff_speed_mps", "stuck_progress_m", "memory_s", "unseen_speed_mps",
-            "backoff_check_m", "backoff_clearance_m",
+            "backoff_check_m", "backoff_clearance_m", "corner_speed_mps", "corner_angle_rad", "corner_before_m",
+            "corner_after_m", "corner_ramp_m",
         )
 
 
@@ -153,6 +168,7 @@ class Navigator:
         self._mem = np.zeros((0, 2))
         self._mem_t = np.zeros(0)
         self._side = 0
+        self._corners = np.zeros(0)
 
     # -- planning ----------------------------------------------------------------------
     def nearest_reachable_node(self, xy: np.ndarray) -> int:
@@ -175,6 +191,13 @@ class Navigator:
         self.path = pts[keep]
         seg = np.hypot(*np.diff(self.path, axis=0).T) if len(self.path) > 1 else np.zeros(0)
         self._cum = np.concatenate([[0.0], np.cumsum(seg)])
+        # Corners: inner vertices where the plan turns by more than corner_angle_rad.
+        self._corners = np.zeros(0)
+        if len(self.path) > 2:
+            d = np.diff(self.path, axis=0)
+            heading = np.arctan2(d[:, 1], d[:, 0])
+            turn = np.abs(np.angle(np.exp(1j * np.diff(heading))))
+            self._corners = self._cum[1:-1][turn > self.cfg.corner_angle_rad]
         self.goal = goal_id
         self._best_s = 0.0
         self._progress_t = t
@@ -188,6 +211,24 @@ class Navigator:
         q = a + t[:, None] * d
         k = int(np.argmin(np.hypot(xy[0] - q[:, 0], xy[1] - q[:, 1])))
         return float(self._cum[k] + t[k] * math.sqrt(L2[k]))
+
+    def corner_speed_limit(self, s: float) -> float:
+        """Speed limit at arc length ``s`` of the plan from its corners: ``corner_speed_mps``
+        from ``corner_before_m`` before a corner to ``corner_after_m`` past it, rising
+        linearly to the cruise speed over ``corner_ramp_m`` before that; inf when off."""
+        cfg = self.cfg
+        if cfg.corner_speed_mps <= 0 or not len(self._corners):
+            return math.inf
+        ahead = self._corners - s
+        ahead = ahead[ahead >= -cfg.corner_after_m]
+        if not len(ahead):
+            return math.inf
+        d = float(ahead.min()) - cfg.corner_before_m
+        if d <= 0.0:
+            return cfg.corner_speed_mps
+        if cfg.corner_ramp_m <= 0 or d >= cfg.corner_ramp_m:
+            return math.inf
+        return cfg.corner_speed_mps + (cfg.cruise_speed_mps - cfg.corner_speed_mps) * d / cfg.corner_ramp_m
 
     def _point_at(self, s: float) -> np.ndarray:
         s = min(max(s, 0.0), float(self._cum[-1]))
@@ -353,7 +394,7 @@ class Navigator:
             return NavCommand(np.array([0.0, 0.0, turn]), "turning", carrot=carrot, desired_rad=desired)
         res = choose_direction(np.asarray(obstacles, dtype=np.float64).reshape(-1, 2), desired, self.avoid)
         res = self._keep_side(res, desired)
-        speed = min(cfg.cruise_speed_mps, res.safe_speed_mps, 0.8 * to_goal + 0.05)
+        speed = min(cfg.cruise_speed_mps, res.safe_speed_mps, 0.8 * to_goal + 0.05, self.corner_speed_limit(s))
         fan = (res.angles, res.lengths)
         if res.blocked:
             if self._blind_blocked(obstacles):

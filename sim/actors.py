@@ -165,14 +165,17 @@ class PeopleController:
 
     People are polite pedestrians: when the robot is ahead of a person within
     ``notice_m``, the person steps up to ``step_aside_m`` to the right of the route
-    (never closer than 5 cm to a wall), and waits while the robot is within ``pause_m``
-    in front — for at most ``max_wait_s``, then they walk on past it, stepped aside.
+    (to the left if the robot is to their right; never closer than 5 cm to a wall), and
+    waits while the robot is within ``pause_m`` in front — for at most ``max_wait_s``,
+    then they walk on past it, stepped aside, back to the route only once the robot is
+    ``clear_behind_m`` behind them.
     Otherwise they walk their route at constant speed, back and forth or looped.
     Nobody walks into the robot: a person whose next step would bring them closer than
     ``personal_space_m`` (plus both radii) to the robot's centre stays put for that
     step — people see a robot coming round a corner even when its camera cannot see
     them. Nor do people stand still while a robot drives at them: when the robot closes
-    in to within ``retreat_gap_m`` of a person's body, the person steps back, away from
+    in to within ``retreat_gap_m`` of a person's body and, going on as it goes, would be
+    inside their personal space within ``retreat_horizon_s``, the person steps back, away from
     it, at ``retreat_speed_mps`` (slower than the robot's cruise, and never into a wall).
     Without that, a person whose route ran through the robot waited right beside it,
     out of the camera's view, until the robot drove off sideways into them. A robot that
@@ -180,6 +183,7 @@ class PeopleController:
     """
 
     notice_m = 2.5
+    clear_behind_m = 1.0
     step_aside_m = 0.8
     pause_m = 1.0
     max_wait_s = 2.0
@@ -187,6 +191,7 @@ class PeopleController:
     personal_space_m = 0.15
     retreat_gap_m = 0.3
     retreat_speed_mps = 0.5
+    retreat_horizon_s = 1.0
 
     def __init__(
         self, people: tuple[Person, ...], mocap_ids: np.ndarray, walls: np.ndarray | None = None, robot_radius_m: float = 0.3
@@ -265,7 +270,15 @@ class PeopleController:
         if not (dt > 0 and dist > 1e-9 and dist - self.robot_radius_m - p.radius_m < self.retreat_gap_m):
             return False
         away = rel / dist
-        if float(robot_step @ away) < 0.02 * dt:  # the robot is not moving towards them (2 cm/s)
+        # Step back when the robot, going on as it goes, would come within the personal
+        # space in the next retreat_horizon_s (a robot standing inside it included). A
+        # robot passing alongside does not count, though the distance shrinks a little as
+        # it draws level: a person overtaking it was held abeam, out of its camera's view.
+        v = robot_step / dt
+        vv = float(v @ v)
+        tc = min(max(float(rel @ v) / vv, 0.0), self.retreat_horizon_s) if vv > 1e-12 else 0.0
+        cpa = float(np.hypot(*(rel - v * tc)))
+        if cpa - self.robot_radius_m - p.radius_m >= self.personal_space_m:
             return False
         before = (self._s[i], self._side[i])
         _, d = self._route_point(i, self._s[i])
@@ -308,9 +321,15 @@ class PeopleController:
                 rel = np.asarray(robot_xy[:2]) - pos
                 ahead = float(rel @ d)
                 across = float(rel[0] * d[1] - rel[1] * d[0])  # > 0: robot to the person's right
-                if 0.0 < ahead < self.notice_m and abs(across - self._side[i]) < 1.0:
-                    target_side = self.step_aside_m if across <= 0 else -self.step_aside_m
-                    walk = ahead > self.pause_m or abs(across - self._side[i]) > 0.7 or self._waited[i] > self.max_wait_s
+                aside = abs(self._side[i]) > 0.05
+                passing = aside and -self.clear_behind_m < ahead <= 0.0
+                # Once aside, a wider lateral window: at its edge the person stepped in and
+                # out by a step each frame.
+                if (0.0 < ahead < self.notice_m or passing) and abs(across - self._side[i]) < (1.5 if aside else 1.0):
+                    # Stay on the side of the robot they are on (the robot weaves about the
+                    # same centreline), and stay aside until it is clear_behind_m behind.
+                    target_side = self.step_aside_m if self._side[i] - across >= 0 else -self.step_aside_m
+                    walk = ahead > self.pause_m or ahead <= 0.0 or abs(across - self._side[i]) > 0.7 or self._waited[i] > self.max_wait_s
             self._waited[i] = 0.0 if walk else self._waited[i] + dt
             step = float(np.clip(target_side - self._side[i], -self.side_speed_mps * dt, self.side_speed_mps * dt))
             if step:

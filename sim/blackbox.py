@@ -75,9 +75,14 @@ def frame_record(
 
 
 def render_incidents(
-    incidents: list[dict], walls: np.ndarray, out_png: str | os.PathLike[str], robot_radius_m: float = 0.3, dpi: int = 110
+    incidents: list[dict],
+    walls: np.ndarray,
+    out_png: str | os.PathLike[str],
+    robot_radius_m: float = 0.3,
+    person_radius_m: float = 0.22,
+    dpi: int = 110,
 ) -> Path | None:
-    """One panel per incident (up to 12): walls within 4 m, the robot's true track (its
+    """One panel per incident (up to 12): the walls, the robot's true track (its
     footprint at the contact), each person's track, arrows for the commanded direction."""
     if not incidents:
         return None
@@ -110,7 +115,7 @@ def render_incidents(
                 for j in range(ppl.shape[1]):
                     if np.min(np.hypot(ppl[:, j, 0] - cx, ppl[:, j, 1] - cy)) < 4.0:
                         ax.plot(ppl[:, j, 0], ppl[:, j, 1], "-", color="#d62728", lw=1.0)
-                        ax.plot(ppl[-1, j, 0], ppl[-1, j, 1], "o", color="#d62728", ms=5)
+                        ax.add_patch(Circle((ppl[-1, j, 0], ppl[-1, j, 1]), person_radius_m, fill=False, color="#d62728", lw=1.2))
                         ax.text(ppl[-1, j, 0], ppl[-1, j, 1], f" p{j}", fontsize=7, color="#d62728")
             for f in tr[:: max(1, len(tr) // 12)]:
                 th = f["truth"][2]

@@ -197,3 +197,39 @@ def test_in_camera_view_is_the_cone_between_the_ranges() -> None:
     assert got.tolist() == [True, False, False, True, False, True, False]
     # The memory's narrower test: 28 degrees is outside 90% of the +-28.9 degree view.
     assert not in_camera_view(np.array([2 * math.cos(math.radians(28))]), np.array([2 * math.sin(math.radians(28))]), cfg, 0.9)[0]
+
+
+def l_graph() -> NavGraph:
+    """Straight east 6 m (nodes every 2 m), then a right-angle turn north for 4 m."""
+    pts = [(0.0, 0.0), (2.0, 0.0), (4.0, 0.0), (6.0, 0.0), (6.0, 2.0), (6.0, 4.0)]
+    nodes = tuple(NavNode(id=i, x=x, y=y) for i, (x, y) in enumerate(pts))
+    return NavGraph(nodes=nodes, edges=tuple(NavEdge(s0_id=i, s1_id=i + 1) for i in range(5)))
+
+
+def test_takes_the_plans_corners_slowly() -> None:
+    """Full speed on the straight (collinear nodes are no corners); from 2 m before the
+    right-angle corner the limit falls linearly to corner_speed_mps, which holds from
+    1 m before to 0.3 m past it; then full speed again. The commanded speed follows."""
+    nav = Navigator(l_graph())
+    nav.set_goal(5, np.zeros(3))
+    cfg = nav.cfg
+    assert nav.corner_speed_limit(0.0) == math.inf and nav.corner_speed_limit(3.9) == math.inf
+    assert nav.corner_speed_limit(4.5) == pytest.approx(cfg.corner_speed_mps + 0.5 * (cfg.cruise_speed_mps - cfg.corner_speed_mps))
+    for s in (5.0, 5.5, 6.0, 6.29):
+        assert nav.corner_speed_limit(s) == pytest.approx(cfg.corner_speed_mps)
+    assert nav.corner_speed_limit(6.31) == math.inf
+    speed = lambda x: float(np.hypot(*nav.command(np.array([x, 0.0, 0.0]), np.zeros((0, 2)), 0.0).velocity[:2]))  # noqa: E731
+    assert speed(2.0) == pytest.approx(0.75) and speed(5.2) == pytest.approx(cfg.corner_speed_mps)
+    # A shallow bend (30 degrees) is no corner; corner_speed_mps = 0 turns it off.
+    bend = NavGraph(
+        nodes=(NavNode(id=0, x=0.0, y=0.0), NavNode(id=1, x=3.0, y=0.0), NavNode(id=2, x=3.0 + 3.0 * math.cos(0.5), y=3.0 * math.sin(0.5))),
+        edges=(NavEdge(s0_id=0, s1_id=1), NavEdge(s0_id=1, s1_id=2)),
+    )
+    nav = Navigator(bend)
+    nav.set_goal(2, np.zeros(3))
+    assert nav.corner_speed_limit(2.5) == math.inf
+    nav = Navigator(l_graph(), NavigatorConfig(corner_speed_mps=0.0))
+    nav.set_goal(5, np.zeros(3))
+    assert nav.corner_speed_limit(5.5) == math.inf
+    with pytest.raises(InputError, match="corner_speed_mps"):
+        NavigatorConfig(corner_speed_mps=-0.1)

@@ -87,6 +87,36 @@ def test_a_person_does_not_step_back_into_a_wall_or_from_a_robot_standing_still(
         cur = pc.advance(k * DT, robot)[0, :2]
     assert abs(cur[1]) < 1e-9 or cur[1] < 0.3 - person.radius_m - 0.05 + 1e-9
     still = PeopleController((person,), np.zeros(1, dtype=int))
-    for k in range(1, 60):
-        cur = still.advance(k * DT, np.array([0.0, -0.6]))[0, :2]
+    for k in range(1, 60):  # a robot standing 0.28 m from their body (outside personal space)
+        cur = still.advance(k * DT, np.array([0.0, -0.8]))[0, :2]
     np.testing.assert_allclose(cur, [0.0, 0.0], atol=1e-12)
+
+
+def test_a_person_touched_by_a_standing_robot_steps_out_of_its_personal_space() -> None:
+    """The robot stopped (turning in place) with a person touching its front: the person
+    steps back until the personal space is restored, then stands (in the 4 km run a
+    person pinned like this was touched for 10 s while the robot turned and backed off)."""
+    person = Person(route=((0.0, 0.0), (0.01, 0.0)), speed_mps=0.0)
+    pc = PeopleController((person,), np.zeros(1, dtype=int))
+    robot = np.array([0.0, -(pc.robot_radius_m + person.radius_m)])
+    pos = np.array([pc.advance(k * DT, robot)[0, :2] for k in range(1, 90)])
+    gaps = np.hypot(*(pos - robot).T) - pc.robot_radius_m - person.radius_m
+    assert gaps[15] > 0.1  # stepping back at 0.5 m/s: 0.25 m in half a second, minus the first step
+    assert gaps.min() >= 0.0 and np.all(np.diff(gaps) >= -1e-9)  # never towards the robot
+    assert gaps[-1] >= pc.personal_space_m and np.ptp(pos[-10:], axis=0).max() < 1e-9  # out of it, and standing
+
+
+def test_a_person_overtakes_a_robot_instead_of_walking_abeam_of_it() -> None:
+    """A faster person walking up behind the robot on the same line steps aside and
+    passes it, and is ahead (where the camera sees) a few seconds later. The step back
+    from a robot closing in once held such a person abeam of the robot, just out of its
+    camera's view, until the robot turned into them at a junction (4 km run, ours)."""
+    person = Person(route=((-3.0, 0.0), (40.0, 0.0)), speed_mps=1.3)
+    robot = lambda k: np.array([0.75 * k * DT, 0.02 * np.sin(0.5 * k * DT)])  # noqa: E731 - 0.75 m/s, weaving by 2 cm
+    pos = _walk((person,), robot, 600)
+    rel = pos[:, 0] - np.array([robot(k) for k in range(601)])
+    touch = PeopleController.robot_radius_m if hasattr(PeopleController, "robot_radius_m") else 0.3
+    assert np.hypot(rel[:, 0], rel[:, 1]).min() > touch + person.radius_m + 0.1
+    abeam = np.abs(rel[:, 0]) < 0.5
+    assert abeam.sum() * DT < 2.0  # passing takes ~1 s at the 0.55 m/s difference
+    assert rel[-1, 0] > 2.0  # well ahead of the robot 20 s later

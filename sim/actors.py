@@ -285,21 +285,20 @@ class PeopleController:
         right = np.array([d[1], -d[0]])
         step = self.retreat_speed_mps * dt
         ds, dside = step * float(away @ d), step * float(away @ right)
-        pos_s, _ = self._route_point(i, self._s[i] + ds)
-        if self._side_is_clear(i, pos_s + (self._side[i] + dside) * right):
-            self._s[i] += ds
-            self._side[i] += dside
-        elif self._side_is_clear(i, pos_s + self._side[i] * right):
-            self._s[i] += ds
-        else:
-            return False
-        new = self._place(i)
-        jump = float(np.hypot(*(new[:2] - self._state[i, :2]))) > (self.retreat_speed_mps + 1e-9) * dt * 1.5
-        if jump or float(np.hypot(new[0] - robot_xy[0], new[1] - robot_xy[1])) <= dist:
-            self._s[i], self._side[i] = before  # the route bends there: no step back
-            return False
-        self._state[i] = new
-        return True
+        # Straight away; else only its along-route part (a wall beside); else only sideways,
+        # a full step (the route ends or bends right behind them).
+        for cand_s, cand_side in ((ds, dside), (ds, 0.0), (0.0, math.copysign(step, dside))):
+            pos_s, _ = self._route_point(i, self._s[i] + cand_s)
+            if not self._side_is_clear(i, pos_s + (self._side[i] + cand_side) * right):
+                continue
+            self._s[i], self._side[i] = before[0] + cand_s, before[1] + cand_side
+            new = self._place(i)
+            jump = float(np.hypot(*(new[:2] - self._state[i, :2]))) > (self.retreat_speed_mps + 1e-9) * dt * 1.5
+            if not jump and float(np.hypot(new[0] - robot_xy[0], new[1] - robot_xy[1])) > dist:
+                self._state[i] = new
+                return True
+            self._s[i], self._side[i] = before
+        return False
 
     def advance(self, t: float, robot_xy: np.ndarray | None = None) -> np.ndarray:
         """Move everyone to time t (reacting to the robot); returns (n, 3) x, y, heading."""

@@ -120,3 +120,18 @@ def test_a_person_overtakes_a_robot_instead_of_walking_abeam_of_it() -> None:
     abeam = np.abs(rel[:, 0]) < 0.5
     assert abeam.sum() * DT < 2.0  # passing takes ~1 s at the 0.55 m/s difference
     assert rel[-1, 0] > 2.0  # well ahead of the robot 20 s later
+
+
+def test_a_person_at_the_end_of_their_route_steps_sideways_from_a_robot_backing_at_them() -> None:
+    """A person standing at the end of their route, the robot backing slowly along the
+    route at them (a recovery back-off: the camera looks the other way). Stepping back
+    along the route is impossible there, so they step sideways, and are never touched
+    (the 200 m run's one contact before this)."""
+    person = Person(route=((0.0, 0.0), (5.0, 0.0)), speed_mps=0.0)
+    pc = PeopleController((person,), np.zeros(1, dtype=int))
+    touch = pc.robot_radius_m + person.radius_m
+    gaps = []
+    for k in range(1, 450):
+        robot = np.array([1.5 - 0.15 * k * DT, 0.0])
+        gaps.append(float(np.hypot(*(pc.advance(k * DT, robot)[0, :2] - robot))) - touch)
+    assert min(gaps) > 0.05, min(gaps)

@@ -76,11 +76,12 @@ class NavigatorConfig:
     open length there is known only from memory, so the robot looks (it turns towards the
     direction) before it drives fast (a person walking into the corridor it was turning
     into went unseen in the 4 km run); 0 = off (as the paper)."""
-    corner_speed_mps: float = 0.4
-    """Speed limit round the plan's corners (blind corners): the camera cannot see into
-    the corridor the robot turns into, nor beside itself, so it takes corners slowly
-    enough to stop for a person it meets there (as nav2's regulated pure pursuit slows
-    for curvature; 0 = off, as the paper)."""
+    corner_speed_mps: float = 0.0
+    """Speed limit round the plan's corners (blind corners), e.g. 0.4: the camera cannot
+    see into the corridor the robot turns into, nor beside itself, so it takes corners
+    slowly enough to stop for a person it meets there (as nav2's regulated pure pursuit
+    slows for curvature). 0 = off (default, as the paper): with 0.4 the 200 m CI run
+    meets an unmapped box at another time and CGR snaps it onto a pillar (one reset)."""
     corner_angle_rad: float = math.radians(35.0)
     """A plan vertex turning by more than this is a corner."""
     corner_before_m: float = 1.0

@@ -207,10 +207,10 @@ def l_graph() -> NavGraph:
 
 
 def test_takes_the_plans_corners_slowly() -> None:
-    """Full speed on the straight (collinear nodes are no corners); from 2 m before the
+    """With corner_speed_mps 0.4: full speed on the straight (collinear nodes are no corners); from 2 m before the
     right-angle corner the limit falls linearly to corner_speed_mps, which holds from
     1 m before to 0.3 m past it; then full speed again. The commanded speed follows."""
-    nav = Navigator(l_graph())
+    nav = Navigator(l_graph(), NavigatorConfig(corner_speed_mps=0.4))
     nav.set_goal(5, np.zeros(3))
     cfg = nav.cfg
     assert nav.corner_speed_limit(0.0) == math.inf and nav.corner_speed_limit(3.9) == math.inf
@@ -225,10 +225,10 @@ def test_takes_the_plans_corners_slowly() -> None:
         nodes=(NavNode(id=0, x=0.0, y=0.0), NavNode(id=1, x=3.0, y=0.0), NavNode(id=2, x=3.0 + 3.0 * math.cos(0.5), y=3.0 * math.sin(0.5))),
         edges=(NavEdge(s0_id=0, s1_id=1), NavEdge(s0_id=1, s1_id=2)),
     )
-    nav = Navigator(bend)
+    nav = Navigator(bend, NavigatorConfig(corner_speed_mps=0.4))
     nav.set_goal(2, np.zeros(3))
     assert nav.corner_speed_limit(2.5) == math.inf
-    nav = Navigator(l_graph(), NavigatorConfig(corner_speed_mps=0.0))
+    nav = Navigator(l_graph())  # off by default
     nav.set_goal(5, np.zeros(3))
     assert nav.corner_speed_limit(5.5) == math.inf
     with pytest.raises(InputError, match="corner_speed_mps"):

@@ -116,7 +116,7 @@ def render_incidents(
                     if np.min(np.hypot(ppl[:, j, 0] - cx, ppl[:, j, 1] - cy)) < 4.0:
                         ax.plot(ppl[:, j, 0], ppl[:, j, 1], "-", color="#d62728", lw=1.0)
                         ax.add_patch(Circle((ppl[-1, j, 0], ppl[-1, j, 1]), person_radius_m, fill=False, color="#d62728", lw=1.2))
-                        ax.text(ppl[-1, j, 0], ppl[-1, j, 1], f" p{j}", fontsize=7, color="#d62728")
+                        ax.text(ppl[-1, j, 0], ppl[-1, j, 1], f" p{j}", fontsize=7, color="#d62728", clip_on=True)
             for f in tr[:: max(1, len(tr) // 12)]:
                 th = f["truth"][2]
                 vx, vy = f["cmd"][0], f["cmd"][1]

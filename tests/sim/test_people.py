@@ -122,16 +122,19 @@ def test_a_person_overtakes_a_robot_instead_of_walking_abeam_of_it() -> None:
     assert rel[-1, 0] > 2.0  # well ahead of the robot 20 s later
 
 
-def test_a_person_at_the_end_of_their_route_steps_sideways_from_a_robot_backing_at_them() -> None:
-    """A person standing at the end of their route, the robot backing slowly along the
-    route at them (a recovery back-off: the camera looks the other way). Stepping back
-    along the route is impossible there, so they step sideways, and are never touched
-    (the 200 m run's one contact before this)."""
-    person = Person(route=((0.0, 0.0), (5.0, 0.0)), speed_mps=0.0)
-    pc = PeopleController((person,), np.zeros(1, dtype=int))
+def test_a_person_who_cannot_step_back_along_their_route_steps_sideways() -> None:
+    """A person facing away from a robot backing slowly at them along their route (a
+    recovery back-off), with a wall right behind them across the route: stepping back
+    along the route is impossible, so they step sideways and are never touched. Before,
+    they stood still and the robot drove into them (the 200 m run's one contact, at the
+    end of a person's route)."""
+    person = Person(route=((0.0, 0.0), (5.0, 0.0)), speed_mps=0.0, start_offset_m=8.0)  # at x = 2, facing -x
+    walls = np.array([[1.72, -0.3, 1.72, 0.3]])
+    pc = PeopleController((person,), np.zeros(1, dtype=int), walls)
     touch = pc.robot_radius_m + person.radius_m
     gaps = []
-    for k in range(1, 450):
-        robot = np.array([1.5 - 0.15 * k * DT, 0.0])
+    for k in range(1, 300):
+        robot = np.array([max(3.5 - 0.15 * k * DT, 2.3), 0.0])  # stops where it would overlap them
         gaps.append(float(np.hypot(*(pc.advance(k * DT, robot)[0, :2] - robot))) - touch)
     assert min(gaps) > 0.05, min(gaps)
+    assert abs(pc.positions()[0, 1]) > 0.3  # stepped sideways

@@ -17,31 +17,47 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["FlightRecorder", "render_incidents"]
+__all__ = ["FlightRecorder", "render_incidents", "starts_incident"]
+
+
+INCIDENT_GAP_S = 3.0
+"""Contacts with the same bodies less than this apart are one incident."""
+
+
+def starts_incident(last: dict[tuple, float], event: dict, gap_s: float = INCIDENT_GAP_S) -> bool:
+    """Whether a contact event begins a new incident: its bodies were not touched in the
+    last ``gap_s`` (contact is made and broken many times while the robot and a person
+    push against each other). Updates ``last`` (bodies -> time last touched)."""
+    key = tuple(event.get("bodies", event.get("with", ())))
+    new = key not in last or event["t"] - last[key] > gap_s
+    last[key] = event["t"]
+    return new
 
 
 class FlightRecorder:
-    """Ring buffer of per-frame records; ``freeze`` copies it out for an incident."""
+    """Ring buffer of per-frame state; a new collision incident freezes a copy of it.
+
+    ``push`` only keeps references (a few microseconds a frame); the records are built
+    when an incident is frozen, so a run without contacts pays almost nothing.
+    """
 
     def __init__(self, seconds: float, rate_hz: float) -> None:
         self.frames = max(1, int(round(seconds * rate_hz)))
-        self._buf: deque[dict] = deque(maxlen=self.frames)
+        self._buf: deque[tuple] = deque(maxlen=self.frames)
         self.incidents: list[dict] = []
         self._last: dict[tuple, float] = {}
 
-    def push(self, record: dict) -> None:
-        """One frame's record (JSON-serialisable values)."""
-        self._buf.append(record)
+    def push(self, t: float, truth: np.ndarray, estimate: np.ndarray, nav, cmd: np.ndarray, obstacles: np.ndarray, people: np.ndarray) -> None:
+        """One frame: true and estimated pose, the navigator's ``NavCommand`` and the
+        velocity sent, the sensed obstacles (robot frame) and the people (n, 2+). The
+        arrays must not be modified afterwards (the runner makes new ones each frame)."""
+        self._buf.append((t, truth, estimate, nav, cmd, obstacles, people))
 
-    def on_events(self, events: list[dict], gap_s: float = 3.0) -> None:
-        """Freeze the buffer for each event that starts a new incident (the same bodies
-        not touched in the last ``gap_s``, as ``runner.collision_incidents`` counts)."""
+    def on_events(self, events: list[dict]) -> None:
+        """Freeze the buffer for each event that starts a new incident (``starts_incident``)."""
         for e in events:
-            key = tuple(e.get("bodies", e.get("with", ())))
-            new = key not in self._last or e["t"] - self._last[key] > gap_s
-            self._last[key] = e["t"]
-            if new:
-                self.incidents.append({"event": dict(e), "trace": list(self._buf)})
+            if starts_incident(self._last, e):
+                self.incidents.append({"event": dict(e), "trace": [frame_record(*f) for f in self._buf]})
 
 
 def frame_record(
@@ -53,11 +69,10 @@ def frame_record(
     obstacles: np.ndarray,
     people: np.ndarray,
 ) -> dict:
-    """The compact per-frame record: poses, navigator decision, nearest obstacle, people."""
+    """One frame as JSON: poses, navigator decision, nearest obstacle, people."""
     near = None
     if len(obstacles):
-        r = np.hypot(obstacles[:, 0], obstacles[:, 1])
-        k = int(np.argmin(r))
+        k = int(np.argmin(np.hypot(obstacles[:, 0], obstacles[:, 1])))
         near = [round(float(obstacles[k, 0]), 3), round(float(obstacles[k, 1]), 3)]
     return {
         "t": round(float(t), 3),

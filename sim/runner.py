@@ -28,7 +28,7 @@ from autonomy.planner import astar, path_points
 from autonomy.raycast import SceneQuery, load_or_build
 from autonomy.vectormap import NavGraph, VectorMap, load_navgraph, load_vectormap
 from sim.actors import Furniture, Person, point_segment_distance
-from sim.blackbox import FlightRecorder, frame_record, render_incidents
+from sim.blackbox import INCIDENT_GAP_S, FlightRecorder, render_incidents, starts_incident
 from sim.config import to_dict
 from sim.kinect import KinectCamera
 from sim.kinect_noise import apply_kinect_noise
@@ -200,18 +200,10 @@ def _people_in_view(people: np.ndarray, pose: np.ndarray, scn: Scenario) -> np.n
     return in_camera_view(x, -s * rel[:, 0] + c * rel[:, 1], scn.navigator)
 
 
-def collision_incidents(events: list[dict], gap_s: float = 3.0) -> int:
-    """Encounters behind the contact events: contacts with the same bodies less than
-    ``gap_s`` apart are one incident (contact is made and broken many times while the
-    robot and a person push against each other)."""
+def collision_incidents(events: list[dict], gap_s: float = INCIDENT_GAP_S) -> int:
+    """Encounters behind the contact events (``sim.blackbox.starts_incident``)."""
     last: dict[tuple, float] = {}
-    n = 0
-    for e in events:
-        key = tuple(e.get("bodies", e.get("with", ())))
-        if key not in last or e["t"] - last[key] > gap_s:
-            n += 1
-        last[key] = e["t"]
-    return n
+    return sum(starts_incident(last, e, gap_s) for e in events)
 
 
 def run_scenario(
@@ -372,7 +364,7 @@ def run_scenario(
             if n_people:
                 last_in_view[_people_in_view(world.people.positions(), pose, scn)] = t + frame_dt
             new_events = world.step_frame(n_sub)
-            blackbox.push(frame_record(world.data.time, world.robot.pose(world.data), control_pose, nav, cmd, obstacles, world.people.positions()))
+            blackbox.push(world.data.time, world.robot.pose(world.data), control_pose, nav, cmd, obstacles, world.people.positions())
             if new_events:
                 # What the robot was doing: the navigator's state and the direction it was
                 # told to move in (robot frame, degrees), to tell blind-zone contacts apart.

@@ -64,6 +64,10 @@ class CGRConfig:
     0 = the fixed gate)."""
     max_gate_m: float = 1.5
     """... up to this."""
+    consistent_fraction: float = 0.5
+    """Association check (ours): correspondences are found again at the refined mean;
+    if fewer than this fraction of the used points keep their line there, the others are
+    dropped and the shared refinement is redone (0 = off)."""
     share_radius_m: float = 1.0
     """Particles within this distance (and share_angle_rad) of the proposal mean share its
     scene lines and correspondences; others get their own."""
@@ -81,6 +85,8 @@ class CGRConfig:
             self, "cgr.", "alpha1", "alpha2_rad_per_m", "alpha3", "min_translation_std_m", "min_rotation_std_rad",
             "init_std_xy_m", "init_std_theta_rad", "gate_sigmas",
         )
+        if not 0 <= self.consistent_fraction <= 1:
+            raise InputError(f"cgr.consistent_fraction: expected a number in [0, 1], got {self.consistent_fraction!r}")
         require_positive(self, "cgr.", "max_gate_m", "trust_region_m", "step_fraction")
         if not 0 < self.step_fraction <= 1:
             raise InputError(f"cgr.step_fraction: expected a number in (0, 1], got {self.step_fraction!r}")
@@ -109,6 +115,8 @@ class UpdateStats:
     accepted_refinements: int = 0
     observation: bool = False
     shared: int = 0
+    dropped_points: int = 0
+    """Points the association check dropped (their line changed at the refined pose)."""
 
 
 def _wrap(a: np.ndarray | float) -> np.ndarray | float:
@@ -247,10 +255,28 @@ class CGRLocalizer:
         stats.shared = int(share.sum())
         m = np.empty((5, 5))
         if share.any():
-            used = moments(frames_shared, idx_shared, pts, m)
             sel = np.flatnonzero(share)
+            first = np.ascontiguousarray(self.particles[sel])
             o_p, o0, o1 = np.empty((len(sel), 3)), np.empty(len(sel)), np.empty(len(sel))
-            refine_all_m(m, used, np.ascontiguousarray(self.particles[sel]), k, iters, cfg.step_fraction, obs.min_points, o_p, o0, o1, cfg.trust_region_m)
+            used = moments(frames_shared, idx_shared, pts, m)
+            refine_all_m(m, used, first, k, iters, cfg.step_fraction, obs.min_points, o_p, o0, o1, cfg.trust_region_m)
+            if iters > 0 and used >= obs.min_points and cfg.consistent_fraction > 0:
+                # Association check (ours): re-find the correspondences where the
+                # refinement led. A box's face beside a pillar, matched to the pillar's
+                # extended line, slides onto that line but off its segment: those points
+                # lose their line there. If too many do, drop them and refine again.
+                at = np.array([o_p[:, 0].mean(), o_p[:, 1].mean(), circular_mean(o_p[:, 2])])
+                idx_at = np.empty(len(pts), dtype=np.int64)
+                correspond(lines, at, pts, nrm, use_n, cos_max, obs.max_distance_m, idx_at)
+                same = (idx_shared >= 0) & (idx_at == idx_shared)
+                stats.dropped_points = int(used - same.sum())
+                if same.sum() < cfg.consistent_fraction * used:
+                    idx_shared[~same] = -1
+                    used = moments(frames_shared, idx_shared, pts, m)
+                    refine_all_m(m, used, first, k, iters, cfg.step_fraction, obs.min_points, o_p, o0, o1, cfg.trust_region_m)
+                    stats.used_points = int(used)
+                else:
+                    stats.dropped_points = 0
             refined[sel], lnp0[sel], lnpr[sel] = o_p, o0, o1
         for i in np.flatnonzero(~share):
             p = self.particles[i]

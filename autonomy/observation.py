@@ -134,12 +134,14 @@ def correspond(lines, pose, pts, nrm, use_normals, cos_theta_max, max_dist, out_
             out_idx[i] = -1
             continue
         # The gate is on the distance to the segment, not to its infinite line: a point
-        # short of a small segment (a pillar's face seen past a table) must not match it.
+        # short of a small segment (a pillar's face seen past a table) or off its end (a
+        # box beside a pillar) must not match it.
         ex, ey = lines[best, 2] - lines[best, 0], lines[best, 3] - lines[best, 1]
         el = math.sqrt(ex * ex + ey * ey)
         if el > 0.0:
             along = ((qx + x - lines[best, 0]) * ex + (qy + y - lines[best, 1]) * ey) / el
-            if along < -max_dist or along > el + max_dist:
+            off = -along if along < 0.0 else (along - el if along > el else 0.0)
+            if d * d + off * off > max_dist * max_dist:
                 out_idx[i] = -1
                 continue
         out_idx[i] = best

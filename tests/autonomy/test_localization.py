@@ -111,16 +111,17 @@ def test_points_short_of_a_small_segment_do_not_match_its_extension() -> None:
     idx = np.empty(len(pts), dtype=np.int64)
     kept = correspond(segs, np.zeros(3), pts, np.zeros_like(pts), False, -1.0, 0.5, idx)
     assert idx.tolist() == [-1, -1, 0, 0, 0] and kept == 3
-    # Brute force: keep exactly the points within the gate of the segment (not the line).
+    # Brute force: keep exactly the points within the gate of the segment (not the line),
+    # sampled densely round the face's end where the two distances differ.
     rng = np.random.default_rng(4)
-    q = rng.uniform([2.0, 6.0], [3.5, 11.0], size=(400, 2))
+    q = np.vstack([rng.uniform([2.0, 6.0], [3.5, 11.0], size=(400, 2)), rng.uniform([2.7, 9.9], [3.4, 11.0], size=(400, 2))])
     idx = np.empty(len(q), dtype=np.int64)
     correspond(segs, np.zeros(3), q, np.zeros_like(q), False, -1.0, 0.5, idx)
     for (px, py), j in zip(q, idx, strict=True):
         t = 3.0 / px  # the ray through the point reaches x = 3 at t * (px, py)
         hits = px > 0 and 9.9 <= t * py <= 10.1
         along = py - 10.1 if py > 10.1 else (9.9 - py if py < 9.9 else 0.0)
-        keep = hits and abs(px - 3.0) <= 0.5 and along <= 0.5
+        keep = hits and math.hypot(px - 3.0, along) <= 0.5
         assert (j == 0) == keep, (px, py)
 
 

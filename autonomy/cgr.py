@@ -7,7 +7,9 @@ A particle filter over (x, y, theta). Each frame (IV-C, steps 1-4):
 2. each sample is refined in r iterations along the gradient of the observation
    log-likelihood (:func:`autonomy.observation.refine_all_m`): q1 .. qr, within a trust
    region of its first-stage pose (ours), on correspondences found within a gate that
-   widens with the belief's spread (:meth:`CGRLocalizer.gate`, ours);
+   widens with the belief's spread (:meth:`CGRLocalizer.gate`, ours), and checked
+   where it led: points whose line changes there are dropped (``consistent_fraction``,
+   ours);
 3. an acceptance test chooses, per sample, between its refined and its first-stage
    version: the refined one is kept with probability min(1, p(y|x_r) / p(y|x_0));
 4. samples are weighted by their observation likelihood and resampled (low variance).

@@ -332,3 +332,51 @@ def test_gate_widens_with_the_belief_spread() -> None:
     assert fixed.gate(loose, pts) == pytest.approx(0.5)
     with pytest.raises(InputError, match="gate_sigmas"):
         CGRConfig(gate_sigmas=-1.0)
+
+
+def _box_beside_a_pillar(consistent_fraction: float, seed: int) -> tuple[CGRLocalizer, np.ndarray]:
+    """The frame that broke the 200 m corner run, reduced: the only thing in view is an
+    unmapped box's face 0.4 m in front of a pillar's face and off its end. The rays to
+    the box hit the pillar face, so the box's points correspond to it; refined on the
+    face's extended line they drag the pose 0.4 m towards the pillar."""
+    face = np.array([[0.25, -0.25, 0.25, 0.25]])
+    true = np.array([2.2, 2.0, math.atan2(-1.65, -1.55)])
+    rng = np.random.default_rng(seed)
+    box = np.column_stack([0.65 + 0.005 * rng.standard_normal(40), np.linspace(0.3, 0.6, 40)])
+    c, s = math.cos(true[2]), math.sin(true[2])
+    world_to_robot = np.array([[c, s], [-s, c]])
+    pts = (box - true[:2]) @ world_to_robot.T
+    nrm = np.tile([1.0, 0.0], (40, 1)) @ world_to_robot.T
+    loc = CGRLocalizer(lambda x, y: face, CGRConfig(consistent_fraction=consistent_fraction), ObservationConfig(), np.random.default_rng(seed))
+    loc.reset(true, 0.12, math.radians(3.0))
+    loc.update(pts, nrm)
+    return loc, true
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_association_check_drops_a_box_matched_to_a_pillar_beside_it(seed: int) -> None:
+    loc, true = _box_beside_a_pillar(0.5, seed)
+    assert loc.last.dropped_points >= 30
+    assert math.hypot(*(loc.estimate().pose[:2] - true[:2])) < 0.1
+    # Without the check the same frame pulls the estimate 0.4 m off.
+    off, _ = _box_beside_a_pillar(0.0, seed)
+    assert off.last.dropped_points == 0 and math.hypot(*(off.estimate().pose[:2] - true[:2])) > 0.3
+
+
+def test_association_check_keeps_a_well_posed_observation() -> None:
+    """A room seen from 8 cm and 1 degree off: every correspondence holds at the refined
+    pose, nothing is dropped, and the refinement lands on the true pose."""
+    rng = np.random.default_rng(3)
+    segs = room()
+    true = np.array([3.5, 2.5, 0.7])
+    pts, nrm = observe(segs, true, rng)
+    loc = CGRLocalizer(lambda x, y: segs, CGRConfig(), ObservationConfig(), np.random.default_rng(3))
+    loc.reset(true + [0.08, -0.05, math.radians(1.0)], 0.02, math.radians(0.5))
+    loc.update(pts, nrm)
+    assert loc.last.dropped_points == 0 and loc.last.used_points > 300
+    assert math.hypot(*(loc.estimate().pose[:2] - true[:2])) < 0.03
+
+
+def test_consistent_fraction_is_a_fraction() -> None:
+    with pytest.raises(InputError, match="cgr.consistent_fraction"):
+        CGRConfig(consistent_fraction=1.5)

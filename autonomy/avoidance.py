@@ -191,13 +191,25 @@ def candidate_angles(desired_rad: float, cfg: AvoidanceConfig) -> np.ndarray:
 
 
 def choose_direction(
-    points2d: np.ndarray, desired_rad: float, cfg: AvoidanceConfig | None = None
+    points2d: np.ndarray,
+    desired_rad: float,
+    cfg: AvoidanceConfig | None = None,
+    static_points2d: np.ndarray | None = None,
+    static_radius_m: float | None = None,
 ) -> AvoidanceResult:
-    """theta* by Eq. 5 over the candidate fan around desired_rad, with its open length and safe speed."""
+    """theta* by Eq. 5 over the candidate fan around desired_rad, with its open length and safe speed.
+
+    ``static_points2d`` (ours): known obstacles (map walls the camera cannot see) taken
+    with their own radius ``static_radius_m`` (default ``cfg.radius_m``); d(theta) is the
+    shorter of the two open lengths.
+    """
     cfg = AvoidanceConfig() if cfg is None else cfg
     angles = candidate_angles(desired_rad, cfg)
     d = wrap_angle(float(desired_rad))
     lengths = open_path_lengths(points2d, angles, cfg.radius_m, cfg.max_range_m)
+    if static_points2d is not None and len(static_points2d):
+        r = cfg.radius_m if static_radius_m is None else float(static_radius_m)
+        lengths = np.minimum(lengths, open_path_lengths(static_points2d, angles, r, cfg.max_range_m))
     score = lengths * np.cos(angles - d)  # Eq. 5
     best = float(score.max())
     ties = np.flatnonzero(score >= best - 1e-12 * max(1.0, abs(best)))

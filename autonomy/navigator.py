@@ -9,7 +9,9 @@ Per frame it:
    +-29 degrees, so the robot must look where it is going);
 3. otherwise asks the obstacle avoidance (seed 000, Eq. 3-5) for the direction theta*
    closest to the carrot with the longest open path, and a speed that can stop within it
-   (and, ours, no faster than ``corner_speed_mps`` round the plan's corners);
+   (and, ours, no faster than ``corner_speed_mps`` round the plan's corners nor than
+   the graph edge's ``max_speed``; map walls in the camera's blind spots count as
+   obstacles, ``map_blind_spots_m``);
 4. watches progress: no progress for ``stuck_time_s`` triggers a recovery (back off
    briefly, then re-plan from the nearest reachable node).
 
@@ -76,12 +78,26 @@ class NavigatorConfig:
     open length there is known only from memory, so the robot looks (it turns towards the
     direction) before it drives fast (a person walking into the corridor it was turning
     into went unseen in the 4 km run); 0 = off (as the paper)."""
-    corner_speed_mps: float = 0.0
-    """Speed limit round the plan's corners (blind corners), e.g. 0.4: the camera cannot
-    see into the corridor the robot turns into, nor beside itself, so it takes corners
-    slowly enough to stop for a person it meets there (as nav2's regulated pure pursuit
-    slows for curvature). 0 = off (default, as the paper): with 0.4 the 200 m CI run
-    meets an unmapped box at another time and CGR snaps it onto a pillar (one reset)."""
+    corner_speed_mps: float = 0.4
+    """Speed limit round the plan's corners (blind corners): the camera cannot see into
+    the corridor the robot turns into, nor beside itself, so it takes corners slowly
+    enough to stop for a person it meets there (ours, as nav2's regulated pure pursuit
+    slows for curvature; 4 of 7 person contacts in a 4 km run were people turning the
+    same corner just ahead of the robot). 0 = off (as the paper)."""
+    edge_speed_limits: bool = True
+    """Honour the navigation graph's per-edge ``max_speed`` (the map format's field; the
+    shipped building's doors say 0.5 m/s) from ``lookahead_m`` before an edge until the
+    robot's back has left it."""
+    map_blind_spots_m: float = 0.7
+    """Map walls within this distance of the robot and outside the camera's view join the
+    obstacles (ours, like nav2's static costmap layer): the camera sees neither beside the
+    robot nor closer than 0.8 m, and the memory forgets a wall after ``memory_s``, so a
+    robot swerving round a person scraped the corridor wall beside it in the 4 km run.
+    0 = off."""
+    map_clearance_m: float = 0.05
+    """Map walls are kept this far beyond the robot radius (the avoidance's safety margin
+    applies to sensed points; the map's walls are placed through the pose estimate, and
+    doors leave 7 cm beside the margin)."""
     corner_angle_rad: float = math.radians(35.0)
     """A plan vertex turning by more than this is a corner."""
     corner_before_m: float = 1.0
@@ -115,6 +131,7 @@ class NavigatorConfig:
         require_non_negative(
             self, "navigator.", "backoff_time_s", "backoff_speed_mps", "stuck_progress_m", "memory_s", "unseen_speed_mps",
             "backoff_check_m", "backoff_clearance_m", "corner_speed_mps", "corner_angle_rad", "corner_before_m",
+            "map_blind_spots_m", "map_clearance_m",
             "corner_after_m", "corner_ramp_m",
         )
 
@@ -170,6 +187,11 @@ class Navigator:
         self._mem_t = np.zeros(0)
         self._side = 0
         self._corners = np.zeros(0)
+        self._seg_speed = np.zeros(0)
+        self._edge_speed = {}
+        for e in graph.edges:
+            self._edge_speed[(e.s0_id, e.s1_id)] = float(e.max_speed)
+            self._edge_speed[(e.s1_id, e.s0_id)] = float(e.max_speed)
 
     # -- planning ----------------------------------------------------------------------
     def nearest_reachable_node(self, xy: np.ndarray) -> int:
@@ -188,8 +210,11 @@ class Navigator:
         start = self.nearest_reachable_node(np.asarray(pose[:2]))
         nodes = astar(self.graph, start, goal_id, exclude_stairs=self.cfg.exclude_stairs)
         pts = np.vstack([np.asarray(pose[:2], dtype=np.float64)[None, :], path_points(self.graph, nodes)])
+        # Speed limit of each segment: the edge's max_speed; none from the pose to the plan.
+        speeds = np.array([math.inf] + [self._edge_speed.get((a, b), math.inf) for a, b in zip(nodes[:-1], nodes[1:], strict=True)])
         keep = np.concatenate([[True], np.hypot(*np.diff(pts, axis=0).T) > 1e-6])
         self.path = pts[keep]
+        self._seg_speed = speeds[keep[1:]] if len(speeds) else speeds
         seg = np.hypot(*np.diff(self.path, axis=0).T) if len(self.path) > 1 else np.zeros(0)
         self._cum = np.concatenate([[0.0], np.cumsum(seg)])
         # Corners: inner vertices where the plan turns by more than corner_angle_rad.
@@ -230,6 +255,26 @@ class Navigator:
         if cfg.corner_ramp_m <= 0 or d >= cfg.corner_ramp_m:
             return math.inf
         return cfg.corner_speed_mps + (cfg.cruise_speed_mps - cfg.corner_speed_mps) * d / cfg.corner_ramp_m
+
+    def edge_speed_limit(self, s: float) -> float:
+        """The lowest ``max_speed`` of the plan's edges from ``robot_radius_m`` behind arc
+        length ``s`` to ``lookahead_m`` ahead of it; inf when off or unlimited."""
+        if not self.cfg.edge_speed_limits or not len(self._seg_speed):
+            return math.inf
+        lo, hi = s - self.avoid.robot_radius_m, s + self.cfg.lookahead_m
+        on = (self._cum[1:] > lo) & (self._cum[:-1] < hi)
+        return float(self._seg_speed[on].min()) if on.any() else math.inf
+
+    def map_blind_spots(self, pose: np.ndarray) -> np.ndarray:
+        """Map wall points within ``map_blind_spots_m`` that the camera cannot see now
+        (outside its view cone or closer than its minimum range), robot frame."""
+        cfg = self.cfg
+        if cfg.map_blind_spots_m <= 0:
+            return np.zeros((0, 2))
+        w = self.map_points(pose, cfg.map_blind_spots_m)
+        if not len(w):
+            return w
+        return w[~in_camera_view(w[:, 0] - cfg.camera_forward_m, w[:, 1], cfg)]
 
     def _point_at(self, s: float) -> np.ndarray:
         s = min(max(s, 0.0), float(self._cum[-1]))
@@ -393,9 +438,12 @@ class Navigator:
         turn = float(np.clip(cfg.heading_gain * desired, -cfg.max_turn_rate_rad_s, cfg.max_turn_rate_rad_s))
         if abs(desired) > cfg.turn_in_place_rad:
             return NavCommand(np.array([0.0, 0.0, turn]), "turning", carrot=carrot, desired_rad=desired)
-        res = choose_direction(np.asarray(obstacles, dtype=np.float64).reshape(-1, 2), desired, self.avoid)
+        static = self.map_blind_spots(pose)
+        res = choose_direction(
+            np.asarray(obstacles, dtype=np.float64).reshape(-1, 2), desired, self.avoid, static, self.avoid.robot_radius_m + cfg.map_clearance_m
+        )
         res = self._keep_side(res, desired)
-        speed = min(cfg.cruise_speed_mps, res.safe_speed_mps, 0.8 * to_goal + 0.05, self.corner_speed_limit(s))
+        speed = min(cfg.cruise_speed_mps, res.safe_speed_mps, 0.8 * to_goal + 0.05, self.corner_speed_limit(s), self.edge_speed_limit(s))
         fan = (res.angles, res.lengths)
         if res.blocked:
             if self._blind_blocked(obstacles):

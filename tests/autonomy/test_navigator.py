@@ -228,8 +228,49 @@ def test_takes_the_plans_corners_slowly() -> None:
     nav = Navigator(bend, NavigatorConfig(corner_speed_mps=0.4))
     nav.set_goal(2, np.zeros(3))
     assert nav.corner_speed_limit(2.5) == math.inf
-    nav = Navigator(l_graph())  # off by default
+    nav = Navigator(l_graph(), NavigatorConfig(corner_speed_mps=0.0))  # 0 = off
     nav.set_goal(5, np.zeros(3))
     assert nav.corner_speed_limit(5.5) == math.inf
     with pytest.raises(InputError, match="corner_speed_mps"):
         NavigatorConfig(corner_speed_mps=-0.1)
+
+
+def test_honours_the_edges_max_speed() -> None:
+    """The edge from x = 4 to 6 says 0.5 m/s (a door): the limit holds from lookahead_m
+    before it until the robot's back (robot_radius_m) has left it; the command follows."""
+    g = line_graph()
+    edges = tuple(NavEdge(s0_id=e.s0_id, s1_id=e.s1_id, has_door=e.s0_id == 2, max_speed=0.5 if e.s0_id == 2 else 0.75) for e in g.edges)
+    nav = Navigator(NavGraph(nodes=g.nodes, edges=edges))
+    nav.set_goal(5, np.zeros(3))
+    assert nav.edge_speed_limit(1.0) == pytest.approx(0.75) and nav.edge_speed_limit(3.1) == pytest.approx(0.75)
+    for s in (3.3, 5.0, 6.2):
+        assert nav.edge_speed_limit(s) == pytest.approx(0.5)
+    assert nav.edge_speed_limit(6.4) == pytest.approx(0.75)
+    speed = lambda n, x: float(np.hypot(*n.command(np.array([x, 0.0, 0.0]), np.zeros((0, 2)), 0.0).velocity[:2]))  # noqa: E731
+    assert speed(nav, 1.0) == pytest.approx(0.75) and speed(nav, 5.0) == pytest.approx(0.5)
+    # Planned the other way round, the same edge limits too.
+    nav.set_goal(0, np.array([10.0, 0.0, math.pi]))
+    assert nav.edge_speed_limit(5.0) == pytest.approx(0.5)
+    off = Navigator(NavGraph(nodes=g.nodes, edges=edges), NavigatorConfig(edge_speed_limits=False))
+    off.set_goal(5, np.zeros(3))
+    assert speed(off, 5.0) == pytest.approx(0.75)
+
+
+def test_map_walls_the_camera_cannot_see_steer_the_robot_off_them() -> None:
+    """A wall 0.33 m to the right, beside the robot where the camera does not look: its
+    map points block the straight direction (within robot radius + map_clearance_m), so
+    the robot steers left, away from it. Without the map layer it drives straight on,
+    and a wall farther than the clearance changes nothing."""
+    wall = np.array([[-2.0, -0.33, 3.0, -0.33]])
+    nav = Navigator(line_graph(), walls=wall)
+    nav.set_goal(5, np.zeros(3))
+    pts = nav.map_blind_spots(np.zeros(3))
+    assert len(pts) and np.all(np.hypot(pts[:, 0], pts[:, 1]) <= nav.cfg.map_blind_spots_m + 1e-9)
+    cmd = nav.command(np.zeros(3), np.zeros((0, 2)), 0.0)
+    assert cmd.state == "driving" and cmd.theta_star_rad > math.radians(5)
+    off = Navigator(line_graph(), NavigatorConfig(map_blind_spots_m=0.0), walls=wall)
+    off.set_goal(5, np.zeros(3))
+    assert off.command(np.zeros(3), np.zeros((0, 2)), 0.0).theta_star_rad == pytest.approx(0.0)
+    far = Navigator(line_graph(), walls=np.array([[-2.0, -0.45, 3.0, -0.45]]))
+    far.set_goal(5, np.zeros(3))
+    assert far.command(np.zeros(3), np.zeros((0, 2)), 0.0).theta_star_rad == pytest.approx(0.0)

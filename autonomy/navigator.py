@@ -98,6 +98,17 @@ class NavigatorConfig:
     """Map walls are kept this far beyond the robot radius (the avoidance's safety margin
     applies to sensed points; the map's walls are placed through the pose estimate, and
     doors leave 7 cm beside the margin)."""
+    proximity_speed_mps: float = 0.4
+    """At most this speed while a sensed or remembered obstacle lies within
+    ``proximity_gap_m`` beyond the avoidance corridor of the chosen direction, less than
+    ``proximity_range_m`` ahead (ours, like nav2's cost-regulated speed near obstacles):
+    Eq. 3-5 treat a person walking towards the robot as standing still, and in a 4 km
+    run 4 of 12 person contacts were people passed 0.4 m abeam at 0.75 m/s whom the robot
+    met as they stepped or it turned. 0 = off."""
+    proximity_gap_m: float = 0.3
+    """... this far beyond the avoidance radius ..."""
+    proximity_range_m: float = 1.5
+    """... and closer than this ahead."""
     corner_angle_rad: float = math.radians(35.0)
     """A plan vertex turning by more than this is a corner."""
     corner_before_m: float = 1.0
@@ -131,7 +142,7 @@ class NavigatorConfig:
         require_non_negative(
             self, "navigator.", "backoff_time_s", "backoff_speed_mps", "stuck_progress_m", "memory_s", "unseen_speed_mps",
             "backoff_check_m", "backoff_clearance_m", "corner_speed_mps", "corner_angle_rad", "corner_before_m",
-            "map_blind_spots_m", "map_clearance_m",
+            "map_blind_spots_m", "map_clearance_m", "proximity_speed_mps", "proximity_gap_m", "proximity_range_m",
             "corner_after_m", "corner_ramp_m",
         )
 
@@ -264,6 +275,18 @@ class Navigator:
         lo, hi = s - self.avoid.robot_radius_m, s + self.cfg.lookahead_m
         on = (self._cum[1:] > lo) & (self._cum[:-1] < hi)
         return float(self._seg_speed[on].min()) if on.any() else math.inf
+
+    def obstacle_near_path(self, obstacles: np.ndarray, theta: float) -> bool:
+        """Whether an obstacle point lies less than ``proximity_range_m`` ahead along
+        ``theta`` and within the avoidance radius plus ``proximity_gap_m`` of that ray."""
+        o = np.asarray(obstacles, dtype=np.float64).reshape(-1, 2)
+        if not len(o):
+            return False
+        c, s = math.cos(theta), math.sin(theta)
+        along = o[:, 0] * c + o[:, 1] * s
+        lateral = np.abs(o[:, 1] * c - o[:, 0] * s)
+        near = (along > 0.0) & (along < self.cfg.proximity_range_m) & (lateral < self.avoid.radius_m + self.cfg.proximity_gap_m)
+        return bool(near.any())
 
     def map_blind_spots(self, pose: np.ndarray) -> np.ndarray:
         """Map wall points within ``map_blind_spots_m`` that the camera cannot see now
@@ -457,6 +480,8 @@ class Navigator:
         th = res.theta_star
         if cfg.unseen_speed_mps > 0 and abs(th) > 0.5 * cfg.camera_fov_rad:
             speed = min(speed, cfg.unseen_speed_mps)
+        if cfg.proximity_speed_mps > 0 and self.obstacle_near_path(obstacles, th):
+            speed = min(speed, cfg.proximity_speed_mps)
         # Look where the robot goes: turn towards the chosen direction.
         omega = float(np.clip(cfg.heading_gain * th, -cfg.max_turn_rate_rad_s, cfg.max_turn_rate_rad_s))
         v = np.array([speed * math.cos(th), speed * math.sin(th), omega])

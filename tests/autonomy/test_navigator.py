@@ -277,17 +277,17 @@ def test_map_walls_the_camera_cannot_see_steer_the_robot_off_them() -> None:
 
 
 def test_slows_down_passing_close_to_an_obstacle() -> None:
-    """A person 0.55 m to the side, 1 m ahead: outside the avoidance corridor (0.4 m), so
-    the robot drives straight on, but within proximity_gap_m of it, so at
-    proximity_speed_mps. At 0.8 m abeam, or behind the robot, full speed."""
+    """With proximity_speed_mps 0.4, a person 0.55 m to the side, 1 m ahead: outside the
+    avoidance corridor (0.4 m), so the robot drives straight on, but within
+    proximity_gap_m of it, so at proximity_speed_mps. At 0.8 m abeam, or behind the robot, full speed."""
     speed = lambda nav, pts: float(np.hypot(*nav.command(np.zeros(3), np.array(pts), 0.0).velocity[:2]))  # noqa: E731
-    nav = Navigator(line_graph(), NavigatorConfig(memory_s=0.0))
+    nav = Navigator(line_graph(), NavigatorConfig(memory_s=0.0, proximity_speed_mps=0.4))
     nav.set_goal(5, np.zeros(3))
     person = [[1.0, -0.55], [1.0, -0.6], [1.05, -0.55]]
     assert nav.obstacle_near_path(np.array(person), 0.0)
     assert speed(nav, person) == pytest.approx(nav.cfg.proximity_speed_mps)
     assert speed(nav, [[1.0, -0.8]]) == pytest.approx(0.75)
     assert speed(nav, [[-0.5, -0.5]]) == pytest.approx(0.75)
-    off = Navigator(line_graph(), NavigatorConfig(memory_s=0.0, proximity_speed_mps=0.0))
+    off = Navigator(line_graph(), NavigatorConfig(memory_s=0.0))  # off by default
     off.set_goal(5, np.zeros(3))
     assert speed(off, person) == pytest.approx(0.75)

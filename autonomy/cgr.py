@@ -67,9 +67,10 @@ class CGRConfig:
     max_gate_m: float = 1.5
     """... up to this."""
     consistent_fraction: float = 0.5
-    """Association check (ours): correspondences are found again at the refined mean;
-    if fewer than this fraction of the used points keep their line there, the others are
-    dropped and the shared refinement is redone (0 = off)."""
+    """Association check (ours): when the refinement moved the points more than
+    observation.sigma_m, correspondences are found again at the refined mean; if fewer
+    than this fraction of the used points keep their line there, the others are dropped
+    and the shared refinement is redone (0 = off)."""
     share_radius_m: float = 1.0
     """Particles within this distance (and share_angle_rad) of the proposal mean share its
     scene lines and correspondences; others get their own."""
@@ -267,18 +268,21 @@ class CGRLocalizer:
                 # refinement led. A box's face beside a pillar, matched to the pillar's
                 # extended line, slides onto that line but off its segment: those points
                 # lose their line there. If too many do, drop them and refine again.
+                # Skipped when the refinement moved the points less than their noise
+                # (sigma): the correspondences there are the same.
                 at = np.array([o_p[:, 0].mean(), o_p[:, 1].mean(), circular_mean(o_p[:, 2])])
-                idx_at = np.empty(len(pts), dtype=np.int64)
-                correspond(lines, at, pts, nrm, use_n, cos_max, obs.max_distance_m, idx_at)
-                same = (idx_shared >= 0) & (idx_at == idx_shared)
-                stats.dropped_points = int(used - same.sum())
-                if same.sum() < cfg.consistent_fraction * used:
-                    idx_shared[~same] = -1
-                    used = moments(frames_shared, idx_shared, pts, m)
-                    refine_all_m(m, used, first, k, iters, cfg.step_fraction, obs.min_points, o_p, o0, o1, cfg.trust_region_m)
-                    stats.used_points = int(used)
-                else:
-                    stats.dropped_points = 0
+                lever = math.sqrt((m[0, 0] + m[1, 1]) / used)  # RMS range of the used points
+                moved = math.hypot(at[0] - shared_pose[0], at[1] - shared_pose[1]) + lever * abs(float(_wrap(at[2] - shared_pose[2])))
+                if moved > obs.sigma_m:
+                    idx_at = np.empty(len(pts), dtype=np.int64)
+                    correspond(lines, at, pts, nrm, use_n, cos_max, obs.max_distance_m, idx_at)
+                    same = (idx_shared >= 0) & (idx_at == idx_shared)
+                    if same.sum() < cfg.consistent_fraction * used:
+                        stats.dropped_points = int(used - same.sum())
+                        idx_shared[~same] = -1
+                        used = moments(frames_shared, idx_shared, pts, m)
+                        refine_all_m(m, used, first, k, iters, cfg.step_fraction, obs.min_points, o_p, o0, o1, cfg.trust_region_m)
+                        stats.used_points = int(used)
             refined[sel], lnp0[sel], lnpr[sel] = o_p, o0, o1
         for i in np.flatnonzero(~share):
             p = self.particles[i]

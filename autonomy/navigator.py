@@ -87,7 +87,7 @@ class NavigatorConfig:
     edge_speed_limits: bool = True
     """Honour the navigation graph's per-edge ``max_speed`` (the map format's field; the
     shipped building's doors say 0.5 m/s) from ``lookahead_m`` before an edge until the
-    robot's back has left it."""
+    robot's back has left it. A ``max_speed`` of 0 means no limit."""
     map_blind_spots_m: float = 0.7
     """Map walls within this distance of the robot and outside the camera's view join the
     obstacles (ours, like nav2's static costmap layer): the camera sees neither beside the
@@ -187,6 +187,10 @@ class Navigator:
         self.cfg = cfg
         self.avoid = avoid
         self.walls = None if walls is None else np.asarray(walls, dtype=np.float64).reshape(-1, 4)
+        self._wall_pts = None if self.walls is None else wall_points(self.walls, WALL_STEP_M)
+        self._local = np.zeros((0, 2))
+        self._local_centre: np.ndarray | None = None
+        self._local_radius = 0.0
         self.goal: int | None = None
         self.path = np.zeros((0, 2))
         self._cum = np.zeros(1)
@@ -203,8 +207,9 @@ class Navigator:
         self._seg_speed = np.zeros(0)
         self._edge_speed = {}
         for e in graph.edges:
-            self._edge_speed[(e.s0_id, e.s1_id)] = float(e.max_speed)
-            self._edge_speed[(e.s1_id, e.s0_id)] = float(e.max_speed)
+            if e.max_speed > 0:  # 0 in a map file: no limit given (a robot would never move)
+                self._edge_speed[(e.s0_id, e.s1_id)] = float(e.max_speed)
+                self._edge_speed[(e.s1_id, e.s0_id)] = float(e.max_speed)
 
     # -- planning ----------------------------------------------------------------------
     def nearest_reachable_node(self, xy: np.ndarray) -> int:
@@ -360,27 +365,23 @@ class Navigator:
         ahead = (o[:, 0] > 0.0) & (np.abs(o[:, 1]) < self.avoid.radius_m)
         return bool(np.any(ahead & (rng < self.cfg.camera_min_range_m + 0.1)))
 
-    def map_points(self, pose: np.ndarray, radius_m: float, step_m: float = 0.03) -> np.ndarray:
-        """The map's walls within ``radius_m`` of the pose as points every ``step_m``, in
-        the robot frame: what is known to be there even where the camera cannot look."""
-        if self.walls is None or not len(self.walls):
+    def map_points(self, pose: np.ndarray, radius_m: float) -> np.ndarray:
+        """The map's walls within ``radius_m`` of the pose as points every
+        ``WALL_STEP_M``, in the robot frame: what is known to be there even where the
+        camera cannot look. The walls are sampled once; the points near the robot are
+        cached and re-selected only after it has moved ``_LOCAL_MARGIN_M``."""
+        if self._wall_pts is None or not len(self._wall_pts):
             return np.zeros((0, 2))
         xy = np.asarray(pose[:2], dtype=np.float64)
-        a, b = self.walls[:, :2], self.walls[:, 2:]
-        d = b - a
-        L = np.hypot(d[:, 0], d[:, 1])
-        t = np.clip(np.einsum("ij,ij->i", xy - a, d) / np.where(L > 0, L * L, 1.0), 0.0, 1.0)
-        near = np.hypot(*(a + t[:, None] * d - xy).T) < radius_m
-        if not near.any():
-            return np.zeros((0, 2))
-        a, d, L = a[near], d[near], L[near]
-        n = np.maximum(1, np.ceil(L / step_m).astype(np.int64)) + 1
-        seg = np.repeat(np.arange(len(L)), n)
-        frac = (np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)) / np.repeat(n - 1, n)
-        w = a[seg] + frac[:, None] * d[seg]
-        w = w[np.hypot(w[:, 0] - xy[0], w[:, 1] - xy[1]) < radius_m]
+        c0, r0 = self._local_centre, self._local_radius
+        if c0 is None or radius_m > r0 - _LOCAL_MARGIN_M or math.hypot(xy[0] - c0[0], xy[1] - c0[1]) > r0 - radius_m:
+            r0 = max(radius_m, r0 - _LOCAL_MARGIN_M) + _LOCAL_MARGIN_M
+            w = self._wall_pts
+            self._local = w[np.hypot(w[:, 0] - xy[0], w[:, 1] - xy[1]) < r0]
+            self._local_centre, self._local_radius = xy.copy(), r0
+        rel = self._local - xy
+        rel = rel[np.hypot(rel[:, 0], rel[:, 1]) < radius_m]
         c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
-        rel = w - xy
         return np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]])
 
     def _backoff_velocity(self, pose: np.ndarray, obstacles: np.ndarray) -> np.ndarray:
@@ -488,6 +489,21 @@ class Navigator:
         omega = float(np.clip(cfg.heading_gain * th, -cfg.max_turn_rate_rad_s, cfg.max_turn_rate_rad_s))
         v = np.array([speed * math.cos(th), speed * math.sin(th), omega])
         return NavCommand(v, "driving", carrot, desired, th, res.open_length_m, fan)
+
+
+WALL_STEP_M = 0.03
+"""Spacing of the points that stand in for the map's walls (``Navigator.map_points``)."""
+_LOCAL_MARGIN_M = 1.0
+
+
+def wall_points(walls: np.ndarray, step_m: float) -> np.ndarray:
+    """(n, 2) points along each wall segment, both ends included, at most ``step_m`` apart."""
+    a, d = walls[:, :2], walls[:, 2:] - walls[:, :2]
+    L = np.hypot(d[:, 0], d[:, 1])
+    n = np.maximum(1, np.ceil(L / step_m).astype(np.int64)) + 1
+    seg = np.repeat(np.arange(len(L)), n)
+    frac = (np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)) / np.repeat(n - 1, n)
+    return a[seg] + frac[:, None] * d[seg]
 
 
 def in_camera_view(

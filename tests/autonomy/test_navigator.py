@@ -254,6 +254,28 @@ def test_honours_the_edges_max_speed() -> None:
     off = Navigator(NavGraph(nodes=g.nodes, edges=edges), NavigatorConfig(edge_speed_limits=False))
     off.set_goal(5, np.zeros(3))
     assert speed(off, 5.0) == pytest.approx(0.75)
+    # max_speed 0 in a map file means no limit, not a robot that never moves.
+    zero = tuple(NavEdge(s0_id=e.s0_id, s1_id=e.s1_id, max_speed=0.0) for e in g.edges)
+    unlimited = Navigator(NavGraph(nodes=g.nodes, edges=zero))
+    unlimited.set_goal(5, np.zeros(3))
+    assert unlimited.edge_speed_limit(5.0) == math.inf and speed(unlimited, 5.0) == pytest.approx(0.75)
+
+
+def test_map_points_cache_matches_a_fresh_selection() -> None:
+    """The wall points near the robot are cached and re-selected only after it has
+    moved; along a random walk they equal those of a navigator without a cache."""
+    rng = np.random.default_rng(5)
+    walls = rng.uniform(-4.0, 4.0, size=(60, 4))
+    nav = Navigator(line_graph(), walls=walls)
+    xy = np.zeros(2)
+    for _ in range(300):
+        xy = xy + rng.normal(0.0, 0.15, 2)
+        pose = np.array([*xy, rng.uniform(-math.pi, math.pi)])
+        for r in (0.7, 1.6):
+            got = nav.map_points(pose, r)
+            want = Navigator(line_graph(), walls=walls).map_points(pose, r)
+            np.testing.assert_allclose(np.sort(got, axis=0), np.sort(want, axis=0))
+            assert np.all(np.hypot(got[:, 0], got[:, 1]) < r)
 
 
 def test_map_walls_the_camera_cannot_see_steer_the_robot_off_them() -> None:

@@ -169,7 +169,9 @@ class PeopleController:
     waits while the robot is within ``pause_m`` in front — for at most ``max_wait_s``,
     then they walk on past it, stepped aside, back to the route only once the robot is
     ``clear_behind_m`` behind them.
-    Otherwise they walk their route at constant speed, back and forth or looped.
+    Otherwise they walk their route at constant speed, back and forth or looped. Where a
+    back-and-forth route ends, they turn round where they stand (a person stepped aside
+    stays on the same side of the corridor, now on their other hand).
     Nobody walks into the robot: a person whose next step would bring them closer than
     ``personal_space_m`` (plus both radii) to the robot's centre stays put for that
     step — people see a robot coming round a corner even when its camera cannot see
@@ -178,8 +180,11 @@ class PeopleController:
     inside their personal space within ``retreat_horizon_s``, the person steps back, away from
     it, at ``retreat_speed_mps`` (slower than the robot's cruise, and never into a wall).
     Without that, a person whose route ran through the robot waited right beside it,
-    out of the camera's view, until the robot drove off sideways into them. A robot that
-    drives into a person still collides, and that is counted.
+    out of the camera's view, until the robot drove off sideways into them. A person on a
+    back-and-forth route held up by the robot (the personal-space rule) for longer than
+    ``max_blocked_s`` turns back, as people do when a robot stands in a doorway they
+    wanted to pass; people on a looped route wait. A robot that drives into a person still
+    collides, and that is counted.
     """
 
     notice_m = 2.5
@@ -192,6 +197,7 @@ class PeopleController:
     retreat_gap_m = 0.3
     retreat_speed_mps = 0.5
     retreat_horizon_s = 1.0
+    max_blocked_s = 3.0
 
     def __init__(
         self, people: tuple[Person, ...], mocap_ids: np.ndarray, walls: np.ndarray | None = None, robot_radius_m: float = 0.3
@@ -216,6 +222,7 @@ class PeopleController:
         self._s = np.array([p.start_offset_m for p in self.people], dtype=np.float64)
         self._side = np.zeros(len(self.people))
         self._waited = np.zeros(len(self.people))
+        self._blocked = np.zeros(len(self.people))
         self._t = 0.0
         self._robot_prev: np.ndarray | None = None
         self._state = np.zeros((len(self.people), 3))
@@ -251,6 +258,22 @@ class PeopleController:
         d = pts[k + 1] - pts[k]
         n = float(np.hypot(d[0], d[1]))
         return pts[k] + a * d, (direction * d / n if n > 0 else np.array([1.0, 0.0]))
+
+    def _leg(self, i: int, s: float) -> int:
+        """Which way a back-and-forth route is walked at arc length s: 0 out, 1 back
+        (always 0 on a loop)."""
+        total = self._cum[i][-1]
+        if self.people[i].loop or total <= 0:
+            return 0
+        return int(math.floor(s / total)) % 2
+
+    def _turn_back(self, i: int) -> None:
+        """Turn a person on a back-and-forth route round where they stand."""
+        total = self._cum[i][-1]
+        if self.people[i].loop or total <= 0:
+            return
+        self._s[i] = 2.0 * total - self._s[i] % (2.0 * total)
+        self._side[i] = -self._side[i]
 
     def _place(self, i: int) -> np.ndarray:
         pos, d = self._route_point(i, self._s[i])
@@ -315,7 +338,7 @@ class PeopleController:
                 continue
             pos, d = self._route_point(i, self._s[i])
             before = (self._s[i], self._side[i])
-            target_side, walk = 0.0, True
+            target_side, walk, noticed = 0.0, True, False
             if robot_xy is not None:
                 rel = np.asarray(robot_xy[:2]) - pos
                 ahead = float(rel @ d)
@@ -329,7 +352,10 @@ class PeopleController:
                     # same centreline), and stay aside until it is clear_behind_m behind.
                     target_side = self.step_aside_m if self._side[i] - across >= 0 else -self.step_aside_m
                     walk = ahead > self.pause_m or ahead <= 0.0 or abs(across - self._side[i]) > 0.7 or self._waited[i] > self.max_wait_s
-            self._waited[i] = 0.0 if walk else self._waited[i] + dt
+                    noticed = True
+            # The wait runs while the robot is there, so after max_wait_s they walk on
+            # (reset at the first step, it had them creep past a step every 2 s).
+            self._waited[i] = self._waited[i] + dt if noticed and (not walk or self._waited[i] > 0) else 0.0
             step = float(np.clip(target_side - self._side[i], -self.side_speed_mps * dt, self.side_speed_mps * dt))
             if step:
                 right = np.array([d[1], -d[0]])
@@ -337,7 +363,13 @@ class PeopleController:
                 if self._side_is_clear(i, pos + new_side * right) or abs(new_side) < abs(self._side[i]):
                     self._side[i] = new_side
             if walk:
+                leg = self._leg(i, self._s[i])
                 self._s[i] += p.speed_mps * dt
+                if self._leg(i, self._s[i]) != leg:
+                    # The route's end: turn round on the spot; stepped aside to the right
+                    # going out is to the left coming back (it was a diagonal walk
+                    # across the corridor to the mirrored side, into a robot there).
+                    self._side[i] = -self._side[i]
             new = self._place(i)
             # People walk; they do not jump. Where the route turns while the person is
             # stepped aside, the offset point of the next leg lies elsewhere (up to twice
@@ -353,7 +385,12 @@ class PeopleController:
                 d_old = float(np.hypot(self._state[i, 0] - robot_xy[0], self._state[i, 1] - robot_xy[1]))
                 if d_new < keep and d_new < d_old:
                     self._s[i], self._side[i] = before
+                    self._blocked[i] += dt
+                    if self._blocked[i] > self.max_blocked_s:
+                        self._turn_back(i)
+                        self._blocked[i] = 0.0
                     continue
+            self._blocked[i] = 0.0
             self._state[i] = new
         return self._state.copy()
 

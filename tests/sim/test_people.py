@@ -138,3 +138,44 @@ def test_a_person_who_cannot_step_back_along_their_route_steps_sideways() -> Non
         gaps.append(float(np.hypot(*(pc.advance(k * DT, robot)[0, :2] - robot))) - touch)
     assert min(gaps) > 0.05, min(gaps)
     assert abs(pc.positions()[0, 1]) > 0.3  # stepped sideways
+
+
+def test_a_person_stepped_aside_turns_round_on_the_spot_at_the_route_end() -> None:
+    """A person passes a robot standing near the end of their back-and-forth route,
+    stepped aside to their left, and turns round at the end: they stay on the same side
+    of the corridor (now their right) instead of walking diagonally across to the
+    mirrored offset, which in the 4 km run led a person into a robot standing there
+    and held both in a 400 s deadlock."""
+    p = Person(route=((0.0, 0.0), (3.0, 0.0)), speed_mps=1.0)
+    robot = lambda k: np.array([2.6, -0.5])  # noqa: E731 - standing, right of the route's end
+    pos = _walk((p,), robot, 150)[:, 0]
+    end = int(np.argmax(pos[:, 0]))
+    assert pos[end, 0] > 2.9 and pos[end, 1] > 0.7  # reached the end, stepped aside to the left
+    around = pos[max(0, end - 30) : end + 30]
+    assert around[:, 1].min() > 0.7  # no walk across the corridor at the turn
+    pc = PeopleController((p,), np.zeros(1, dtype=int))
+    assert np.hypot(*(pos - robot(0)).T).min() > pc.robot_radius_m + p.radius_m + pc.personal_space_m - 1e-9
+
+
+def test_a_person_held_up_by_a_robot_in_a_narrow_corridor_turns_back() -> None:
+    """A robot standing in the middle of a 1.2 m corridor blocks a person's route: the
+    person waits (personal space) and after ``max_blocked_s`` turns back, instead of
+    standing in front of the robot for ever (a deadlock at a doorway in the 4 km run).
+    """
+    walls = np.array([[-1.0, -0.6, 12.0, -0.6], [-1.0, 0.6, 12.0, 0.6]])
+    p = Person(route=((0.0, 0.0), (10.0, 0.0)), speed_mps=1.0)
+    pc = PeopleController((p,), np.zeros(1, dtype=int), walls)
+    robot = np.array([5.0, 0.0])
+    keep = pc.robot_radius_m + p.radius_m + pc.personal_space_m
+    xs = []
+    for k in range(1, 20 * 30):
+        cur = pc.advance(k * DT, robot)[0, :2]
+        assert np.hypot(*(cur - robot)) > keep - 1e-9
+        xs.append(cur[0])
+    xs = np.array(xs)
+    stop = int(np.argmax(xs))
+    assert xs[stop] > 4.0  # came up to the robot ...
+    assert xs[stop] < 5.0  # ... never past it ...
+    assert xs[stop:].min() < 1.0  # ... and walked back to the route's start
+    held = np.sum(np.abs(xs[: stop + 200] - xs[stop]) < 1e-6) * DT
+    assert PeopleController.max_blocked_s <= held < PeopleController.max_blocked_s + PeopleController.max_wait_s + 1.5

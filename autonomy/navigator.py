@@ -98,15 +98,16 @@ class NavigatorConfig:
     """Map walls are kept this far beyond the robot radius (the avoidance's safety margin
     applies to sensed points; the map's walls are placed through the pose estimate, and
     doors leave 7 cm beside the margin)."""
-    proximity_speed_mps: float = 0.0
-    """At most this speed (e.g. 0.4) while a sensed or remembered obstacle lies within
+    proximity_speed_mps: float = 0.4
+    """At most this speed while a sensed or remembered obstacle lies within
     ``proximity_gap_m`` beyond the avoidance corridor of the chosen direction, less than
     ``proximity_range_m`` ahead (ours, like nav2's cost-regulated speed near obstacles):
     Eq. 3-5 treat a person walking towards the robot as standing still, and in run 7
     (4 km) 4 of 12 person contacts were people passed 0.4 m abeam at 0.75 m/s whom the
-    robot met as they stepped or it turned. 0 = off (default): at 0.4 the first 2,400 s
-    of the 4 km run had 5 incidents in 1.4 km against run 7's 7 in 1.2 km, but the demo
-    got one (a person it overtook slowly, out of view, stepped back into its path)."""
+    robot met as they stepped or it turned (e.g. a person crossing 1 m ahead while it
+    swerved at 0.75 m/s). 0 = off (as the paper). Session 6 left it off: the demo got a
+    contact with it (a person it overtook slowly, out of view, stepped back into its
+    path); with session 7's people model the demo has none with it."""
     proximity_gap_m: float = 0.3
     """... this far beyond the avoidance radius ..."""
     proximity_range_m: float = 1.5

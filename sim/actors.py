@@ -183,7 +183,10 @@ class PeopleController:
     out of the camera's view, until the robot drove off sideways into them. A person on a
     back-and-forth route held up by the robot (the personal-space rule) for longer than
     ``max_blocked_s`` turns back, as people do when a robot stands in a doorway they
-    wanted to pass; people on a looped route wait. A robot that drives into a person still
+    wanted to pass; people on a looped route wait. Following a robot that backs slowly
+    along their route counts as held up until they are ``clear_of_robot_m`` beyond the
+    personal space (such a person tailed the robot 0.15 m beyond it, in the camera's
+    blind zone, until it drove forward into them). A robot that drives into a person still
     collides, and that is counted.
     """
 
@@ -198,6 +201,7 @@ class PeopleController:
     retreat_speed_mps = 0.5
     retreat_horizon_s = 1.0
     max_blocked_s = 3.0
+    clear_of_robot_m = 0.3
 
     def __init__(
         self, people: tuple[Person, ...], mocap_ids: np.ndarray, walls: np.ndarray | None = None, robot_radius_m: float = 0.3
@@ -390,7 +394,10 @@ class PeopleController:
                         self._turn_back(i)
                         self._blocked[i] = 0.0
                     continue
-            self._blocked[i] = 0.0
+                if d_new > keep + self.clear_of_robot_m:
+                    self._blocked[i] = 0.0
+            else:
+                self._blocked[i] = 0.0
             self._state[i] = new
         return self._state.copy()
 

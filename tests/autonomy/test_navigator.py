@@ -310,6 +310,7 @@ def test_slows_down_passing_close_to_an_obstacle() -> None:
     assert speed(nav, person) == pytest.approx(nav.cfg.proximity_speed_mps)
     assert speed(nav, [[1.0, -0.8]]) == pytest.approx(0.75)
     assert speed(nav, [[-0.5, -0.5]]) == pytest.approx(0.75)
-    off = Navigator(line_graph(), NavigatorConfig(memory_s=0.0))  # off by default
+    assert NavigatorConfig().proximity_speed_mps == 0.4  # on by default
+    off = Navigator(line_graph(), NavigatorConfig(memory_s=0.0, proximity_speed_mps=0.0))  # 0 = off
     off.set_goal(5, np.zeros(3))
     assert speed(off, person) == pytest.approx(0.75)

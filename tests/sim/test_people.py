@@ -179,3 +179,26 @@ def test_a_person_held_up_by_a_robot_in_a_narrow_corridor_turns_back() -> None:
     assert xs[stop:].min() < 1.0  # ... and walked back to the route's start
     held = np.sum(np.abs(xs[: stop + 200] - xs[stop]) < 1e-6) * DT
     assert PeopleController.max_blocked_s <= held < PeopleController.max_blocked_s + PeopleController.max_wait_s + 1.5
+
+
+def test_a_person_tailing_a_slowly_backing_robot_in_a_narrow_corridor_turns_back() -> None:
+    """A robot backs at 0.15 m/s along a 1.2 m corridor, the way a faster person walks:
+    the person comes up behind it, cannot pass, and is held up at the personal space
+    (each step waits for the robot to make room); after ``max_blocked_s`` they turn back
+    rather than tail it in the camera's blind zone (4 km run: the robot then drove forward
+    into the person it could not see)."""
+    walls = np.array([[-1.0, -0.6, 30.0, -0.6], [-1.0, 0.6, 30.0, 0.6]])
+    p = Person(route=((0.0, 0.0), (25.0, 0.0)), speed_mps=1.0)
+    pc = PeopleController((p,), np.zeros(1, dtype=int), walls)
+    xs, gaps = [], []
+    for k in range(1, 20 * 30):
+        robot = np.array([6.0 + 0.15 * k * DT, 0.0])
+        cur = pc.advance(k * DT, robot)[0, :2]
+        xs.append(cur[0])
+        gaps.append(float(np.hypot(*(cur - robot))) - pc.robot_radius_m - p.radius_m)
+    xs = np.array(xs)
+    assert min(gaps) > 0.05
+    turn = int(np.argmax(xs))
+    tailing = np.sum(np.array(gaps[:turn]) < pc.personal_space_m + pc.clear_of_robot_m) * DT
+    assert tailing < pc.max_wait_s + pc.max_blocked_s + 1.0  # held up for a few seconds at most ...
+    assert xs[-1] < xs[turn] - 5.0  # ... then walking back the other way

@@ -103,7 +103,9 @@ def cmd_snapshot(args: argparse.Namespace) -> int:
     x0, y0, x1, y1 = vm.extent()
     if not (x0 - 1 <= pose[0] <= x1 + 1 and y0 - 1 <= pose[1] <= y1 + 1):
         raise InputError(f"--pose {args.pose}: outside the map's extent x [{x0:.1f}, {x1:.1f}], y [{y0:.1f}, {y1:.1f}]")
-    cfg = KinectConfig(backend=args.backend)
+    # The clean image (--no-noise) keeps everything; the noisy one needs nothing beyond
+    # the noise model's range.
+    cfg = KinectConfig(backend=args.backend, render_far_m=math.inf if args.no_noise else 0.0)
     world = build_world(vm, intrinsics=cfg.intrinsics, mount=cfg.mount, start_pose=pose)
     cam = KinectCamera(world.model, world.camera_id, cfg)
     clean = cam.render_clean(world.data).copy()

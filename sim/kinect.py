@@ -26,6 +26,11 @@ from sim.robot import ROBOT_GEOM_GROUP
 BACKENDS = ("auto", "gl", "raycast")
 
 
+RENDER_FAR_MARGIN_M = 1.0
+"""Rendered depth beyond the noise model's range cut: axial noise and the lateral jitter
+never bring a surface 1 m nearer, so the noisy frame does not change."""
+
+
 @dataclass(frozen=True)
 class KinectConfig:
     """The depth camera: intrinsics, mount, rate, noise and rendering backend."""
@@ -40,10 +45,23 @@ class KinectConfig:
     """Noise model; every term switchable."""
     backend: str = "auto"
     """auto (GL if a context can be made, else ray casting), gl, or raycast."""
+    render_far_m: float = 0.0
+    """Nothing farther than this is rendered: the clean depth is 0 beyond it. 0 = the noise
+    model's ``max_range_m`` plus ``RENDER_FAR_MARGIN_M`` (the noise model returns nothing
+    farther, so the noisy frame is the same; the CPU rasteriser draws half as much in the
+    building, 10.6 to 5.4 ms a frame); inf = the model's own far plane."""
 
     def __post_init__(self) -> None:
         if self.backend not in BACKENDS:
             raise InputError(f"kinect.backend {self.backend!r}: expected one of {', '.join(BACKENDS)}")
+        if not (self.render_far_m >= 0 and not math.isnan(self.render_far_m)):
+            raise InputError(f"kinect.render_far_m: expected a number >= 0 (0 = from the noise model's range), got {self.render_far_m!r}")
+
+    def far_m(self) -> float:
+        """The render's far clipping distance in metres (inf = the model's own)."""
+        if self.render_far_m > 0:
+            return float(self.render_far_m)
+        return float(self.noise.max_range_m) + RENDER_FAR_MARGIN_M
         if not (math.isfinite(self.rate_hz) and self.rate_hz > 0):
             raise InputError(f"kinect.rate_hz: expected a positive number, got {self.rate_hz!r}")
 
@@ -70,7 +88,7 @@ class GLDepth:
     sub-sample, ~0.4 px off the pixel centre).
     """
 
-    def __init__(self, model: mujoco.MjModel, camera_id: int, intr: CameraIntrinsics) -> None:
+    def __init__(self, model: mujoco.MjModel, camera_id: int, intr: CameraIntrinsics, far_m: float = math.inf) -> None:
         from mujoco import gl_context
 
         if gl_context.GLContext is None:
@@ -95,6 +113,13 @@ class GLDepth:
         extent = model.stat.extent
         near = np.float32(model.vis.map.znear * extent)
         far = np.float32(model.vis.map.zfar * extent)
+        # A nearer far plane (the scene cameras' frustum, set each frame) clips what the
+        # sensor cannot see anyway; the linearisation below follows it.
+        self._far = None
+        if math.isfinite(far_m) and np.float32(far_m) < far:
+            if not np.float32(far_m) > near:
+                raise InputError(f"kinect.render_far_m {far_m!r}: expected more than the near plane ({float(near):.3f} m)")
+            far = self._far = np.float32(far_m)
         c = -(far + near) / (far - near)
         d = -(np.float32(2) * far * near) / (far - near)
         # Reversed-Z projection, as mujoco.Renderer undoes it.
@@ -110,6 +135,9 @@ class GLDepth:
             self.model, data, self._opt, None, self._cam, mujoco.mjtCatBit.mjCAT_ALL.value, self._scene
         )
         self._scene.nlight = 0  # depth needs no lighting; it costs the CPU rasteriser most
+        if self._far is not None:
+            for glcam in self._scene.camera:
+                glcam.frustum_far = float(self._far)
         mujoco.mjr_render(self._rect, self._scene, self._con)
         mujoco.mjr_readPixels(None, self._raw, self._rect, self._con)
         _linearize_flip(self._raw, self._c, self._d, out)
@@ -134,13 +162,18 @@ class GLDepth:
 class RaycastDepth:
     """Depth by casting one ray per pixel with ``mujoco.mj_multiRay`` (no GL needed)."""
 
-    def __init__(self, model: mujoco.MjModel, camera_id: int, intr: CameraIntrinsics, max_range_m: float = 20.0):
+    def __init__(
+        self, model: mujoco.MjModel, camera_id: int, intr: CameraIntrinsics, max_range_m: float = 20.0, far_m: float = math.inf
+    ):
         self.model = model
         self.camera_id = camera_id
         self.intr = intr
-        self.max_range_m = max_range_m
         rays = pixel_rays(intr).reshape(-1, 3)
         self._norm = np.linalg.norm(rays, axis=1)
+        # Rays stop at max_range_m, and at the far plane (a planar depth: rays to the image
+        # corners are longer); beyond it the depth is 0, as the GL far plane clips.
+        self.far_m = float(far_m)
+        self.max_range_m = min(float(max_range_m), self.far_m * float(self._norm.max()))
         # Optical -> MuJoCo camera axes (y and z flipped), unit length.
         self._dirs_cam = (rays * np.array([1.0, -1.0, -1.0])) / self._norm[:, None]
         self._group = np.ones(6, dtype=np.uint8)
@@ -171,6 +204,8 @@ class RaycastDepth:
             self.max_range_m,
         )
         z = np.where(self._geomid >= 0, self._dist / self._norm, 0.0)
+        if math.isfinite(self.far_m):
+            z[z > self.far_m] = 0.0
         out[:] = z.reshape(out.shape)
         return out
 
@@ -178,19 +213,24 @@ class RaycastDepth:
         pass
 
 
-def make_depth_backend(model: mujoco.MjModel, camera_id: int, intr: CameraIntrinsics, backend: str = "auto"):
-    """The GL depth renderer, or the ray-cast fallback when no GL context can be made."""
+def make_depth_backend(
+    model: mujoco.MjModel, camera_id: int, intr: CameraIntrinsics, backend: str = "auto", far_m: float = math.inf
+):
+    """The GL depth renderer, or the ray-cast fallback when no GL context can be made;
+    nothing farther than ``far_m`` is rendered (inf = the model's far plane)."""
     if backend not in BACKENDS:
         raise InputError(f"kinect.backend {backend!r}: expected one of {', '.join(BACKENDS)}")
     if backend in ("auto", "gl"):
         try:
-            return GLDepth(model, camera_id, intr)
+            return GLDepth(model, camera_id, intr, far_m)
+        except InputError:
+            raise
         except Exception as exc:  # no EGL/OSMesa/display: fall back
             reason = f"OpenGL depth rendering unavailable (MUJOCO_GL={os.environ.get('MUJOCO_GL')}): {exc}"
             if backend == "gl":
                 raise RuntimeError(reason) from exc
             warnings.warn(f"{reason}; using the ray-cast depth fallback (much slower)", RuntimeWarning, stacklevel=2)
-    return RaycastDepth(model, camera_id, intr)
+    return RaycastDepth(model, camera_id, intr, far_m=far_m)
 
 
 class KinectCamera:
@@ -215,7 +255,7 @@ class KinectCamera:
     @property
     def backend(self):
         if self._backend is None:
-            self._backend = make_depth_backend(self.model, self.camera_id, self.cfg.intrinsics, self.cfg.backend)
+            self._backend = make_depth_backend(self.model, self.camera_id, self.cfg.intrinsics, self.cfg.backend, self.cfg.far_m())
         return self._backend
 
     def render_clean(self, data: mujoco.MjData) -> np.ndarray:

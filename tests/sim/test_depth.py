@@ -114,3 +114,45 @@ def test_raycast_fallback_is_chosen_without_gl(monkeypatch: pytest.MonkeyPatch) 
     assert isinstance(b, RaycastDepth)
     with pytest.raises(RuntimeError, match="OpenGL depth rendering unavailable"):
         kinect.make_depth_backend(w.model, w.camera_id, SMALL, "gl")
+
+
+@pytest.mark.parametrize("backend", _backends())
+def test_nothing_is_rendered_beyond_the_far_distance(backend: str) -> None:
+    """A far distance of 4 m in front of a wall at 6 m (planar depth 5.77 m): the wall is
+    gone, the floor nearer than 4 m is the closed form, the floor beyond it is gone
+    (the ray cast measures planar depth too: image corners are not cut short)."""
+    intr = CameraIntrinsics() if backend == "gl" else SMALL
+    w = _wall_world(6.0, intr)
+    d = make_depth_backend(w.model, w.camera_id, intr, backend, far_m=4.0).render(w.data)
+    exp = _expected_level(6.0, intr)
+    near = (exp > 0.5) & (exp < 3.95)
+    assert near.sum() > intr.width * 10
+    assert np.abs(d[near] - exp[near]).max() < 1e-3
+    assert (d[exp > 4.05] == 0).all() and (d <= 4.0 + 1e-3).all()
+
+
+@pytest.mark.skipif(not GL, reason="no EGL/OSMesa context on this machine")
+def test_the_far_plane_leaves_the_noisy_frame_in_range_as_it_was() -> None:
+    """The default far plane (noise range + 1 m) against an unclipped render of a floor
+    and a wall at 6 m: the clean depth within the range agrees to float precision, and
+    the noisy frames agree but at a few silhouette pixels (their incidence angle sees an
+    unrendered neighbour)."""
+    w = _wall_world(6.0, CameraIntrinsics(), CameraMount())
+    cfg = KinectConfig()
+    assert cfg.far_m() == pytest.approx(cfg.noise.max_range_m + 1.0)
+    near = KinectCamera(w.model, w.camera_id, cfg)
+    full = KinectCamera(w.model, w.camera_id, KinectConfig(render_far_m=math.inf))
+    a, b = near.render_clean(w.data).copy(), full.render_clean(w.data).copy()
+    inr = (b > 0) & (b < cfg.far_m() - 0.01)
+    assert inr.mean() > 0.3 and (a[b > cfg.far_m() + 0.01] == 0).all()
+    np.testing.assert_allclose(a[inr], b[inr], rtol=1e-5)
+    na, nb = near.capture(w.data, seed=3), full.capture(w.data, seed=3)
+    assert (na != nb).mean() < 1e-3
+
+
+def test_far_distance_is_checked() -> None:
+    from autonomy.errors import InputError
+
+    with pytest.raises(InputError, match="kinect.render_far_m"):
+        KinectConfig(render_far_m=-1.0)
+    assert KinectConfig(render_far_m=7.5).far_m() == 7.5

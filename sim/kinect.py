@@ -94,6 +94,7 @@ class GLDepth:
         if gl_context.GLContext is None:
             raise RuntimeError("no OpenGL context class available")
         self.model = model
+        self.camera_id = camera_id
         self.intr = intr
         self._ctx = gl_context.GLContext(intr.width, intr.height)
         self._ctx.make_current()
@@ -120,6 +121,11 @@ class GLDepth:
             if not np.float32(far_m) > near:
                 raise InputError(f"kinect.render_far_m {far_m!r}: expected more than the near plane ({float(near):.3f} m)")
             far = self._far = np.float32(far_m)
+        # Static geoms (walls) that may be culled: a thousand draw calls of walls beyond the
+        # far plane or behind the camera still cost the CPU rasteriser ~1.5 ms a frame.
+        static = (model.geom_bodyid == 0) & (model.geom_type != mujoco.mjtGeom.mjGEOM_PLANE) & (model.geom_group != ROBOT_GEOM_GROUP)
+        self._static = np.flatnonzero(static) if self._far is not None else np.zeros(0, dtype=np.int64)
+        self._static_r = model.geom_rbound[self._static].copy()
         c = -(far + near) / (far - near)
         d = -(np.float32(2) * far * near) / (far - near)
         # Reversed-Z projection, as mujoco.Renderer undoes it.
@@ -131,9 +137,18 @@ class GLDepth:
         if out is None:
             out = np.empty((self.intr.height, self.intr.width), dtype=np.float32)
         self._ctx.make_current()
-        mujoco.mjv_updateScene(
-            self.model, data, self._opt, None, self._cam, mujoco.mjtCatBit.mjCAT_ALL.value, self._scene
-        )
+        cull = self._culled(data)
+        if len(cull):
+            # Hidden for this scene update only (the robot's group is not drawn).
+            groups = self.model.geom_group[cull].copy()
+            self.model.geom_group[cull] = ROBOT_GEOM_GROUP
+        try:
+            mujoco.mjv_updateScene(
+                self.model, data, self._opt, None, self._cam, mujoco.mjtCatBit.mjCAT_ALL.value, self._scene
+            )
+        finally:
+            if len(cull):
+                self.model.geom_group[cull] = groups
         self._scene.nlight = 0  # depth needs no lighting; it costs the CPU rasteriser most
         if self._far is not None:
             for glcam in self._scene.camera:
@@ -142,6 +157,15 @@ class GLDepth:
         mujoco.mjr_readPixels(None, self._raw, self._rect, self._con)
         _linearize_flip(self._raw, self._c, self._d, out)
         return out
+
+    def _culled(self, data: mujoco.MjData) -> np.ndarray:
+        """Static geoms whose bounding sphere lies wholly beyond the far plane or behind
+        the camera (planar depth along the optical axis)."""
+        if not len(self._static):
+            return self._static
+        fwd = -data.cam_xmat[self.camera_id].reshape(3, 3)[:, 2]
+        z = (data.geom_xpos[self._static] - data.cam_xpos[self.camera_id]) @ fwd
+        return self._static[(z - self._static_r > self._far) | (z + self._static_r < 0.0)]
 
     def close(self) -> None:
         if self._con is not None:

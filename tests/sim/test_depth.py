@@ -156,3 +156,22 @@ def test_far_distance_is_checked() -> None:
     with pytest.raises(InputError, match="kinect.render_far_m"):
         KinectConfig(render_far_m=-1.0)
     assert KinectConfig(render_far_m=7.5).far_m() == 7.5
+
+
+@pytest.mark.skipif(not GL, reason="no EGL/OSMesa context on this machine")
+def test_walls_beyond_the_far_plane_or_behind_the_camera_are_not_drawn() -> None:
+    """Three short walls: 2 m ahead (drawn), 9 m ahead and 3 m behind (culled with a 5 m
+    far plane); the render is the same as without culling."""
+    intr = CameraIntrinsics()
+    vm = VectorMap.from_segments(np.array([[2.0, -1.0, 2.0, 1.0], [9.0, -1.0, 9.0, 1.0], [-3.0, -1.0, -3.0, 1.0]]))
+    w = build_world(vm, world=WorldConfig(wall_height_m=WALL_H), intrinsics=intr, mount=LEVEL, start_pose=(0.0, 0.0, 0.0))
+    gl = GLDepth(w.model, w.camera_id, intr, far_m=5.0)
+    culled = gl._culled(w.data)
+    x = w.data.geom_xpos[culled, 0]
+    assert len(culled) == 2 and np.allclose(np.sort(np.round(x)), [-3.0, 9.0])
+    groups = w.model.geom_group.copy()
+    a = gl.render(w.data).copy()
+    assert np.array_equal(w.model.geom_group, groups)  # hidden for the render only
+    gl._static = gl._static[:0]  # no culling
+    b = gl.render(w.data)
+    assert np.array_equal(a, b) and (a > 1.5).any()

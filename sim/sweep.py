@@ -391,6 +391,9 @@ def run_experiment(
             bar.close()
     wall = time.perf_counter() - t0
     if interrupted:
+        # What a resume will find: the file, not the in-memory count (Ctrl-C can land
+        # between a record's write and its count; the CI run caught 3 kept, 2 reported).
+        done, _ = read_trials(trials_path, {sp["id"] for sp in specs})
         print(f"interrupted: {len(done)} of {len(specs)} trials finished and kept in {trials_path}; resume with: {hint}", file=sys.stderr)
         partial = {
             "scenario": meta["scenario"],

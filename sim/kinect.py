@@ -48,22 +48,26 @@ class KinectConfig:
     render_far_m: float = 0.0
     """Nothing farther than this is rendered: the clean depth is 0 beyond it. 0 = the noise
     model's ``max_range_m`` plus ``RENDER_FAR_MARGIN_M`` (the noise model returns nothing
-    farther, so the noisy frame is the same; the CPU rasteriser draws half as much in the
-    building, 10.6 to 5.4 ms a frame); inf = the model's own far plane."""
+    farther, so the noisy frame is the same but at ~0.01% of pixels; with the walls beyond
+    it culled, 10.4 to 6.3 ms a frame over 40 poses in the building); inf = the model's
+    own far plane."""
 
     def __post_init__(self) -> None:
         if self.backend not in BACKENDS:
             raise InputError(f"kinect.backend {self.backend!r}: expected one of {', '.join(BACKENDS)}")
-        if not (self.render_far_m >= 0 and not math.isnan(self.render_far_m)):
-            raise InputError(f"kinect.render_far_m: expected a number >= 0 (0 = from the noise model's range), got {self.render_far_m!r}")
+        if not (math.isfinite(self.rate_hz) and self.rate_hz > 0):
+            raise InputError(f"kinect.rate_hz: expected a positive number, got {self.rate_hz!r}")
+        if not (self.render_far_m == 0 or self.render_far_m > self.noise.min_range_m):
+            raise InputError(
+                f"kinect.render_far_m: expected 0 (from the noise model's range) or more than "
+                f"kinect.noise.min_range_m ({self.noise.min_range_m} m), got {self.render_far_m!r}"
+            )
 
     def far_m(self) -> float:
         """The render's far clipping distance in metres (inf = the model's own)."""
         if self.render_far_m > 0:
             return float(self.render_far_m)
         return float(self.noise.max_range_m) + RENDER_FAR_MARGIN_M
-        if not (math.isfinite(self.rate_hz) and self.rate_hz > 0):
-            raise InputError(f"kinect.rate_hz: expected a positive number, got {self.rate_hz!r}")
 
 
 @numba.njit(cache=True)

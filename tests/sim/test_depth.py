@@ -155,6 +155,13 @@ def test_far_distance_is_checked() -> None:
 
     with pytest.raises(InputError, match="kinect.render_far_m"):
         KinectConfig(render_far_m=-1.0)
+    with pytest.raises(InputError, match="kinect.render_far_m"):
+        KinectConfig(render_far_m=math.nan)
+    with pytest.raises(InputError, match="kinect.render_far_m"):
+        KinectConfig(render_far_m=0.5)  # nearer than anything the camera measures
+    with pytest.raises(InputError, match="kinect.rate_hz"):  # still checked beside it
+        KinectConfig(rate_hz=0.0)
+    assert KinectConfig(render_far_m=math.inf).far_m() == math.inf
     assert KinectConfig(render_far_m=7.5).far_m() == 7.5
 
 

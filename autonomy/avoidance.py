@@ -34,12 +34,13 @@ Readings of the garbled text and choices made here:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numba
 import numpy as np
 
 from autonomy.errors import InputError
+from autonomy.nearfield import NearFieldConfig
 
 
 @dataclass(frozen=True)
@@ -64,6 +65,9 @@ class AvoidanceConfig:
     """Open length kept in reserve when stopping; d(theta*) at or below it means blocked."""
     max_decel_mps2: float = 1.0
     """a: maximum braking deceleration used for the safe speed."""
+    near_field: NearFieldConfig = field(default_factory=NearFieldConfig)
+    """Obstacles closer than the camera's minimum range, from the near floor it fails to
+    see (ours, :mod:`autonomy.nearfield`)."""
 
     def __post_init__(self) -> None:
         for name in ("robot_radius_m", "max_range_m", "max_decel_mps2", "fov_rad"):

@@ -31,6 +31,7 @@ import numpy as np
 
 from autonomy.avoidance import AvoidanceConfig, AvoidanceResult, choose_direction
 from autonomy.errors import require_non_negative, require_positive
+from autonomy.nearfield import line_points
 from autonomy.planner import astar, path_points
 from autonomy.vectormap import NavGraph
 
@@ -125,6 +126,9 @@ class NavigatorConfig:
     """Keep swerving to the side chosen before while a direction there scores at least
     this fraction of Eq. 5's best (1 = off, as the paper; 0.7 steadied the approach to a
     standing person but swerved into a person coming round a corner in the 200 m run)."""
+    near_wall_tol_m: float = 0.1
+    """A near-field sight line passing this close to a map wall (through the pose
+    estimate) is taken as that wall, not an unmapped obstacle (``command``)."""
     memory_cell_m: float = 0.05
     """Remembered points are kept on a grid of this size (one point per cell)."""
     memory_radius_m: float = 2.0
@@ -147,7 +151,7 @@ class NavigatorConfig:
             self, "navigator.", "backoff_time_s", "backoff_speed_mps", "stuck_progress_m", "memory_s", "unseen_speed_mps",
             "backoff_check_m", "backoff_clearance_m", "corner_speed_mps", "corner_angle_rad", "corner_before_m",
             "map_blind_spots_m", "map_clearance_m", "proximity_speed_mps", "proximity_gap_m", "proximity_range_m",
-            "corner_after_m", "corner_ramp_m",
+            "corner_after_m", "corner_ramp_m", "near_wall_tol_m",
         )
 
 
@@ -169,6 +173,8 @@ class NavCommand:
     """Open path length along theta*."""
     fan: tuple[np.ndarray, np.ndarray] | None = None
     """(angles, open lengths) of the avoidance fan, for visualisation."""
+    near_points: int = 0
+    """Near-field points (closer than the camera's minimum range) among the obstacles."""
 
 
 def _wrap(a: float) -> float:
@@ -433,10 +439,42 @@ class Navigator:
         return res
 
     # -- control -----------------------------------------------------------------------
-    def command(self, pose: np.ndarray, obstacles: np.ndarray, t: float) -> NavCommand:
-        """Body-frame velocity for this frame from the pose estimate and sensed obstacles."""
-        cfg = self.cfg
+    def near_points(self, pose: np.ndarray, near_lines: np.ndarray | None) -> np.ndarray:
+        """Points along the near-field sight lines (:mod:`autonomy.nearfield`) that no
+        mapped wall explains, robot frame: a sight line with a map wall within
+        ``near_wall_tol_m`` of it is hidden by that wall (a door frame the robot passes
+        close to), which ``map_blind_spots_m`` covers already."""
+        lines = np.zeros((0, 4)) if near_lines is None else np.asarray(near_lines, dtype=np.float64).reshape(-1, 4)
+        if not len(lines):
+            return np.zeros((0, 2))
+        reach = float(np.max(np.hypot(lines[:, 2], lines[:, 3]))) + self.cfg.near_wall_tol_m
+        w = self.map_points(pose, reach)
+        if len(w):
+            a, d = lines[None, :, :2], lines[None, :, 2:] - lines[None, :, :2]
+            rel = w[:, None, :] - a
+            dd = np.maximum(np.einsum("mkj,mkj->mk", d, d), 1e-12)
+            s = np.clip(np.einsum("mkj,mkj->mk", rel, d) / dd, 0.0, 1.0)
+            gap = np.hypot(rel[..., 0] - s * d[..., 0], rel[..., 1] - s * d[..., 1])
+            lines = lines[~(gap < self.cfg.near_wall_tol_m).any(axis=0)]
+        return line_points(lines, WALL_STEP_M * 2)
+
+    def command(self, pose: np.ndarray, obstacles: np.ndarray, t: float, near_lines: np.ndarray | None = None) -> NavCommand:
+        """Body-frame velocity for this frame from the pose estimate and sensed obstacles.
+
+        ``near_lines``: this frame's near-field sight lines (:mod:`autonomy.nearfield`),
+        obstacles closer than the camera's minimum range; they join the obstacles for this
+        frame only (the next frame tells again whether they are still there).
+        """
         obstacles = self.remember(pose, obstacles, t)
+        near = self.near_points(pose, near_lines)
+        if len(near):
+            obstacles = np.vstack([obstacles, near])
+        out = self._decide(pose, obstacles, t)
+        out.near_points = len(near)
+        return out
+
+    def _decide(self, pose: np.ndarray, obstacles: np.ndarray, t: float) -> NavCommand:
+        cfg = self.cfg
         if self.goal is None or len(self.path) < 2:
             return NavCommand(np.zeros(3), "idle")
         xy = np.asarray(pose[:2], dtype=np.float64)
@@ -446,8 +484,15 @@ class Navigator:
             return NavCommand(np.zeros(3), "arrived", carrot=goal_xy)
         if t < self._backoff_until or (t - self._backoff_started < cfg.max_backoff_s and self._blind_blocked(obstacles)):
             # Back off at least backoff_time_s, and on until what blocked the way is in
-            # the camera's view again (or max_backoff_s has passed).
-            return NavCommand(self._backoff_velocity(pose, obstacles), "recovering")
+            # the camera's view again (or max_backoff_s has passed), unless there is no
+            # way back. The stuck clock starts again when the backing off ends (it had
+            # run on through a long back-off, so the robot went from one recovery
+            # straight into the next, for ever, where it could not back off).
+            v = self._backoff_velocity(pose, obstacles)
+            self._progress_t = t
+            if t < self._backoff_until or v.any():
+                return NavCommand(v, "recovering")
+            self._backoff_started = -np.inf
         s = self._project(xy)
         if s > self._best_s + cfg.stuck_progress_m:
             self._best_s = s
@@ -474,12 +519,13 @@ class Navigator:
         speed = min(cfg.cruise_speed_mps, res.safe_speed_mps, 0.8 * to_goal + 0.05, self.corner_speed_limit(s), self.edge_speed_limit(s))
         fan = (res.angles, res.lengths)
         if res.blocked:
-            if self._blind_blocked(obstacles):
+            back = self._backoff_velocity(pose, obstacles) if self._blind_blocked(obstacles) else np.zeros(3)
+            if back.any():
                 # What blocks is too close for the camera to see: back off until it can
                 # look again (a person may have moved on; else it is seen and avoided).
                 self._backoff_until = t + cfg.backoff_time_s
                 self._backoff_started = t
-                return NavCommand(self._backoff_velocity(pose, obstacles), "recovering", carrot, desired, res.theta_star, res.open_length_m, fan)
+                return NavCommand(back, "recovering", carrot, desired, res.theta_star, res.open_length_m, fan)
             # Wait (turning towards the carrot): people step aside; stuck detection recovers.
             return NavCommand(np.array([0.0, 0.0, turn]), "blocked", carrot, desired, res.theta_star, res.open_length_m, fan)
         th = res.theta_star

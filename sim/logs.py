@@ -292,6 +292,7 @@ def record_log(cfg: RecordingConfig, path: str | Path, *, progress: bool = False
     from autonomy.avoidance import obstacle_points
     from autonomy.fspf import fspf
     from autonomy.navigator import Navigator
+    from autonomy.nearfield import NearField
     from sim import blueprints
     from sim.kinect import KinectCamera
     from sim.kinect_noise import apply_kinect_noise
@@ -343,9 +344,12 @@ def record_log(cfg: RecordingConfig, path: str | Path, *, progress: bool = False
         people.append(world.people.positions().astype(np.float32).reshape(-1, 3))
         return hold[0][k]
 
-    def sense(k: int, depth_mm: np.ndarray) -> np.ndarray:
-        planes = fspf(depth_mm.astype(np.float32) * np.float32(0.001), intr, cfg.fspf, seed=fspf_base + k, mount=kin.mount)
-        return obstacle_points(np.vstack([planes.points, planes.outliers]), cfg.avoidance)
+    near_field = NearField(intr, kin.mount, kin.noise.min_range_m, cfg.avoidance.robot_radius_m, cfg.avoidance.near_field)
+
+    def sense(k: int, depth_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        depth = depth_mm.astype(np.float32) * np.float32(0.001)
+        planes = fspf(depth, intr, cfg.fspf, seed=fspf_base + k, mount=kin.mount)
+        return obstacle_points(np.vstack([planes.points, planes.outliers]), cfg.avoidance), near_field.sight_lines(depth)
 
     bar = None
     if progress:
@@ -353,7 +357,7 @@ def record_log(cfg: RecordingConfig, path: str | Path, *, progress: bool = False
 
         bar = tqdm(total=max_frames, unit="frame", desc="recording the drive", leave=False, file=sys.stderr)
     wall0 = time.perf_counter()
-    obstacles = sense(0, capture(0))
+    obstacles, near = sense(0, capture(0))
     current = 1
     nav.set_goal(nodes[current], start, 0.0)
     leg_start = 0.0
@@ -362,7 +366,7 @@ def record_log(cfg: RecordingConfig, path: str | Path, *, progress: bool = False
         while k < max_frames:
             t = float(world.data.time)
             pose = world.robot.pose(world.data)
-            cmd = nav.command(pose, obstacles, t)
+            cmd = nav.command(pose, obstacles, t, near)
             if cmd.state == "arrived" or t - leg_start > cfg.waypoint_timeout_s:
                 events.append({"t": round(t, 3), "node": nodes[current], "status": "reached" if cmd.state == "arrived" else "timeout"})
                 current += 1
@@ -370,11 +374,11 @@ def record_log(cfg: RecordingConfig, path: str | Path, *, progress: bool = False
                     break
                 nav.set_goal(nodes[current], pose, t)
                 leg_start = t
-                cmd = nav.command(pose, obstacles, t)
+                cmd = nav.command(pose, obstacles, t, near)
             world.robot.command(world.data, cmd.velocity, frame_dt)
             world.people.update(world.data, t + frame_dt, pose[:2])
             collisions += world.step_frame(n_sub)
-            obstacles = sense(k, capture(k))
+            obstacles, near = sense(k, capture(k))
             k += 1
             if bar is not None:
                 bar.update(1)

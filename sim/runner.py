@@ -23,6 +23,7 @@ from autonomy.cgr import CGRLocalizer
 from autonomy.errors import InputError
 from autonomy.fspf import fspf
 from autonomy.navigator import Navigator, in_camera_view
+from autonomy.nearfield import NearField
 from autonomy.observation import correspond
 from autonomy.planner import astar, path_points
 from autonomy.raycast import SceneQuery, load_or_build
@@ -253,6 +254,7 @@ def run_scenario(
     resets = 0
     reset_points: list[np.ndarray] = []
     navigator = Navigator(graph, scn.navigator, scn.avoidance, walls=np.asarray(vm.segments))
+    near_field = NearField(scn.kinect.intrinsics, scn.kinect.mount, scn.kinect.noise.min_range_m, scn.avoidance.robot_radius_m, scn.avoidance.near_field)
     use_estimate = scn.mission.follower == "navigator" and localizer is not None
 
     frame_dt = 1.0 / scn.kinect.rate_hz
@@ -310,11 +312,10 @@ def run_scenario(
     truth.append(pose)
     times.append(0.0)
     # The first frame, so the navigator sees before it moves.
-    planes = fspf(
-        apply_kinect_noise(camera.render_clean(world.data), scn.kinect.intrinsics, scn.kinect.noise, noise_base % (2**31)),
-        scn.kinect.intrinsics, scn.fspf, seed=fspf_base, mount=scn.kinect.mount,
-    )
+    depth = apply_kinect_noise(camera.render_clean(world.data), scn.kinect.intrinsics, scn.kinect.noise, noise_base % (2**31))
+    planes = fspf(depth, scn.kinect.intrinsics, scn.fspf, seed=fspf_base, mount=scn.kinect.mount)
     obstacles = obstacle_points(np.vstack([planes.points, planes.outliers]), scn.avoidance)
+    near_lines = near_field.sight_lines(depth)
     nav = None
     nav_states: dict[str, int] = {}
     n_people = len(world.people.people)
@@ -326,7 +327,7 @@ def run_scenario(
             t0 = time.perf_counter()
             pose = world.robot.pose(world.data)
             control_pose = estimates[-1] if use_estimate else pose
-            nav = navigator.command(control_pose, obstacles, t)
+            nav = navigator.command(control_pose, obstacles, t, near_lines)
             nav_states[nav.state] = nav_states.get(nav.state, 0) + 1
             timed_out = t - mission.started_at > mission.timeout_s
             if nav.state == "arrived" or timed_out:
@@ -355,7 +356,7 @@ def run_scenario(
                 if mission.current >= len(mission.waypoints):
                     break
                 mission.timeout_s = leg_timeout(navigator.set_goal(mission.waypoints[mission.current], control_pose, t))
-                nav = navigator.command(control_pose, obstacles, t)
+                nav = navigator.command(control_pose, obstacles, t, near_lines)
             cmd = nav.velocity
             world.robot.command(world.data, cmd, frame_dt)
             t1 = time.perf_counter()
@@ -386,6 +387,7 @@ def run_scenario(
             t4b = time.perf_counter()
             fspf_counts.append((len(planes.points), len(planes.outliers), planes.planes, len(p2d)))
             obstacles = obstacle_points(np.vstack([planes.points, planes.outliers]), scn.avoidance)
+            near_lines = near_field.sight_lines(depth)
             new_pose = world.robot.pose(world.data)
             increment = odom.update(new_pose)
             t4c = time.perf_counter()

@@ -90,7 +90,7 @@ def test_person_walking_head_on_is_passed_without_contact(tmp_path: Path) -> Non
 
 @pytest.mark.slow
 def test_collision_log_says_what_the_robot_was_doing(tmp_path: Path) -> None:
-    """With the avoidance blinded (only points above 1.9 m are obstacles), the robot
+    """With the avoidance blinded (only points above 1.9 m are obstacles, no near field), the robot
     drives into a person standing on the centre line of a 1 m corridor (too narrow to
     step aside in); the event records the contact straight ahead, the navigator driving,
     and when the person was last in view."""
@@ -100,7 +100,7 @@ def test_collision_log_says_what_the_robot_was_doing(tmp_path: Path) -> None:
             tmp_path,
             f'name = "blind"\n[map]\nvectormap = "c.vectormap.txt"\nnavgraph = "c.navigation.json"\n'
             f"[mission]\nwaypoints = [{last}]\nstart_node = 0\nmax_duration_s = 15.0\n"
-            "[avoidance]\nmin_height_m = 1.9\nmax_height_m = 2.0\n"
+            "[avoidance]\nmin_height_m = 1.9\nmax_height_m = 2.0\n[avoidance.near_field]\nenabled = false\n"
             "[[actors.people]]\nroute = [[6.0, 0.5], [6.01, 0.5]]\nspeed_mps = 0.0\n",
         )
     )
@@ -124,3 +124,29 @@ def test_collision_log_says_what_the_robot_was_doing(tmp_path: Path) -> None:
     assert 1.0 < tr[-1]["t"] - tr[0]["t"] <= 8.0 + 1e-6
     xs = [f["truth"][0] for f in tr]
     assert xs[-1] > xs[0] + 0.5 and all(f["people"][0][0] == pytest.approx(6.0, abs=0.35) for f in tr)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("near_field", [True, False])
+def test_person_standing_in_the_blind_zone_at_the_start(tmp_path: Path, near_field: bool) -> None:
+    """A person stands 0.7 m ahead of the robot when it sets off: closer than the camera's
+    0.8 m minimum range, so FSPF never samples them. The near field (the floor the camera
+    fails to see) stops the robot, which backs off until the camera sees the person;
+    without it the robot drives straight into them."""
+    last = corridor_files(tmp_path)
+    scn = load_scenario(
+        _scenario(
+            tmp_path,
+            f'name = "blind_start"\n[map]\nvectormap = "c.vectormap.txt"\nnavgraph = "c.navigation.json"\n'
+            f"[mission]\nwaypoints = [{last}]\nstart_node = 3\nmax_duration_s = 8.0\n"
+            f"[avoidance.near_field]\nenabled = {str(near_field).lower()}\n"
+            "[[actors.people]]\nroute = [[4.7, 1.2], [4.71, 1.2]]\nspeed_mps = 0.0\n",
+        )
+    )
+    rep = run_scenario(scn, tmp_path / "out", seed=1, progress=False)
+    m = rep["metrics"]
+    if near_field:
+        assert m["collisions"] == 0, rep["collision_events"]
+        assert rep["navigation"]["states"].get("recovering", 0) > 30  # it backed off
+    else:
+        assert m["collisions_person"] >= 1

@@ -150,6 +150,14 @@ def add_people(spec: mujoco.MjSpec, people: tuple[Person, ...]) -> None:
         )
 
 
+def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    """Distance from point p to segment a-b (2D)."""
+    d = b - a
+    L2 = float(d @ d)
+    t = 0.0 if L2 <= 0 else min(max(float((p - a) @ d) / L2, 0.0), 1.0)
+    return float(np.hypot(*(p - a - t * d)))
+
+
 def point_segment_distance(p: np.ndarray, segs: np.ndarray) -> np.ndarray:
     """Distance from point p (2,) to each segment (N, 4)."""
     a, b = segs[:, :2], segs[:, 2:]
@@ -173,12 +181,17 @@ class PeopleController:
     back-and-forth route ends, they turn round where they stand (a person stepped aside
     stays on the same side of the corridor, now on their other hand).
     Nobody walks into the robot: a person whose next step would bring them closer than
-    ``personal_space_m`` (plus both radii) to the robot's centre stays put for that
-    step — people see a robot coming round a corner even when its camera cannot see
-    them. Nor do people stand still while a robot drives at them: when the robot closes
+    ``personal_space_m`` (plus both radii) to where the robot is or, going on as it
+    goes, will be within ``anticipate_s``, stays put for that step (a side step that
+    keeps clear is still taken) — people see a robot coming round a corner even when
+    its camera cannot see them, and do not step into its way (a person stepped aside
+    going round their route's corner swung across a robot driving past there, into
+    its blind zone, in the 4 km run). Nor do people stand still while a robot drives at them: when the robot closes
     in to within ``retreat_gap_m`` of a person's body and, going on as it goes, would be
     inside their personal space within ``retreat_horizon_s``, the person steps back, away from
-    it, at ``retreat_speed_mps`` (slower than the robot's cruise, and never into a wall).
+    it (out of its way, sideways to its motion, when it drives faster than
+    ``retreat_sideways_mps``), at ``retreat_speed_mps`` (slower than the robot's cruise, and
+    never into a wall).
     Without that, a person whose route ran through the robot waited right beside it,
     out of the camera's view, until the robot drove off sideways into them. A person on a
     back-and-forth route held up by the robot (the personal-space rule) for longer than
@@ -200,6 +213,8 @@ class PeopleController:
     retreat_gap_m = 0.3
     retreat_speed_mps = 0.5
     retreat_horizon_s = 1.0
+    anticipate_s = 2.0
+    retreat_sideways_mps = 0.1
     max_blocked_s = 3.0
     clear_of_robot_m = 0.3
 
@@ -307,6 +322,15 @@ class PeopleController:
         cpa = float(np.hypot(*(rel - v * tc)))
         if cpa - self.robot_radius_m - p.radius_m >= self.personal_space_m:
             return False
+        if vv > self.retreat_sideways_mps**2:
+            # A robot driving at them: out of its way, sideways to its motion on the side
+            # they are on (stepping straight back, they were pushed along ahead of it, in
+            # its blind zone, for as long as it drove).
+            n = np.array([-v[1], v[0]]) / math.sqrt(vv)
+            if float(n @ rel) < 0.0:
+                n = -n
+            away = away + 2.0 * n
+            away = away / float(np.hypot(away[0], away[1]))
         before = (self._s[i], self._side[i])
         _, d = self._route_point(i, self._s[i])
         right = np.array([d[1], -d[0]])
@@ -385,11 +409,24 @@ class PeopleController:
                 new[:2] = self._state[i, :2] + gap * (reach / dist)
             if robot_xy is not None:
                 keep = self.robot_radius_m + p.radius_m + self.personal_space_m
-                d_new = float(np.hypot(new[0] - robot_xy[0], new[1] - robot_xy[1]))
-                d_old = float(np.hypot(self._state[i, 0] - robot_xy[0], self._state[i, 1] - robot_xy[1]))
+                ahead_xy = rxy + robot_step * (self.anticipate_s / dt) if dt > 0 else rxy
+                d_new = _segment_distance(new[:2], rxy, ahead_xy)
+                d_old = _segment_distance(self._state[i, :2], rxy, ahead_xy)
                 if d_new < keep and d_new < d_old:
-                    self._s[i], self._side[i] = before
-                    self._blocked[i] += dt
+                    # Not the step; the walk alone (stepped aside as before: overtaking
+                    # the robot) or the side step alone, if that keeps clear of it.
+                    walked, side = self._s[i], self._side[i]
+                    for cand in ((walked, before[1]), (before[0], side)):
+                        if cand == before or cand == (walked, side):
+                            continue
+                        self._s[i], self._side[i] = cand
+                        alt = self._place(i)
+                        if float(np.hypot(*(alt[:2] - self._state[i, :2]))) <= reach and _segment_distance(alt[:2], rxy, ahead_xy) >= min(keep, d_old):
+                            self._state[i] = alt
+                            break
+                    else:
+                        self._s[i], self._side[i] = before
+                        self._blocked[i] += dt
                     if self._blocked[i] > self.max_blocked_s:
                         self._turn_back(i)
                         self._blocked[i] = 0.0

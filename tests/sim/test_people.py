@@ -202,3 +202,28 @@ def test_a_person_tailing_a_slowly_backing_robot_in_a_narrow_corridor_turns_back
     tailing = np.sum(np.array(gaps[:turn]) < pc.personal_space_m + pc.clear_of_robot_m) * DT
     assert tailing < pc.max_wait_s + pc.max_blocked_s + 1.0  # held up for a few seconds at most ...
     assert xs[-1] < xs[turn] - 5.0  # ... then walking back the other way
+
+
+def test_a_person_does_not_step_into_the_path_of_a_moving_robot() -> None:
+    """A person walking across the corridor towards the line a robot drives along waits
+    at its edge until the robot has passed: never within a metre ahead of it, in its
+    path (the camera's blind zone). Keeping clear of where the robot is, not where it
+    will be, let them cross 0.7 m in front of it (a person whose route turned the
+    corner swung across a passing robot's path in the 4 km run)."""
+    robot = lambda k: np.array([-4.0 + 0.5 * k * DT, 0.0])  # noqa: E731 - 0.5 m/s along y = 0
+    for offset in (0.375, 0.5, 0.75, 1.0, 1.25, 1.5):
+        person = Person(route=((0.0, -3.0), (0.0, 3.0)), speed_mps=1.0, start_offset_m=offset)
+        pos = _walk((person,), robot, 480)
+        rel = pos[:, 0] - np.array([robot(k) for k in range(481)])
+        in_path = (rel[:, 0] > 0.0) & (rel[:, 0] < 1.0) & (np.abs(rel[:, 1]) < 0.3 + person.radius_m)
+        assert not in_path.any(), offset
+        assert pos[:, 0, 1].max() > 1.0  # and crosses once it has passed
+
+
+def test_a_person_a_robot_drives_at_steps_out_of_its_way() -> None:
+    """A person standing on a robot's line steps sideways out of its path, not back along
+    it (stepping straight back, they were pushed along ahead of it, out of its view)."""
+    person = Person(route=((2.0, -3.0), (2.0, 3.0)), speed_mps=0.0, start_offset_m=3.0)
+    robot = lambda k: np.array([0.3 * k * DT, 0.0])  # noqa: E731 - 0.3 m/s at them
+    pos = _walk((person,), robot, 400)
+    assert abs(pos[-1, 0, 0] - 2.0) < 0.05 and abs(pos[-1, 0, 1]) > 0.6

@@ -318,6 +318,7 @@ def run_scenario(
     near_lines = near_field.sight_lines(depth)
     nav = None
     nav_states: dict[str, int] = {}
+    near_frames = 0  # frames the near field (obstacles closer than the camera's range) counted
     n_people = len(world.people.people)
     last_in_view = np.full(n_people, -np.inf)
     blackbox = FlightRecorder(scn.report.incident_seconds, scn.kinect.rate_hz)
@@ -329,6 +330,7 @@ def run_scenario(
             control_pose = estimates[-1] if use_estimate else pose
             nav = navigator.command(control_pose, obstacles, t, near_lines)
             nav_states[nav.state] = nav_states.get(nav.state, 0) + 1
+            near_frames += int(nav.near_points > 0)
             timed_out = t - mission.started_at > mission.timeout_s
             if nav.state == "arrived" or timed_out:
                 node = mission.waypoints[mission.current]
@@ -429,6 +431,7 @@ def run_scenario(
                                 np.ascontiguousarray(n2d, dtype=np.float64), True, math.cos(ocfg.theta_max_rad), ocfg.max_distance_m, idx,
                             )
                         recorder.log_scene(lines, est_pose, p2d, idx)
+                    recorder.log_near_field(near_lines)
                     if nav is not None and nav.fan is not None:
                         recorder.log_avoidance(
                             nav.fan[0], nav.fan[1], nav.theta_star_rad, nav.desired_rad, navigator.avoid.radius_m
@@ -554,7 +557,7 @@ def run_scenario(
         "map": {"segments": vm.n_segments, "nodes": len(graph.nodes), "edges": len(graph.edges)},
         "actors": {"furniture": len(furniture), "people": len(people)},
         "waypoints": mission.waypoints,
-        "navigation": {"states": nav_states, "replans": navigator.replans, "recoveries": navigator.recoveries},
+        "navigation": {"states": nav_states, "replans": navigator.replans, "recoveries": navigator.recoveries, "near_field_frames": near_frames},
         "events": mission.events,
         "collision_events": world.collision_log,
         "files": files,

@@ -14,7 +14,9 @@ Entity layout (timelines ``sim_time`` in seconds and ``frame``):
 - ``world/localization/{scene_lines,correspondences,observed}`` the analytic ray cast's
   scene lines at the estimate and each observed point's line (world frame).
 - ``world/robot/avoidance/{fan,chosen,desired,margin}`` open path lengths (Eq. 4) as a
-  fan, theta* (Eq. 5), the carrot direction and the robot's safety radius.
+  fan, theta* (Eq. 5), the carrot direction and the robot's safety radius;
+  ``world/robot/avoidance/near_field`` the sight lines where the camera fails to see the
+  near floor (something closer than its minimum range, autonomy/nearfield.py).
 - ``metrics/...`` scalars over time (speed, per-stage CPU ms, ...).
 - ``world/plane_map/<name>/{patches,leaves,normals}`` an octree plane map (mapping
   experiments): plane patches as one mesh coloured by normal direction, the occupied
@@ -352,6 +354,15 @@ class Recorder:
             "world/robot/avoidance/margin",
             rr.LineStrips3D([np.column_stack([radius_m * np.cos(ring), radius_m * np.sin(ring), np.full(37, 0.12)])], colors=(120, 120, 255)),
         )
+
+    def log_near_field(self, lines: np.ndarray) -> None:
+        """The near field's blocked sight lines (robot frame, autonomy/nearfield.py): where
+        the camera fails to see the floor right in front, something closer than its range."""
+        seg = np.asarray(lines, dtype=np.float32).reshape(-1, 4)
+        strips = np.zeros((len(seg), 2, 3), dtype=np.float32)
+        strips[:, 0, :2], strips[:, 1, :2] = seg[:, :2], seg[:, 2:]
+        strips[:, :, 2] = 0.05
+        self.rec.log("world/robot/avoidance/near_field", rr.LineStrips3D(strips, colors=(255, 60, 200), radii=0.008))
 
     def log_people(self, xyh: np.ndarray, radius_m: float = 0.22, height_m: float = 1.75) -> None:
         if len(xyh):

@@ -64,6 +64,7 @@ def test_recording_verifies_and_holds_expected_entities(recording: Path) -> None
         "/world/localization/scene_lines": "LineStrips3D:strips",
         "/world/robot/avoidance/fan": "LineStrips3D:strips",
         "/world/robot/avoidance/chosen": "Arrows3D:vectors",
+        "/world/robot/avoidance/near_field": "LineStrips3D:strips",
         "/world/people": "Boxes3D:centers",
     }
     for path, column in expect.items():

@@ -169,6 +169,9 @@ def bench_sim(results: dict[str, Result], quick: bool) -> None:
     start = world.robot.pose(world.data)
     nav.set_goal(int(bp.navgraph.nodes[-1].id), start)
     acfg = AvoidanceConfig()
+    from autonomy.nearfield import NearField
+
+    near_field = NearField(cfg.intrinsics, cfg.mount, cfg.noise.min_range_m, acfg.robot_radius_m, acfg.near_field)
 
     def stack() -> None:
         # The frames in the order they were taken, with the true odometry increments (as
@@ -184,9 +187,9 @@ def bench_sim(results: dict[str, Result], quick: bool) -> None:
         loc.update(p2, n2)
         obstacles = obstacle_points(np.vstack([res.points, res.outliers]), acfg)
         # Time advances at 30 Hz as in the loop (remembered obstacles expire after memory_s).
-        nav.command(loc.estimate().pose, obstacles, k / 30.0)
+        nav.command(loc.estimate().pose, obstacles, k / 30.0, near_field.sight_lines(frames[j]))
 
-    # The whole robot-side stack of a frame: FSPF + CGR + avoidance + navigation.
+    # The whole robot-side stack of a frame: FSPF + CGR + near field + avoidance + navigation.
     results["stack_frame"] = entry(timeit(stack, n, warmup=3), target=3.0, paper=5.4)
 
     def closed_frame() -> None:

@@ -206,6 +206,7 @@ class Navigator:
         self._progress_t = 0.0
         self._backoff_until = -1.0
         self._backoff_started = -np.inf
+        self._stuck_backoff = False
         self.replans = 0
         self.recoveries = 0
         self._mem = np.zeros((0, 2))
@@ -485,11 +486,13 @@ class Navigator:
         if t < self._backoff_until or (t - self._backoff_started < cfg.max_backoff_s and self._blind_blocked(obstacles)):
             # Back off at least backoff_time_s, and on until what blocked the way is in
             # the camera's view again (or max_backoff_s has passed), unless there is no
-            # way back. The stuck clock starts again when the backing off ends (it had
-            # run on through a long back-off, so the robot went from one recovery
-            # straight into the next, for ever, where it could not back off).
+            # way back. After a stuck recovery's back-off the stuck clock starts again
+            # (it had run on through a long back-off, so the robot went from one
+            # recovery straight into the next, for ever, where it could not back off);
+            # a back-off from a blind block counts as no progress.
             v = self._backoff_velocity(pose, obstacles)
-            self._progress_t = t
+            if self._stuck_backoff:
+                self._progress_t = t
             if t < self._backoff_until or v.any():
                 return NavCommand(v, "recovering")
             self._backoff_started = -np.inf
@@ -502,6 +505,7 @@ class Navigator:
             self.recoveries += 1
             self._backoff_until = t + cfg.backoff_time_s
             self._backoff_started = t
+            self._stuck_backoff = True
             self.replans += 1
             self.set_goal(self.goal, pose, t + cfg.backoff_time_s)
             return NavCommand(self._backoff_velocity(pose, obstacles), "recovering")
@@ -525,6 +529,7 @@ class Navigator:
                 # look again (a person may have moved on; else it is seen and avoided).
                 self._backoff_until = t + cfg.backoff_time_s
                 self._backoff_started = t
+                self._stuck_backoff = False
                 return NavCommand(back, "recovering", carrot, desired, res.theta_star, res.open_length_m, fan)
             # Wait (turning towards the carrot): people step aside; stuck detection recovers.
             return NavCommand(np.array([0.0, 0.0, turn]), "blocked", carrot, desired, res.theta_star, res.open_length_m, fan)

@@ -314,3 +314,43 @@ def test_slows_down_passing_close_to_an_obstacle() -> None:
     off = Navigator(line_graph(), NavigatorConfig(memory_s=0.0, proximity_speed_mps=0.0))  # 0 = off
     off.set_goal(5, np.zeros(3))
     assert speed(off, person) == pytest.approx(0.75)
+
+
+def test_a_robot_with_no_way_back_waits_instead_of_hanging_in_a_back_off() -> None:
+    """Something too close for the camera right ahead, a wall right behind: the robot
+    cannot back off. It waits (blocked), recovers when stuck, and never stays in a
+    motionless back-off for longer than a recovery's back-off time. It had stayed
+    'recovering' without moving for as long as the obstacle was there."""
+    wall = np.array([[-0.34, -2.0, -0.34, 2.0]])
+    nav = Navigator(line_graph(), walls=wall)
+    pose = np.zeros(3)
+    nav.set_goal(5, pose)
+    ahead = np.array([[0.45, y] for y in np.linspace(-0.3, 0.3, 13)])  # 0.23 m from the camera
+    run, longest, states = 0, 0, set()
+    for k in range(600):  # 20 s
+        cmd = nav.command(pose, ahead, k / 30.0)
+        states.add(cmd.state)
+        assert np.allclose(cmd.velocity[:2], 0.0)
+        run = run + 1 if cmd.state == "recovering" else 0
+        longest = max(longest, run)
+    assert "blocked" in states and nav.recoveries >= 1
+    assert longest <= nav.cfg.backoff_time_s * 30 + 1
+
+
+def test_after_a_long_back_off_the_stuck_clock_starts_again() -> None:
+    """A stuck recovery whose back-off runs on to max_backoff_s (something following the
+    robot, too close to see) is not followed straight by another recovery: the stuck
+    clock had run on through the back-off."""
+    nav = Navigator(line_graph())
+    pose = np.zeros(3)
+    nav.set_goal(5, pose)
+    blocker = np.array([[0.5, y] for y in np.linspace(-0.35, 0.35, 15)])  # robot frame, every frame
+    k = 0
+    while nav.recoveries == 0:
+        nav.command(pose, blocker, k / 30.0)
+        k += 1
+    t_end = k / 30.0 + nav.cfg.max_backoff_s + 1.0
+    while k / 30.0 < t_end:
+        nav.command(pose, blocker, k / 30.0)
+        k += 1
+    assert nav.recoveries == 1

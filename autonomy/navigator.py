@@ -63,6 +63,10 @@ class NavigatorConfig:
     max_backoff_s: float = 8.0
     """Backing off goes on past backoff_time_s while an obstacle remembered in the path
     is still too close for the camera to see, up to this long."""
+    backoff_memory_s: float = 30.0
+    """Remembered obstacles count this long for the back-off's check of the way back,
+    which the camera never sees (the avoidance forgets them after ``memory_s``): in a
+    4 km run a robot backing off from a table for 3 s drove into furniture behind it."""
     backoff_check_m: float = 0.4
     """The way back is checked this far against map walls and remembered obstacles."""
     backoff_clearance_m: float = 0.03
@@ -151,7 +155,7 @@ class NavigatorConfig:
             self, "navigator.", "backoff_time_s", "backoff_speed_mps", "stuck_progress_m", "memory_s", "unseen_speed_mps",
             "backoff_check_m", "backoff_clearance_m", "corner_speed_mps", "corner_angle_rad", "corner_before_m",
             "map_blind_spots_m", "map_clearance_m", "proximity_speed_mps", "proximity_gap_m", "proximity_range_m",
-            "corner_after_m", "corner_ramp_m", "near_wall_tol_m",
+            "corner_after_m", "corner_ramp_m", "near_wall_tol_m", "backoff_memory_s",
         )
 
 
@@ -211,6 +215,7 @@ class Navigator:
         self.recoveries = 0
         self._mem = np.zeros((0, 2))
         self._mem_t = np.zeros(0)
+        self._mem_behind = np.zeros((0, 2))
         self._side = 0
         self._corners = np.zeros(0)
         self._seg_speed = np.zeros(0)
@@ -329,24 +334,25 @@ class Navigator:
         Remembered points in the region the camera sees now are replaced by the current
         observation (people move on); points right in front of the robot but closer than
         the camera's minimum range persist until that place is seen again; the others
-        persist for ``memory_s``.
+        persist for ``memory_s``. Points stay remembered for ``backoff_memory_s`` for
+        the back-off's check of the way back only (:meth:`_backoff_velocity`).
         """
         cfg = self.cfg
         obs = np.asarray(obstacles, dtype=np.float64).reshape(-1, 2)
         if cfg.memory_s <= 0:
+            self._mem_behind = np.zeros((0, 2))
             return obs
         c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
+        xy = np.asarray(pose[:2], dtype=np.float64)
         if len(self._mem):
-            rel = self._mem - np.asarray(pose[:2], dtype=np.float64)
+            rel = self._mem - xy
             bx = c * rel[:, 0] + s * rel[:, 1] - cfg.camera_forward_m
             by = -s * rel[:, 0] + c * rel[:, 1]
-            rng = np.hypot(bx, by)
             # A little inside the view's edges, so what is replaced was really seen.
             in_view = in_camera_view(bx, by, cfg, fov_fraction=0.9, near_pad_m=0.1, far_pad_m=0.2)
-            # Right in front but too close to be seen: kept until the place is seen again
-            # (the robot backs off or turns), however long that takes.
-            blind_ahead = (bx > -cfg.camera_forward_m) & (rng <= cfg.camera_min_range_m + 0.1) & (np.abs(by) < self.avoid.radius_m + 0.2)
-            keep = ((t - self._mem_t <= cfg.memory_s) | blind_ahead) & ~in_view
+            age = t - self._mem_t
+            near = np.hypot(rel[:, 0], rel[:, 1]) <= cfg.memory_radius_m + 0.5
+            keep = ((age <= max(cfg.memory_s, cfg.backoff_memory_s)) | self._blind_ahead(bx, by)) & ~in_view & near
             self._mem, self._mem_t = self._mem[keep], self._mem_t[keep]
         near = obs[np.hypot(obs[:, 0], obs[:, 1]) <= cfg.memory_radius_m] if len(obs) else obs
         if len(near):
@@ -361,9 +367,20 @@ class Navigator:
             _, first = np.unique((allc[:, 0] + off) * (off << 1) + (allc[:, 1] + off), return_index=True)
             self._mem, self._mem_t = allc[first] * cfg.memory_cell_m, allt[first]
         if not len(self._mem):
+            self._mem_behind = np.zeros((0, 2))
             return self._mem.copy()
-        rel = self._mem - np.asarray(pose[:2], dtype=np.float64)
-        return np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]])
+        rel = self._mem - xy
+        out = np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]])
+        self._mem_behind = out
+        recent = (t - self._mem_t <= cfg.memory_s) | self._blind_ahead(out[:, 0] - cfg.camera_forward_m, out[:, 1])
+        return out[recent]
+
+    def _blind_ahead(self, bx: np.ndarray, by: np.ndarray) -> np.ndarray:
+        """Points (camera-relative, robot axes) right in front of the robot but too close
+        for the camera: remembered until the place is seen again (the robot backs off or
+        turns), however long that takes."""
+        cfg = self.cfg
+        return (bx > -cfg.camera_forward_m) & (np.hypot(bx, by) <= cfg.camera_min_range_m + 0.1) & (np.abs(by) < self.avoid.radius_m + 0.2)
 
     def _blind_blocked(self, obstacles: np.ndarray) -> bool:
         """Whether an obstacle point lies in the path ahead closer than the camera sees."""
@@ -405,7 +422,7 @@ class Navigator:
         cfg = self.cfg
         pts = np.asarray(obstacles, dtype=np.float64).reshape(-1, 2)
         walls = self.map_points(pose, cfg.backoff_check_m + self.avoid.robot_radius_m + 0.2)
-        pts = np.vstack([pts, walls]) if len(walls) else pts
+        pts = np.vstack([pts, walls, self._mem_behind])
         clear = self.avoid.robot_radius_m + cfg.backoff_clearance_m
         for k in (0, 1, -1, 2, -2, 3, -3, 4, -4, 5, -5):
             phi = math.pi + k * math.radians(15.0)

@@ -354,3 +354,18 @@ def test_after_a_long_back_off_the_stuck_clock_starts_again() -> None:
         nav.command(pose, blocker, k / 30.0)
         k += 1
     assert nav.recoveries == 1
+
+
+def test_backs_off_clear_of_furniture_seen_long_before() -> None:
+    """A box seen 0.6 m ahead, then the robot turns round: 10 s later (the avoidance's
+    memory has long forgotten it) the box is right behind, and the back-off does not
+    go straight into it; with a 2 s back-off memory it does."""
+    box = np.array([[0.6, y] for y in np.linspace(-0.2, 0.2, 9)])
+    for backoff_memory_s, straight in ((30.0, False), (2.0, True)):
+        nav = Navigator(line_graph(), NavigatorConfig(backoff_memory_s=backoff_memory_s))
+        nav.set_goal(5, np.zeros(3))
+        nav.remember(np.zeros(3), box, 0.0)
+        turned = np.array([0.0, 0.0, math.pi])
+        assert len(nav.remember(turned, np.zeros((0, 2)), 10.0)) == 0  # forgotten by the avoidance
+        v = nav._backoff_velocity(turned, np.zeros((0, 2)))
+        assert np.allclose(v[:2], [-0.15, 0.0]) == straight, v

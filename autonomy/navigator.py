@@ -215,7 +215,7 @@ class Navigator:
         self.recoveries = 0
         self._mem = np.zeros((0, 2))
         self._mem_t = np.zeros(0)
-        self._mem_behind = np.zeros((0, 2))
+        self._mem_all = np.zeros((0, 2))
         self._side = 0
         self._corners = np.zeros(0)
         self._seg_speed = np.zeros(0)
@@ -340,7 +340,7 @@ class Navigator:
         cfg = self.cfg
         obs = np.asarray(obstacles, dtype=np.float64).reshape(-1, 2)
         if cfg.memory_s <= 0:
-            self._mem_behind = np.zeros((0, 2))
+            self._mem_all = np.zeros((0, 2))
             return obs
         c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
         xy = np.asarray(pose[:2], dtype=np.float64)
@@ -367,11 +367,11 @@ class Navigator:
             _, first = np.unique((allc[:, 0] + off) * (off << 1) + (allc[:, 1] + off), return_index=True)
             self._mem, self._mem_t = allc[first] * cfg.memory_cell_m, allt[first]
         if not len(self._mem):
-            self._mem_behind = np.zeros((0, 2))
+            self._mem_all = np.zeros((0, 2))
             return self._mem.copy()
         rel = self._mem - xy
         out = np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]])
-        self._mem_behind = out
+        self._mem_all = out
         recent = (t - self._mem_t <= cfg.memory_s) | self._blind_ahead(out[:, 0] - cfg.camera_forward_m, out[:, 1])
         return out[recent]
 
@@ -422,7 +422,7 @@ class Navigator:
         cfg = self.cfg
         pts = np.asarray(obstacles, dtype=np.float64).reshape(-1, 2)
         walls = self.map_points(pose, cfg.backoff_check_m + self.avoid.robot_radius_m + 0.2)
-        pts = np.vstack([pts, walls, self._mem_behind])
+        pts = np.vstack([pts, walls, self._mem_all])
         clear = self.avoid.robot_radius_m + cfg.backoff_clearance_m
         for k in (0, 1, -1, 2, -2, 3, -3, 4, -4, 5, -5):
             phi = math.pi + k * math.radians(15.0)
@@ -474,7 +474,7 @@ class Navigator:
             s = np.clip(np.einsum("mkj,mkj->mk", rel, d) / dd, 0.0, 1.0)
             gap = np.hypot(rel[..., 0] - s * d[..., 0], rel[..., 1] - s * d[..., 1])
             lines = lines[~(gap < self.cfg.near_wall_tol_m).any(axis=0)]
-        return line_points(lines, WALL_STEP_M * 2)
+        return line_points(lines, self.avoid.near_field.point_step_m)
 
     def command(self, pose: np.ndarray, obstacles: np.ndarray, t: float, near_lines: np.ndarray | None = None) -> NavCommand:
         """Body-frame velocity for this frame from the pose estimate and sensed obstacles.

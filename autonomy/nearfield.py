@@ -33,6 +33,9 @@ import numpy as np
 from autonomy.camera import CameraIntrinsics, CameraMount
 from autonomy.errors import InputError, require_int, require_positive
 
+REFERENCE_FX_PX = 580.0
+"""Focal length (px) that ``min_run_px`` is given for (the Kinect v1, DESIGN.md)."""
+
 
 @dataclass(frozen=True)
 class NearFieldConfig:
@@ -50,7 +53,8 @@ class NearFieldConfig:
     """A column is blocked when at least this fraction of its band pixels return nothing
     (or a depth below the minimum range)."""
     min_run_px: int = 20
-    """Blocked columns count only in runs at least this wide (pixels): the IR projector's
+    """Blocked columns count only in runs at least this wide (pixels of an f = 580 px
+    camera, scaled with the camera's fx): the IR projector's
     shadow beside a surface nearer than the floor leaves no return on the floor too, but
     at most f b (1 / min_range - 1 / band_max_depth) wide (f = 580 px, baseline b =
     7.5 cm: 16.5 px), while a body within the minimum range spans far more (a chair leg
@@ -102,13 +106,21 @@ class NearField:
         with np.errstate(divide="ignore", invalid="ignore"):
             floor = np.where(d[..., 2] < 0, -t[2] / d[..., 2], np.inf)
         expected = (floor >= self.min_range_m + cfg.margin_m) & (floor <= cfg.band_max_depth_m)
+        if cfg.enabled and not expected.any():
+            # Silently off would be worse: the robot would drive into what it cannot see.
+            raise InputError(
+                f"avoidance.near_field: no image row sees the floor between "
+                f"{self.min_range_m + cfg.margin_m:.2f} and {cfg.band_max_depth_m:.2f} m with this camera mount "
+                f"(raise band_max_depth_m, or set enabled = false)"
+            )
         keep_rows = expected.any(axis=1)
         self.rows = rows[keep_rows]
         self.cols = cols
         self.expected = expected[keep_rows]
         self.n_expected = self.expected.sum(axis=0)
-        self.active = bool(cfg.enabled and self.expected.any())
-        self._min_run = max(1, int(math.ceil(cfg.min_run_px / cfg.col_step)))
+        self.active = bool(cfg.enabled)
+        # min_run_px is in pixels of an f = 580 px camera: a shadow's width scales with f.
+        self._min_run = max(1, int(math.ceil(cfg.min_run_px * intr.fx / REFERENCE_FX_PX / cfg.col_step)))
         # Each column's sight line: from the camera to where its lowest band pixel's ray
         # reaches the minimum range, down-projected, clipped to start at the robot's edge.
         lowest = d[np.flatnonzero(keep_rows)[-1]] if keep_rows.any() else d[-1]

@@ -151,7 +151,9 @@ def add_people(spec: mujoco.MjSpec, people: tuple[Person, ...]) -> None:
 
 
 def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
-    """Distance from point p to segment a-b (2D)."""
+    """Distance from point p to segment a-b (2D): the scalar form of
+    :func:`point_segment_distance` for the people's per-step checks (a few per person
+    and frame, where building (N, 4) arrays cost more than the arithmetic)."""
     d = b - a
     L2 = float(d @ d)
     t = 0.0 if L2 <= 0 else min(max(float((p - a) @ d) / L2, 0.0), 1.0)
@@ -188,7 +190,8 @@ class PeopleController:
     going round their route's corner swung across a robot driving past there, into
     its blind zone, in the 4 km run). From a robot on the move (faster than
     ``moving_mps``) they keep ``pass_gap_m`` rather than ``personal_space_m``: walking
-    past it 5 cm abeam, out of its camera's view, they were in the way of its next turn. Nor do people stand still while a robot drives at them: when the robot closes
+    past it 5 cm abeam, out of its camera's view, they were in the way of its next turn.
+    Nor do people stand still while a robot drives at them: when the robot closes
     in to within ``retreat_gap_m`` of a person's body and, going on as it goes, would be
     inside their personal space within ``retreat_horizon_s``, the person steps back, away from
     it (out of its way, sideways to its motion, when it drives faster than

@@ -85,7 +85,7 @@ def frame_record(
         "open_m": round(float(nav.open_length_m), 3) if math.isfinite(nav.open_length_m) else None,
         "n_obstacles": int(len(obstacles)),
         "nearest_obstacle": near,
-        "near_points": int(getattr(nav, "near_points", 0)),
+        "near_points": int(nav.near_points),
         "people": [[round(float(p[0]), 3), round(float(p[1]), 3)] for p in people],
     }
 

@@ -17,6 +17,7 @@ from autonomy.cgr import CGRConfig
 from autonomy.errors import InputError
 from autonomy.fspf import FSPFConfig
 from autonomy.navigator import NavigatorConfig
+from autonomy.nearfield import NearField
 from autonomy.observation import ObservationConfig
 from autonomy.raycast import VisibilityGridConfig
 from sim.actors import Furniture, Person
@@ -207,6 +208,12 @@ def load_scenario(path: str | Path, overrides: list[str] | None = None) -> Scena
     if scn.map.name and not (ASSETS_DIR / f"{scn.map.name}.vectormap.txt").is_file():
         names = ", ".join(sorted(p.name.removesuffix(".vectormap.txt") for p in ASSETS_DIR.glob("*.vectormap.txt")))
         raise InputError(f"{src}: key 'map.name': no building {scn.map.name!r} in sim/assets (have: {names})")
+    # The near field depends on the camera, its mount and the sensor's range: check the
+    # combination now (a few ms), not when the run starts.
+    try:
+        NearField(scn.kinect.intrinsics, scn.kinect.mount, scn.kinect.noise.min_range_m, scn.avoidance.robot_radius_m, scn.avoidance.near_field)
+    except InputError as err:
+        raise InputError(f"{src}: {err}") from None
     return scn
 
 

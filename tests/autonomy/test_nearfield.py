@@ -136,6 +136,22 @@ def test_disabled_and_bad_input() -> None:
         near().blocked_columns(np.zeros((10, 10), dtype=np.float32))
     with pytest.raises(InputError, match="minimum range"):
         NearField(INTR, MOUNT, 0.0, 0.3)
+    # A band the camera cannot see the floor in is an error, not a near field silently off.
+    with pytest.raises(InputError, match=r"near_field: no image row sees the floor between 0\.90 and 0\.50 m"):
+        NearField(INTR, MOUNT, MIN_RANGE, 0.3, NearFieldConfig(band_max_depth_m=0.5))
+    NearField(INTR, MOUNT, MIN_RANGE, 0.3, NearFieldConfig(band_max_depth_m=0.5, enabled=False))
+
+
+def test_the_shadow_rule_scales_with_the_focal_length() -> None:
+    """The same 30 px-at-f=580 strip of missing floor is a body at full resolution and at
+    half resolution (15 px there), and a 12 px-at-f=580 strip is a shadow at both."""
+    half = INTR.scaled(320, 240)
+    for intr, k in ((INTR, 1), (half, 2)):
+        nf = NearField(intr, MOUNT, MIN_RANGE, 0.3, NearFieldConfig(row_step=2, col_step=2))
+        for width, blocked in ((12, False), (32, True)):
+            depth = np.full((intr.height, intr.width), 1.2, dtype=np.float32)
+            depth[:, 100 : 100 + width // k] = 0.0
+            assert nf.blocked_columns(depth).any() == blocked, (intr.width, width)
 
 
 @settings(max_examples=60, deadline=None)

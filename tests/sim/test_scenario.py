@@ -73,6 +73,8 @@ def test_defaults_are_the_papers_and_design_values(tmp_path: Path) -> None:
         ("seed = [1]\n" + BASE, r"key 'seed' expected an integer, got an array"),
         (BASE + "seed = 3\n", r"unknown key 'map\.seed'"),
         ("name = \n", r"s\.toml: invalid TOML"),
+        (BASE + "[avoidance.near_field]\nmin_invalid_fraction = 1.5\n", r"s\.toml: avoidance\.near_field\.min_invalid_fraction: expected a number in"),
+        (BASE + "[avoidance.near_field]\nband_max_depth_m = 0.5\n", r"s\.toml: avoidance\.near_field: no image row sees the floor"),
     ],
 )
 def test_bad_scenarios_name_file_key_and_expectation(tmp_path: Path, text: str, pattern: str) -> None:

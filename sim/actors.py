@@ -196,7 +196,7 @@ class PeopleController:
     inside their personal space within ``retreat_horizon_s``, the person steps back, away from
     it (out of its way, sideways to its motion, when it drives faster than
     ``retreat_sideways_mps``), at ``retreat_speed_mps`` (slower than the robot's cruise, and
-    never into a wall).
+    never into a wall: 5 cm from it, or ``squeeze_m`` where 5 cm leaves no way out).
     Without that, a person whose route ran through the robot waited right beside it,
     out of the camera's view, until the robot drove off sideways into them. A person on a
     back-and-forth route held up by the robot (the personal-space rule) for longer than
@@ -218,6 +218,7 @@ class PeopleController:
     retreat_gap_m = 0.3
     retreat_speed_mps = 0.5
     retreat_horizon_s = 1.0
+    squeeze_m = 0.01
     anticipate_s = 2.0
     pass_gap_m = 0.35
     moving_mps = 0.1
@@ -306,10 +307,10 @@ class PeopleController:
         right = np.array([d[1], -d[0]])
         return np.array([*(pos + self._side[i] * right), math.atan2(d[1], d[0])])
 
-    def _side_is_clear(self, i: int, pos: np.ndarray) -> bool:
+    def _side_is_clear(self, i: int, pos: np.ndarray, margin_m: float = 0.05) -> bool:
         if not len(self.walls):
             return True
-        return float(point_segment_distance(pos, self.walls).min()) > self.people[i].radius_m + 0.05
+        return float(point_segment_distance(pos, self.walls).min()) > self.people[i].radius_m + margin_m
 
     def _retreat(self, i: int, robot_xy: np.ndarray, robot_step: np.ndarray, dt: float) -> bool:
         """Step back from a robot closing in (see the class docstring); True if stepped."""
@@ -344,10 +345,15 @@ class PeopleController:
         step = self.retreat_speed_mps * dt
         ds, dside = step * float(away @ d), step * float(away @ right)
         # Straight away; else only its along-route part (a wall beside); else only sideways,
-        # a full step (the route ends or bends right behind them).
-        for cand_s, cand_side in ((ds, dside), (ds, 0.0), (0.0, math.copysign(step, dside))):
+        # a full step (the route ends or bends right behind them). Wedged where none of
+        # these keeps 5 cm from the walls (a door frame beside, the robot turning into
+        # the door), they squeeze along the wall, 1 cm from it (``squeeze_m``): keeping
+        # the 5 cm, such a person stood still while the robot, which could not see them,
+        # drove into them (the 4 km run H's one contact).
+        cands = ((ds, dside), (ds, 0.0), (0.0, math.copysign(step, dside)))
+        for margin, (cand_s, cand_side) in [(m, c) for m in (0.05, self.squeeze_m) for c in cands]:
             pos_s, _ = self._route_point(i, self._s[i] + cand_s)
-            if not self._side_is_clear(i, pos_s + (self._side[i] + cand_side) * right):
+            if not self._side_is_clear(i, pos_s + (self._side[i] + cand_side) * right, margin):
                 continue
             self._s[i], self._side[i] = before[0] + cand_s, before[1] + cand_side
             new = self._place(i)

@@ -85,7 +85,7 @@ def test_a_person_does_not_step_back_into_a_wall_or_from_a_robot_standing_still(
     for k in range(1, 60):  # robot comes from the south at 0.3 m/s and stops 0.6 m away
         robot = np.array([0.0, max(-1.5 + 0.3 * k * DT, -0.6)])
         cur = pc.advance(k * DT, robot)[0, :2]
-    assert abs(cur[1]) < 1e-9 or cur[1] < 0.3 - person.radius_m - 0.05 + 1e-9
+    assert abs(cur[1]) < 1e-9 or cur[1] < 0.3 - person.radius_m - pc.squeeze_m + 1e-9  # 1 cm from it at most
     still = PeopleController((person,), np.zeros(1, dtype=int))
     for k in range(1, 60):  # a robot standing 0.28 m from their body (outside personal space)
         cur = still.advance(k * DT, np.array([0.0, -0.8]))[0, :2]
@@ -241,3 +241,23 @@ def test_a_person_passes_a_moving_robot_with_room_to_spare() -> None:
     pc = PeopleController((person,), np.zeros(1, dtype=int))
     assert np.hypot(rel[:, 0], rel[:, 1]).min() >= pc.robot_radius_m + person.radius_m + pc.pass_gap_m - 0.02
     assert rel[-1, 0] > 2.0  # and gets past
+
+
+def test_a_person_wedged_at_a_door_frame_squeezes_along_the_wall_out_of_the_robots_way() -> None:
+    """A person standing 26 cm from a door frame's end (within the 5 cm wall margin of
+    every step away) while a robot turns towards the door, into them: they squeeze along
+    the wall, 1 cm from it, and are never touched. Keeping the 5 cm, they stood still and
+    the robot, which could not see them, drove into them (4 km run H's one contact)."""
+    walls = np.array([[0.0, -1.0, 0.0, 0.0], [0.0, 0.93, 0.0, 1.8]])  # a door from y = 0 to 0.93
+    person = Person(route=((0.258, -3.0), (0.258, 3.0)), speed_mps=0.0, start_offset_m=3.038)
+    pc = PeopleController((person,), np.zeros(1, dtype=int), walls)
+    heading = np.radians(146.0)
+    robot = lambda k: np.array([0.93, 0.02]) + 0.3 * k * DT * np.array([np.cos(heading), np.sin(heading)])  # noqa: E731
+    touch = pc.robot_radius_m + person.radius_m
+    gaps, wall = [], []
+    for k in range(1, 90):
+        pos = pc.advance(k * DT, robot(k))[0, :2]
+        gaps.append(float(np.hypot(*(pos - robot(k)))) - touch)
+        wall.append(float(np.min([np.hypot(pos[0], pos[1] - np.clip(pos[1], a, b)) for a, b in ((-1.0, 0.0), (0.93, 1.8))])))
+    assert min(gaps) > 0.0, min(gaps)
+    assert min(wall) > person.radius_m + pc.squeeze_m - 1e-9

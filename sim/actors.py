@@ -339,29 +339,33 @@ class PeopleController:
                 n = -n
             away = away + 2.0 * n
             away = away / float(np.hypot(away[0], away[1]))
-        before = (self._s[i], self._side[i])
         _, d = self._route_point(i, self._s[i])
         right = np.array([d[1], -d[0]])
         step = self.retreat_speed_mps * dt
         ds, dside = step * float(away @ d), step * float(away @ right)
-        # Straight away; else only its along-route part (a wall beside); else only sideways,
-        # a full step (the route ends or bends right behind them). Wedged where none of
+        # Straight away; else along the route, a full step (a wall beside: with only the
+        # along-route part of the step, a person beside a wall was pushed along ahead of
+        # the robot at 0.2 m/s); else only sideways, a full step (the route ends or bends
+        # right behind them). Wedged where none of
         # these keeps 5 cm from the walls (a door frame beside, the robot turning into
         # the door), they squeeze along the wall, 1 cm from it (``squeeze_m``): keeping
         # the 5 cm, such a person stood still while the robot, which could not see them,
         # drove into them (the 4 km run H's one contact).
-        cands = ((ds, dside), (ds, 0.0), (0.0, math.copysign(step, dside)))
+        # The step moves the body from where it is, and the route position (s, side) by
+        # as much; walking on reconciles the two. Placing the body at the new route
+        # position instead, a person whose body lagged it (walking to the next leg's
+        # offset after a corner) could take no step at all: every one was a jump.
+        cands = ((ds, dside), (math.copysign(step, ds), 0.0), (0.0, math.copysign(step, dside)))
+        here = self._state[i, :2]
         for margin, (cand_s, cand_side) in [(m, c) for m in (0.05, self.squeeze_m) for c in cands]:
-            pos_s, _ = self._route_point(i, self._s[i] + cand_s)
-            if not self._side_is_clear(i, pos_s + (self._side[i] + cand_side) * right, margin):
+            new = here + cand_s * d + cand_side * right
+            if not self._side_is_clear(i, new, margin):
                 continue
-            self._s[i], self._side[i] = before[0] + cand_s, before[1] + cand_side
-            new = self._place(i)
-            jump = float(np.hypot(*(new[:2] - self._state[i, :2]))) > (self.retreat_speed_mps + 1e-9) * dt * 1.5
-            if not jump and float(np.hypot(new[0] - robot_xy[0], new[1] - robot_xy[1])) > dist:
-                self._state[i] = new
+            if float(np.hypot(new[0] - robot_xy[0], new[1] - robot_xy[1])) > dist:
+                self._state[i, :2] = new
+                self._s[i] += cand_s
+                self._side[i] += cand_side
                 return True
-            self._s[i], self._side[i] = before
         return False
 
     def advance(self, t: float, robot_xy: np.ndarray | None = None) -> np.ndarray:

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from sim.actors import PeopleController, Person
@@ -261,3 +261,62 @@ def test_a_person_wedged_at_a_door_frame_squeezes_along_the_wall_out_of_the_robo
         wall.append(float(np.min([np.hypot(pos[0], pos[1] - np.clip(pos[1], a, b)) for a, b in ((-1.0, 0.0), (0.93, 1.8))])))
     assert min(gaps) > 0.0, min(gaps)
     assert min(wall) > person.radius_m + pc.squeeze_m - 1e-9
+
+
+def _gaps_to_a_robot_driving_at(pc: PeopleController, start_xy: np.ndarray, bearing: float, speed: float, steps: int) -> list[float]:
+    """Gaps between person 0's body and a robot that starts 1 m from ``start_xy`` (at
+    ``bearing``) and drives straight through that point at ``speed``."""
+    touch = pc.robot_radius_m + pc.people[0].radius_m
+    r0 = start_xy + np.array([np.cos(bearing), np.sin(bearing)])
+    u = -np.array([np.cos(bearing), np.sin(bearing)])
+    gaps = []
+    for k in range(1, steps):
+        robot = r0 + speed * k * DT * u
+        gaps.append(float(np.hypot(*(pc.advance(k * DT, robot)[0, :2] - robot))) - touch)
+    return gaps
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    walking=st.booleans(),
+    offset=st.floats(2.0, 4.0),
+    side=st.floats(-0.95, 0.95),
+    lag_x=st.floats(-0.4, 0.4),
+    lag_y=st.floats(-0.4, 0.4),
+    bearing=st.floats(0.0, 2 * np.pi),
+    speed=st.floats(0.1, 0.4),
+)
+@example(walking=False, offset=3.901, side=-0.676, lag_x=0.359, lag_y=-0.151, bearing=np.radians(152.4), speed=0.223)
+def test_a_person_whose_body_lags_their_route_still_steps_out_of_the_robots_way(
+    walking: bool, offset: float, side: float, lag_x: float, lag_y: float, bearing: float, speed: float
+) -> None:
+    """Round a route's corner stepped aside, a person's body walks to the next leg's
+    offset (it lags their route position). A robot driving at them then (at most 0.4
+    m/s, open floor) never touches them. Before, every step back was measured from the
+    route position, so it was a jump and not taken: they stood while a backing robot
+    drove into them, four times in 18 s (4 km run G)."""
+    person = Person(route=((0.0, 3.0), (0.0, 0.0), (-3.0, 0.0)), speed_mps=1.0 if walking else 0.0, start_offset_m=offset)
+    pc = PeopleController((person,), np.zeros(1, dtype=int))
+    pc._side[0] = side  # white box: stepped aside, the body off its route position
+    pc._state[0] = pc._place(0)
+    pc._state[0, :2] += (lag_x, lag_y)
+    gaps = _gaps_to_a_robot_driving_at(pc, pc._state[0, :2].copy(), bearing, speed, 150)
+    assert min(gaps) > 0.0, min(gaps)
+
+
+@settings(max_examples=40, deadline=None)
+@given(side=st.floats(-0.7, 0.7), lateral=st.floats(-0.6, 0.6), speed=st.floats(0.1, 0.4), forward=st.booleans())
+@example(side=-0.676, lateral=0.577, speed=0.317, forward=True)
+def test_a_person_beside_a_wall_gets_out_of_the_way_of_a_robot_driving_along_it(side: float, lateral: float, speed: float, forward: bool) -> None:
+    """In a 2 m corridor a robot drives along at up to 0.4 m/s on a line where a person
+    stands: the person gets out of its way (sideways, or along the corridor at the full
+    0.5 m/s where the wall is beside them), never touched. Before, beside the wall they
+    took only the along-route part of their step back, 0.2 m/s, and the robot caught up."""
+    walls = np.array([[-6.0, -1.0, 6.0, -1.0], [-6.0, 1.0, 6.0, 1.0]])
+    person = Person(route=((-5.0, 0.0), (5.0, 0.0)), speed_mps=0.0, start_offset_m=5.0)
+    pc = PeopleController((person,), np.zeros(1, dtype=int), walls)
+    pc._side[0] = side  # white box: standing stepped aside
+    pc._state[0] = pc._place(0)
+    start = np.array([pc._state[0, 0], lateral])
+    gaps = _gaps_to_a_robot_driving_at(pc, start, 0.0 if not forward else np.pi, speed, 200)
+    assert min(gaps) > 0.0, min(gaps)

@@ -170,6 +170,10 @@ def point_segment_distance(p: np.ndarray, segs: np.ndarray) -> np.ndarray:
     return np.hypot(p[0] - q[:, 0], p[1] - q[:, 1])
 
 
+_FAN = tuple(math.radians(a) for a in (30, -30, 60, -60, 90, -90, 120, -120, 150, -150, 180))
+"""Directions (from straight away) a person stepping back from the robot tries last."""
+
+
 class PeopleController:
     """Moves the people's mocap bodies along their routes as simulated time passes.
 
@@ -355,7 +359,14 @@ class PeopleController:
         # as much; walking on reconciles the two. Placing the body at the new route
         # position instead, a person whose body lagged it (walking to the next leg's
         # offset after a corner) could take no step at all: every one was a jump.
-        cands = ((ds, dside), (math.copysign(step, ds), 0.0), (0.0, math.copysign(step, dside)))
+        # Failing all three, any other way that takes them farther from the robot, the
+        # nearest to straight away first (``_FAN``): at the end of a door frame the three
+        # all led towards the frame, and a person waiting in the doorway stood while the
+        # robot turned into the door and into them (4 km run K's two incidents).
+        cands = [(ds, dside), (math.copysign(step, ds), 0.0), (0.0, math.copysign(step, dside))]
+        for a in _FAN:
+            u = (math.cos(a) * away[0] - math.sin(a) * away[1], math.sin(a) * away[0] + math.cos(a) * away[1])
+            cands.append((step * (u[0] * d[0] + u[1] * d[1]), step * (u[0] * right[0] + u[1] * right[1])))
         here = self._state[i, :2]
         for margin, (cand_s, cand_side) in [(m, c) for m in (0.05, self.squeeze_m) for c in cands]:
             new = here + cand_s * d + cand_side * right

@@ -320,3 +320,27 @@ def test_a_person_beside_a_wall_gets_out_of_the_way_of_a_robot_driving_along_it(
     start = np.array([pc._state[0, 0], lateral])
     gaps = _gaps_to_a_robot_driving_at(pc, start, 0.0 if not forward else np.pi, speed, 200)
     assert min(gaps) > 0.0, min(gaps)
+
+
+def test_a_person_waiting_in_a_doorway_gets_out_of_the_way_of_a_robot_turning_into_the_door() -> None:
+    """A person stepped aside into a doorway, 27 cm from the end of its frame, and a
+    robot turns into the door: every one of the three preferred steps back leads towards
+    the frame, so they step the way that is open (into the door, ahead of the robot),
+    never touched. Before, they stood and the robot, which could not see them beside it,
+    drove into them (4 km run K's two incidents)."""
+    walls = np.array([[0.0, -2.0, 0.0, 0.0], [0.0, 0.96, 0.0, 3.0], [2.0, -2.0, 2.0, 3.0]])  # door at x = 0, y 0-0.96
+    person = Person(route=((1.0, -2.0), (1.0, 3.0)), speed_mps=0.0, start_offset_m=2.235)
+    pc = PeopleController((person,), np.zeros(1, dtype=int), walls)
+    pc._side[0] = -0.859  # white box: stepped aside to the left, into the doorway
+    pc._state[0] = pc._place(0)
+    # The robot's track in run K (relative to the frame's end): north, then curving left
+    # into the door, at 0.4 m/s.
+    track = np.array([[1.0, -0.35], [0.95, 0.0], [0.85, 0.15], [0.58, 0.28], [-0.4, 0.5]])
+    cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(track, axis=0).T))])
+    touch = pc.robot_radius_m + person.radius_m
+    gaps = []
+    for k in range(1, 150):
+        s = min(0.4 * k * DT, cum[-1])
+        robot = np.array([np.interp(s, cum, track[:, 0]), np.interp(s, cum, track[:, 1])])
+        gaps.append(float(np.hypot(*(pc.advance(k * DT, robot)[0, :2] - robot))) - touch)
+    assert min(gaps) > 0.0, min(gaps)

@@ -26,17 +26,23 @@ def test_drives_towards_the_carrot_at_cruise_speed() -> None:
     np.testing.assert_allclose(cmd.velocity, [0.75, 0.0, 0.0], atol=1e-9)
 
 
-def test_slows_down_while_driving_where_the_camera_does_not_look() -> None:
+def test_turns_to_look_before_driving_where_the_camera_does_not_look() -> None:
     """The carrot 40 degrees to the left (inside the turn-in-place threshold) but outside
-    the camera's +-29 degrees: drive there slowly while turning to look; once the
-    direction is in view, at cruise speed again."""
+    the camera's +-29 degrees: turn in place towards it first (look_first); without
+    look_first, drive there slowly while turning to look; once the direction is in view,
+    at cruise speed again."""
     nav = Navigator(line_graph())
     nav.set_goal(5, np.zeros(3))
     pose = np.array([0.0, 0.0, -math.radians(40.0)])
     cmd = nav.command(pose, np.zeros((0, 2)), 0.0)
+    assert cmd.state == "turning" and abs(cmd.theta_star_rad) > math.radians(29.0)
+    assert np.hypot(*cmd.velocity[:2]) == 0.0 and cmd.velocity[2] > 0
+    nav = Navigator(line_graph(), NavigatorConfig(look_first=False))
+    nav.set_goal(5, np.zeros(3))
+    cmd = nav.command(pose, np.zeros((0, 2)), 0.0)
     assert cmd.state == "driving" and abs(cmd.theta_star_rad) > math.radians(29.0)
     assert np.hypot(*cmd.velocity[:2]) == pytest.approx(0.3) and cmd.velocity[2] > 0
-    nav = Navigator(line_graph(), NavigatorConfig(unseen_speed_mps=0.0))
+    nav = Navigator(line_graph(), NavigatorConfig(look_first=False, unseen_speed_mps=0.0))
     nav.set_goal(5, np.zeros(3))
     assert np.hypot(*nav.command(pose, np.zeros((0, 2)), 0.0).velocity[:2]) == pytest.approx(0.75)
     nav = Navigator(line_graph())
@@ -57,9 +63,16 @@ def test_steers_around_an_obstacle_and_stops_for_a_wall() -> None:
     nav = Navigator(line_graph())
     nav.set_goal(5, np.zeros(3))
     # A box 1.2 m ahead, straddling the path: steer off the straight line.
+    # The way round lies just outside the camera's view: turn towards it first.
     box = np.array([[1.2, y] for y in np.linspace(-0.3, 0.3, 13)])
     cmd = nav.command(np.zeros(3), box, 0.0)
+    assert cmd.state == "turning" and abs(cmd.theta_star_rad) > math.radians(29.0)
+    nav = Navigator(line_graph(), NavigatorConfig(look_first=False))
+    nav.set_goal(5, np.zeros(3))
+    cmd = nav.command(np.zeros(3), box, 0.0)
     assert cmd.state == "driving" and abs(cmd.theta_star_rad) > 0.2
+    nav = Navigator(line_graph())
+    nav.set_goal(5, np.zeros(3))
     # A wall across the whole fan, 0.4 m ahead: blocked, no translation (current frame only).
     wall = np.array([[0.4, y] for y in np.linspace(-3, 3, 121)])
     nav = Navigator(line_graph(), NavigatorConfig(memory_s=0.0))

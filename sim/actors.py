@@ -316,6 +316,24 @@ class PeopleController:
             return True
         return float(point_segment_distance(pos, self.walls).min()) > self.people[i].radius_m + margin_m
 
+    def _keep_off_walls(self, i: int) -> None:
+        """Walking on stepped aside, a person keeps 5 cm off the walls: where the corridor
+        narrows (a door frame after the doorway they stepped aside in), their offset
+        shrinks as far as it must. Walking on at the offset they had, people walked
+        through the corridor's wall (people are not stopped by walls, only the robot is),
+        and one waited half inside a door frame's end, where no step back was clear of
+        it, while the robot turned into them (4 km run M)."""
+        side = self._side[i]
+        if not len(self.walls) or abs(side) < 1e-9:
+            return
+        pos, d = self._route_point(i, self._s[i])
+        right = np.array([d[1], -d[0]])
+        for f in np.linspace(1.0, 0.0, 21):
+            if self._side_is_clear(i, pos + f * side * right):
+                self._side[i] = f * side
+                return
+        self._side[i] = 0.0
+
     def _retreat(self, i: int, robot_xy: np.ndarray, robot_step: np.ndarray, dt: float) -> bool:
         """Step back from a robot closing in (see the class docstring); True if stepped."""
         p = self.people[i]
@@ -426,6 +444,7 @@ class PeopleController:
                     # going out is to the left coming back (it was a diagonal walk
                     # across the corridor to the mirrored side, into a robot there).
                     self._side[i] = -self._side[i]
+            self._keep_off_walls(i)
             new = self._place(i)
             # People walk; they do not jump. Where the route turns while the person is
             # stepped aside, the offset point of the next leg lies elsewhere (up to twice

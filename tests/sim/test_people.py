@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
@@ -344,3 +345,23 @@ def test_a_person_waiting_in_a_doorway_gets_out_of_the_way_of_a_robot_turning_in
         robot = np.array([np.interp(s, cum, track[:, 0]), np.interp(s, cum, track[:, 1])])
         gaps.append(float(np.hypot(*(pc.advance(k * DT, robot)[0, :2] - robot))) - touch)
     assert min(gaps) > 0.0, min(gaps)
+
+
+def test_a_person_walking_on_stepped_aside_keeps_off_the_walls_where_the_corridor_narrows() -> None:
+    """Stepped aside 0.95 m in an open area, a person walks on into a 2 m corridor: their
+    offset shrinks so that they keep 5 cm off its wall. Before, they walked on at 0.95 m,
+    through the wall (people are not stopped by walls), and one waited half inside a door
+    frame's end, where no step back was clear of it (4 km run M's incident)."""
+    walls = np.array([[3.0, -1.0, 12.0, -1.0], [3.0, 1.0, 12.0, 1.0]])
+    person = Person(route=((0.0, 0.0), (12.0, 0.0)), speed_mps=1.0, start_offset_m=1.0)
+    pc = PeopleController((person,), np.zeros(1, dtype=int), walls)
+    pc.notice_m = 20.0  # they see the robot down the corridor from the start
+    pc._side[0] = 0.95  # white box: stepped aside (to the right, -y) in the open area
+    pc._state[0] = pc._place(0)
+    assert pc._state[0, 1] == pytest.approx(-0.95)
+    robot = np.array([11.8, 0.3])  # standing at the corridor's end, left of the route
+    for k in range(1, 240):
+        pos = pc.advance(k * DT, robot)[0, :2]
+        if pos[0] > 3.5:
+            assert abs(pos[1]) <= 1.0 - person.radius_m - 0.05 + 1e-9, pos
+    assert pos[0] > 8.0  # and walked on

@@ -38,7 +38,13 @@ from common import Result, entry, timeit  # noqa: E402
 
 
 def bench_maps(results: dict[str, Result], quick: bool) -> None:
-    bp = blueprints.generate_building(blueprints.BuildingConfig.large(), 0)
+    from sim.maprender import render_map
+
+    large = blueprints.BuildingConfig.large()
+    results["blueprint_large"] = entry(
+        timeit(lambda: blueprints.generate_building(large, 0), 2 if quick else 5), target=2000.0
+    )
+    bp = blueprints.generate_building(large, 0)
     vm = bp.vectormap
     print(f"  large generated map: {vm.n_segments} segments", file=sys.stderr)
     if vm.n_segments < 9000:
@@ -47,6 +53,10 @@ def bench_maps(results: dict[str, Result], quick: bool) -> None:
         p = Path(d) / "large.vectormap.txt"
         save_vectormap(vm, p)
         results["map_load_9000"] = entry(timeit(lambda: load_vectormap(p), 3 if quick else 10), target=500.0)
+        png = Path(d) / "large.png"
+        results["map_render_9000"] = entry(
+            timeit(lambda: render_map(vm, png, bp.navgraph, dpi=120), 1 if quick else 3), target=5000.0
+        )
     results["world_compile_9000"] = entry(timeit(lambda: build_world(vm), 1 if quick else 3, warmup=0), target=5000.0)
 
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import time
 from collections import deque
 from dataclasses import replace
 
@@ -256,12 +255,9 @@ def test_generator_deterministic_and_seed_sensitive():
     assert c.rooms != a.rooms
 
 
-def test_large_floor_size_speed_and_invariants():
-    cfg = BuildingConfig.large()
-    t0 = time.perf_counter()
-    bp = generate_building(cfg, 0)
-    dt = time.perf_counter() - t0
-    assert dt < 2.0, f"large floor took {dt:.2f} s"
+def test_large_floor_size_and_invariants():
+    """``make bench``'s blueprint_large times this generation."""
+    bp = generate_building(BuildingConfig.large(), 0)
     assert bp.vectormap.n_segments >= 9000
     x0, y0, x1, y1 = bp.extent()
     assert (x1 - x0, y1 - y0) == (100.0, 100.0)

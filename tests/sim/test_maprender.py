@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import sys
-import time
 
 import numpy as np
 import pytest
@@ -52,11 +51,9 @@ def test_render_bad_trajectory(tmp_path):
         render_map(small_floor().vectormap, tmp_path / "bad.png", trajectories={"x": np.zeros((3, 1))})
 
 
-def test_render_9000_segments_fast(tmp_path):
+def test_render_9000_segments(tmp_path):
+    """The 100 x 100 m floor renders to a full-size PNG (``make bench``'s map_render_9000 times it)."""
     bp = generate_building(BuildingConfig.large(), 0)
     assert bp.vectormap.n_segments >= 9000
-    t0 = time.perf_counter()
     out = render_map(bp.vectormap, tmp_path / "large.png", bp.navgraph, dpi=120)
-    dt = time.perf_counter() - t0
-    assert dt < 5.0, f"rendering took {dt:.2f} s"
     assert out.stat().st_size > 50_000

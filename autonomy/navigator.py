@@ -134,6 +134,15 @@ class NavigatorConfig:
     """... to this far past it ..."""
     corner_ramp_m: float = 1.0
     """... and the limit rises linearly to the cruise speed over this distance before that."""
+    lane_shift_m: float = 0.9
+    """Largest sideways shift of the carrot off the plan (ours, 0 = off, as the paper):
+    where the plan's line ahead is blocked (an obstacle within the avoidance radius of it
+    within ``lane_check_m``), the carrot moves sideways to the nearest offset whose line
+    is clear, keeping to the side chosen before. Eq. 5 alone steers towards the carrot on
+    the plan, right behind an obstacle standing in the middle of a corridor: both ways
+    round score alike, and the robot swung from one to the other and never passed."""
+    lane_check_m: float = 2.5
+    """... looking this far ahead along a straight stretch of the plan."""
     side_hysteresis: float = 1.0
     """Keep swerving to the side chosen before while a direction there scores at least
     this fraction of Eq. 5's best (1 = off, as the paper; 0.7 steadied the approach to a
@@ -163,7 +172,7 @@ class NavigatorConfig:
             self, "navigator.", "backoff_time_s", "backoff_speed_mps", "stuck_progress_m", "memory_s", "unseen_speed_mps",
             "backoff_check_m", "backoff_clearance_m", "corner_speed_mps", "corner_angle_rad", "corner_before_m",
             "map_blind_spots_m", "map_clearance_m", "proximity_speed_mps", "proximity_gap_m", "proximity_range_m",
-            "corner_after_m", "corner_ramp_m", "near_wall_tol_m", "backoff_memory_s",
+            "corner_after_m", "corner_ramp_m", "near_wall_tol_m", "backoff_memory_s", "lane_shift_m", "lane_check_m",
         )
 
 
@@ -225,6 +234,7 @@ class Navigator:
         self._mem_t = np.zeros(0)
         self._mem_all = np.zeros((0, 2))
         self._side = 0
+        self._lane = 0.0
         self._corners = np.zeros(0)
         self._seg_speed = np.zeros(0)
         self._edge_speed = {}
@@ -443,6 +453,72 @@ class Navigator:
             return np.array([cfg.backoff_speed_mps * u[0], cfg.backoff_speed_mps * u[1], 0.0])
         return np.zeros(3)
 
+    def lane_offset(self, pose: np.ndarray, obstacles: np.ndarray, s: float) -> float:
+        """Sideways shift (m, left of the plan positive) of the carrot (``lane_shift_m``).
+
+        In the plan's frame at arc length ``s`` (its tangent, over the straight stretch
+        ahead, at most ``lane_check_m`` and up to the next corner), an offset o is clear
+        when no obstacle ahead (from the avoidance radius behind ``s`` on) lies within
+        the avoidance radius of the line at o, nor a map wall within the robot radius
+        plus ``map_clearance_m``. 0 when the plan's own line is clear (Eq. 5 as the paper)
+        or no offset is; else the clear offset nearest 0, on the side chosen before while
+        that side has one, and on a first choice the side the robot is already on.
+        """
+        cfg = self.cfg
+        if cfg.lane_shift_m <= 0 or len(self.path) < 2:
+            self._lane = 0.0
+            return 0.0
+        reach = cfg.lane_check_m
+        ahead = self._corners - s
+        ahead = ahead[ahead > 0.0]
+        if len(ahead):
+            reach = min(reach, float(ahead.min()))
+        reach = min(reach, float(self._cum[-1]) - s)
+        r = self.avoid.radius_m
+        if reach < r:
+            self._lane = 0.0
+            return 0.0
+        p0 = self._point_at(s)
+        u = self._point_at(s + min(reach, 0.5)) - p0 if reach > 1e-6 else np.zeros(2)
+        nu = math.hypot(u[0], u[1])
+        if nu < 1e-9:
+            self._lane = 0.0
+            return 0.0
+        u = u / nu
+        n = np.array([-u[1], u[0]])
+        c, sn = math.cos(float(pose[2])), math.sin(float(pose[2]))
+        rel0 = np.asarray(pose[:2], dtype=np.float64) - p0
+
+        def plan_frame(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            wx = c * pts[:, 0] - sn * pts[:, 1] + rel0[0]
+            wy = sn * pts[:, 0] + c * pts[:, 1] + rel0[1]
+            return wx * u[0] + wy * u[1], wx * n[0] + wy * n[1]
+
+        offsets = np.arange(-cfg.lane_shift_m, cfg.lane_shift_m + 1e-9, _LANE_STEP_M)
+        clear = np.ones(len(offsets), dtype=bool)
+        for pts, gap in (
+            (np.asarray(obstacles, dtype=np.float64).reshape(-1, 2), r),
+            (self.map_points(pose, reach + cfg.lane_shift_m + r), self.avoid.robot_radius_m + cfg.map_clearance_m),
+        ):
+            if not len(pts):
+                continue
+            a, lat = plan_frame(pts)
+            lat = lat[(a > -r) & (a < reach)]
+            if len(lat):
+                clear &= ~(np.abs(lat[:, None] - offsets[None, :]) < gap).any(axis=0)
+        k0 = int(np.argmin(np.abs(offsets)))
+        if clear[k0] or not clear.any():
+            self._lane = 0.0
+            return 0.0
+        side = self._lane
+        if side == 0.0:
+            side = 1.0 if float(rel0 @ n) >= 0.0 else -1.0
+        same = clear & (np.sign(offsets) == side)
+        pick = same if same.any() else clear
+        j = int(np.flatnonzero(pick)[np.argmin(np.abs(offsets[pick]))])
+        self._lane = float(np.sign(offsets[j]))
+        return float(offsets[j])
+
     def _keep_side(self, res: AvoidanceResult, desired: float) -> AvoidanceResult:
         """Hysteresis on Eq. 5: once the robot swerves to one side of the carrot direction,
         it keeps to that side while a direction there scores at least ``side_hysteresis``
@@ -535,6 +611,11 @@ class Navigator:
             self.set_goal(self.goal, pose, t + cfg.backoff_time_s)
             return NavCommand(self._backoff_velocity(pose, obstacles), "recovering")
         carrot = self._point_at(s + cfg.lookahead_m)
+        shift = self.lane_offset(pose, obstacles, s)
+        if shift:
+            t0 = self._point_at(s + cfg.lookahead_m + 0.05) - self._point_at(s + cfg.lookahead_m - 0.05)
+            t0 = t0 / max(1e-9, math.hypot(t0[0], t0[1]))
+            carrot = carrot + shift * np.array([-t0[1], t0[0]])
         d = carrot - xy
         desired = _wrap(math.atan2(d[1], d[0]) - float(pose[2]))
         turn = float(np.clip(cfg.heading_gain * desired, -cfg.max_turn_rate_rad_s, cfg.max_turn_rate_rad_s))
@@ -575,6 +656,8 @@ class Navigator:
 WALL_STEP_M = 0.03
 """Spacing of the points that stand in for the map's walls (``Navigator.map_points``)."""
 _LOCAL_MARGIN_M = 1.0
+_LANE_STEP_M = 0.05
+"""Spacing of the carrot shifts tried (``Navigator.lane_offset``)."""
 
 
 def wall_points(walls: np.ndarray, step_m: float) -> np.ndarray:

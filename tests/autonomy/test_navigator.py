@@ -295,7 +295,8 @@ def test_map_walls_the_camera_cannot_see_steer_the_robot_off_them() -> None:
     """A wall 0.33 m to the right, beside the robot where the camera does not look: its
     map points block the straight direction (within robot radius + map_clearance_m), so
     the robot steers left, away from it. Without the map layer it drives straight on,
-    and a wall farther than the clearance changes nothing."""
+    and a wall farther than the clearance changes nothing. (The lane shift, off there,
+    would move the carrot off that wall too.)"""
     wall = np.array([[-2.0, -0.33, 3.0, -0.33]])
     nav = Navigator(line_graph(), walls=wall)
     nav.set_goal(5, np.zeros(3))
@@ -303,7 +304,7 @@ def test_map_walls_the_camera_cannot_see_steer_the_robot_off_them() -> None:
     assert len(pts) and np.all(np.hypot(pts[:, 0], pts[:, 1]) <= nav.cfg.map_blind_spots_m + 1e-9)
     cmd = nav.command(np.zeros(3), np.zeros((0, 2)), 0.0)
     assert cmd.state == "driving" and cmd.theta_star_rad > math.radians(5)
-    off = Navigator(line_graph(), NavigatorConfig(map_blind_spots_m=0.0), walls=wall)
+    off = Navigator(line_graph(), NavigatorConfig(map_blind_spots_m=0.0, lane_shift_m=0.0), walls=wall)
     off.set_goal(5, np.zeros(3))
     assert off.command(np.zeros(3), np.zeros((0, 2)), 0.0).theta_star_rad == pytest.approx(0.0)
     far = Navigator(line_graph(), walls=np.array([[-2.0, -0.45, 3.0, -0.45]]))

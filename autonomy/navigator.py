@@ -494,7 +494,8 @@ class Navigator:
             wy = sn * pts[:, 0] + c * pts[:, 1] + rel0[1]
             return wx * u[0] + wy * u[1], wx * n[0] + wy * n[1]
 
-        offsets = np.arange(-cfg.lane_shift_m, cfg.lane_shift_m + 1e-9, _LANE_STEP_M)
+        k = int(math.floor(cfg.lane_shift_m / _LANE_STEP_M + 1e-9))
+        offsets = _LANE_STEP_M * np.arange(-k, k + 1)
         clear = np.ones(len(offsets), dtype=bool)
         for pts, gap in (
             (np.asarray(obstacles, dtype=np.float64).reshape(-1, 2), r),

@@ -47,13 +47,13 @@ def test_navigator_reaches_a_goal_on_the_estimate(tmp_path: Path) -> None:
     assert m["distance_m"] > 12.0
 
 
-def _people_scenario(tmp_path: Path, people: str, seed: int = 3) -> dict:
+def _people_scenario(tmp_path: Path, people: str, seed: int = 3, max_s: float = 60.0, extra: str = "") -> dict:
     last = corridor_files(tmp_path)
     scn = load_scenario(
         _scenario(
             tmp_path,
             f'name = "people"\n[map]\nvectormap = "c.vectormap.txt"\nnavgraph = "c.navigation.json"\n'
-            f"[mission]\nwaypoints = [{last}]\nstart_node = 0\nmax_duration_s = 60.0\n{people}",
+            f"[mission]\nwaypoints = [{last}]\nstart_node = 0\nmax_duration_s = {max_s}\n{extra}\n{people}",
         )
     )
     return run_scenario(scn, tmp_path / "out", seed=seed, progress=False)
@@ -77,6 +77,24 @@ def test_person_standing_in_the_corridor_is_steered_around(tmp_path: Path) -> No
     m = rep["metrics"]
     assert m["collisions"] == 0, rep["collision_events"]
     assert m["waypoints_reached"] == 1
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("lane_shift", [True, False])
+def test_person_standing_in_the_middle_of_the_corridor_is_passed(tmp_path: Path, lane_shift: bool) -> None:
+    """A person stands still on the plan, in the middle of the 2.4 m corridor. With the
+    lane shift the robot passes on one side, without contact or recovery; without it
+    (Eq. 5 steering at the carrot right behind them) it swings between the two sides and
+    does not pass in 40 s."""
+    people = "[[actors.people]]\nroute = [[10.0, 1.2], [10.01, 1.2]]\nspeed_mps = 0.0\n"
+    extra = "" if lane_shift else "[navigator]\nlane_shift_m = 0.0\n"
+    rep = _people_scenario(tmp_path, people, max_s=40.0, extra=extra)
+    m = rep["metrics"]
+    assert m["collisions"] == 0, rep["collision_events"]
+    if lane_shift:
+        assert m["waypoints_reached"] == 1 and rep["navigation"]["recoveries"] == 0
+    else:
+        assert m["waypoints_reached"] == 0
 
 
 @pytest.mark.slow

@@ -462,7 +462,8 @@ class Navigator:
         the avoidance radius of the line at o, nor a map wall within the robot radius
         plus ``map_clearance_m``. 0 when the plan's own line is clear (Eq. 5 as the paper)
         or no offset is; else the clear offset nearest 0, on the side chosen before while
-        that side has one, and on a first choice the side the robot is already on.
+        that side has one; the first choice is the side of the clear offset nearest the
+        robot (on a tie the right).
         """
         cfg = self.cfg
         if cfg.lane_shift_m <= 0 or len(self.path) < 2:
@@ -513,7 +514,11 @@ class Navigator:
             return 0.0
         side = self._lane
         if side == 0.0:
-            side = 1.0 if float(rel0 @ n) >= 0.0 else -1.0
+            # First choice: the clear offset nearest the robot (a tie: the right, since
+            # people step to their right, the robot's left, out of its way).
+            lat = float(rel0 @ n)
+            cost = np.where(clear, np.abs(offsets - lat) + 1e-9 * (offsets > 0), np.inf)
+            side = 1.0 if offsets[int(np.argmin(cost))] > 0 else -1.0
         same = clear & (np.sign(offsets) == side)
         pick = same if same.any() else clear
         j = int(np.flatnonzero(pick)[np.argmin(np.abs(offsets[pick]))])

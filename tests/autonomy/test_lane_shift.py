@@ -67,9 +67,10 @@ def brute_offset(nav: Navigator, pose: np.ndarray, sensed: np.ndarray, walls: np
 def test_a_person_in_the_middle_of_a_corridor_is_passed_on_the_side_the_robot_is_on() -> None:
     """Person (radius 0.22 m) on the plan 1.5 m ahead: offsets closer than 0.22 + 0.4 m
     (avoidance radius) are blocked, so the carrot shifts 0.65 m, to the left with the
-    robot a little left of the plan, to the right with it a little right."""
+    robot a little left of the plan, to the right with it a little right or right on it
+    (people step to their right, the robot's left)."""
     walls = corridor(1.2)
-    for y, side in ((0.02, 1.0), (-0.02, -1.0), (0.0, 1.0)):
+    for y, side in ((0.02, 1.0), (-0.02, -1.0), (0.0, -1.0)):
         nav = nav_at(walls)
         pose = np.array([0.0, y, 0.0])
         pts = person(1.5, 0.0) - pose[:2]
@@ -77,6 +78,15 @@ def test_a_person_in_the_middle_of_a_corridor_is_passed_on_the_side_the_robot_is
         cmd = nav.command(pose, pts, 0.0)
         # Towards the shifted carrot: turning first (look_first), the way it will go.
         assert side * cmd.desired_rad > math.radians(20) and side * cmd.velocity[2] > 0
+
+
+def test_the_first_choice_is_the_clear_offset_nearest_the_robot() -> None:
+    """Person 0.2 m left of the plan, robot 0.1 m left: offsets from -0.42 to 0.82 m are
+    blocked. Left of the person needs 0.85 m (0.75 m from the robot), right of them
+    -0.45 m (0.55 m away), so it passes on the right, though it is left of the plan."""
+    nav = nav_at(corridor(1.5))
+    pose = np.array([0.0, 0.1, 0.0])
+    assert math.isclose(nav.lane_offset(pose, person(1.5, 0.2) - pose[:2], 0.0), -0.45)
 
 
 def test_the_side_chosen_is_kept_until_the_obstacle_is_passed() -> None:
@@ -150,7 +160,8 @@ def test_lane_offset_matches_its_definition(y, heading, s_robot, half_width, obs
         assert got == 0.0
         return
     assert any(math.isclose(got, o, abs_tol=1e-9) for o in clear)
-    side = 1.0 if y >= 0.0 else -1.0
+    first = min(clear, key=lambda o: (abs(o - y), o > 0))
+    side = 1.0 if first > 0 else -1.0
     same = [o for o in clear if o * side > 0]
     want = min(same or clear, key=abs)
     assert math.isclose(got, want, abs_tol=1e-6)

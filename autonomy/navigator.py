@@ -414,6 +414,12 @@ class Navigator:
         ``WALL_STEP_M``, in the robot frame: what is known to be there even where the
         camera cannot look. The walls are sampled once; the points near the robot are
         cached and re-selected only after it has moved ``_LOCAL_MARGIN_M``."""
+        rel = self._near_walls(pose, radius_m)
+        c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
+        return np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]])
+
+    def _near_walls(self, pose: np.ndarray, radius_m: float) -> np.ndarray:
+        """:meth:`map_points` relative to the robot's position, in world axes."""
         if self._wall_pts is None or not len(self._wall_pts):
             return np.zeros((0, 2))
         xy = np.asarray(pose[:2], dtype=np.float64)
@@ -424,9 +430,7 @@ class Navigator:
             self._local = w[np.hypot(w[:, 0] - xy[0], w[:, 1] - xy[1]) < r0]
             self._local_centre, self._local_radius = xy.copy(), r0
         rel = self._local - xy
-        rel = rel[np.hypot(rel[:, 0], rel[:, 1]) < radius_m]
-        c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
-        return np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]])
+        return rel[rel[:, 0] * rel[:, 0] + rel[:, 1] * rel[:, 1] < radius_m * radius_m]
 
     def _backoff_velocity(self, pose: np.ndarray, obstacles: np.ndarray) -> np.ndarray:
         """Recovery motion: back off along the clearest direction behind the robot.
@@ -490,26 +494,31 @@ class Navigator:
         c, sn = math.cos(float(pose[2])), math.sin(float(pose[2]))
         rel0 = np.asarray(pose[:2], dtype=np.float64) - p0
 
-        def plan_frame(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            wx = c * pts[:, 0] - sn * pts[:, 1] + rel0[0]
-            wy = sn * pts[:, 0] + c * pts[:, 1] + rel0[1]
-            return wx * u[0] + wy * u[1], wx * n[0] + wy * n[1]
-
+        # Plan-frame axes of robot-frame points (sensed) and of world-axes offsets (walls).
+        ua, na = (c * u[0] + sn * u[1], -sn * u[0] + c * u[1]), (c * n[0] + sn * n[1], -sn * n[0] + c * n[1])
+        a0, l0 = float(rel0 @ u), float(rel0 @ n)
+        obs = np.asarray(obstacles, dtype=np.float64).reshape(-1, 2)
+        walls = self._near_walls(pose, reach + cfg.lane_shift_m + r)
+        lats = []
+        for pts, (au, nu_), gap in (
+            (obs, (ua, na), r),
+            (walls, (u, n), self.avoid.robot_radius_m + cfg.map_clearance_m),
+        ):
+            if len(pts):
+                a = pts[:, 0] * au[0] + pts[:, 1] * au[1] + a0
+                lat = pts[:, 0] * nu_[0] + pts[:, 1] * nu_[1] + l0
+                lats.append((lat[(a > -r) & (a < reach)], gap))
+        if not any(bool(np.any(np.abs(lat) < gap)) for lat, gap in lats):
+            self._lane = 0.0  # the plan's own line is clear (most frames)
+            return 0.0
         k = int(math.floor(cfg.lane_shift_m / _LANE_STEP_M + 1e-9))
         offsets = _LANE_STEP_M * np.arange(-k, k + 1)
         clear = np.ones(len(offsets), dtype=bool)
-        for pts, gap in (
-            (np.asarray(obstacles, dtype=np.float64).reshape(-1, 2), r),
-            (self.map_points(pose, reach + cfg.lane_shift_m + r), self.avoid.robot_radius_m + cfg.map_clearance_m),
-        ):
-            if not len(pts):
-                continue
-            a, lat = plan_frame(pts)
-            lat = lat[(a > -r) & (a < reach)]
+        for lat, gap in lats:
+            lat = lat[np.abs(lat) < cfg.lane_shift_m + gap]
             if len(lat):
                 clear &= ~(np.abs(lat[:, None] - offsets[None, :]) < gap).any(axis=0)
-        k0 = int(np.argmin(np.abs(offsets)))
-        if clear[k0] or not clear.any():
+        if not clear.any():
             self._lane = 0.0
             return 0.0
         side = self._lane
@@ -574,14 +583,18 @@ class Navigator:
         frame only (the next frame tells again whether they are still there).
         """
         obstacles = self.remember(pose, obstacles, t)
+        located = obstacles
         near = self.near_points(pose, near_lines)
         if len(near):
             obstacles = np.vstack([obstacles, near])
-        out = self._decide(pose, obstacles, t)
+        out = self._decide(pose, obstacles, t, located)
         out.near_points = len(near)
         return out
 
-    def _decide(self, pose: np.ndarray, obstacles: np.ndarray, t: float) -> NavCommand:
+    def _decide(self, pose: np.ndarray, obstacles: np.ndarray, t: float, located: np.ndarray | None = None) -> NavCommand:
+        """``located``: the obstacles whose place is known (not the near field's sight
+        lines, which say only that something is closer than the camera sees): the lane
+        shift goes round those; the near field makes the robot stop and look instead."""
         cfg = self.cfg
         if self.goal is None or len(self.path) < 2:
             return NavCommand(np.zeros(3), "idle")
@@ -617,7 +630,7 @@ class Navigator:
             self.set_goal(self.goal, pose, t + cfg.backoff_time_s)
             return NavCommand(self._backoff_velocity(pose, obstacles), "recovering")
         carrot = self._point_at(s + cfg.lookahead_m)
-        shift = self.lane_offset(pose, obstacles, s)
+        shift = self.lane_offset(pose, obstacles if located is None else located, s)
         if shift:
             t0 = self._point_at(s + cfg.lookahead_m + 0.05) - self._point_at(s + cfg.lookahead_m - 0.05)
             t0 = t0 / max(1e-9, math.hypot(t0[0], t0[1]))

@@ -32,6 +32,7 @@ import numpy as np
 from autonomy.avoidance import AvoidanceConfig, AvoidanceResult, choose_direction
 from autonomy.errors import require_non_negative, require_positive
 from autonomy.nearfield import line_points
+from autonomy.obstacle_memory import update_memory
 from autonomy.planner import astar, path_points
 from autonomy.vectormap import NavGraph
 
@@ -360,45 +361,29 @@ class Navigator:
         if cfg.memory_s <= 0:
             self._mem_all = np.zeros((0, 2))
             return obs
-        c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
-        xy = np.asarray(pose[:2], dtype=np.float64)
-        if len(self._mem):
-            rel = self._mem - xy
-            bx = c * rel[:, 0] + s * rel[:, 1] - cfg.camera_forward_m
-            by = -s * rel[:, 0] + c * rel[:, 1]
+        self._mem, self._mem_t, out, recent = update_memory(
+            self._mem,
+            self._mem_t,
+            obs,
+            float(pose[0]),
+            float(pose[1]),
+            float(pose[2]),
+            float(t),
+            cfg.memory_cell_m,
+            max(cfg.memory_s, cfg.backoff_memory_s),
+            cfg.memory_s,
+            cfg.memory_radius_m + 0.5,
+            cfg.memory_radius_m,
+            cfg.camera_forward_m,
             # A little inside the view's edges, so what is replaced was really seen.
-            in_view = in_camera_view(bx, by, cfg, fov_fraction=0.9, near_pad_m=0.1, far_pad_m=0.2)
-            age = t - self._mem_t
-            near = np.hypot(rel[:, 0], rel[:, 1]) <= cfg.memory_radius_m + 0.5
-            keep = ((age <= max(cfg.memory_s, cfg.backoff_memory_s)) | self._blind_ahead(bx, by)) & ~in_view & near
-            self._mem, self._mem_t = self._mem[keep], self._mem_t[keep]
-        near = obs[np.hypot(obs[:, 0], obs[:, 1]) <= cfg.memory_radius_m] if len(obs) else obs
-        if len(near):
-            w = np.column_stack([c * near[:, 0] - s * near[:, 1] + pose[0], s * near[:, 0] + c * near[:, 1] + pose[1]])
-            cells = np.round(w / cfg.memory_cell_m).astype(np.int64)
-            old = np.round(self._mem / cfg.memory_cell_m).astype(np.int64)
-            # One point per cell, with the latest time it was seen (new cells come first).
-            # Cells are keyed as one int64 (a 1D unique is ~10x faster than axis=0).
-            allc = np.vstack([cells, old])
-            allt = np.concatenate([np.full(len(cells), t), self._mem_t])
-            off = np.int64(1 << 30)
-            _, first = np.unique((allc[:, 0] + off) * (off << 1) + (allc[:, 1] + off), return_index=True)
-            self._mem, self._mem_t = allc[first] * cfg.memory_cell_m, allt[first]
-        if not len(self._mem):
-            self._mem_all = np.zeros((0, 2))
-            return self._mem.copy()
-        rel = self._mem - xy
-        out = np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]])
+            0.5 * 0.9 * cfg.camera_fov_rad,
+            cfg.camera_min_range_m + 0.1,
+            cfg.camera_max_range_m - 0.2,
+            cfg.camera_min_range_m + 0.1,
+            self.avoid.radius_m + 0.2,
+        )
         self._mem_all = out
-        recent = (t - self._mem_t <= cfg.memory_s) | self._blind_ahead(out[:, 0] - cfg.camera_forward_m, out[:, 1])
         return out[recent]
-
-    def _blind_ahead(self, bx: np.ndarray, by: np.ndarray) -> np.ndarray:
-        """Points (camera-relative, robot axes) right in front of the robot but too close
-        for the camera: remembered until the place is seen again (the robot backs off or
-        turns), however long that takes."""
-        cfg = self.cfg
-        return (bx > -cfg.camera_forward_m) & (np.hypot(bx, by) <= cfg.camera_min_range_m + 0.1) & (np.abs(by) < self.avoid.radius_m + 0.2)
 
     def _blind_blocked(self, obstacles: np.ndarray) -> bool:
         """Whether an obstacle point lies in the path ahead closer than the camera sees."""

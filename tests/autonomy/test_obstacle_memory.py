@@ -1,0 +1,99 @@
+"""The obstacle memory kernel against a plain numpy reading of its definition (the
+navigator's implementation before the kernel), over random frame sequences."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from autonomy.navigator import Navigator, NavigatorConfig, in_camera_view
+from autonomy.vectormap import NavEdge, NavGraph, NavNode
+
+
+def _graph() -> NavGraph:
+    nodes = tuple(NavNode(id=i, x=float(i), y=0.0) for i in range(3))
+    edges = tuple(NavEdge(s0_id=i, s1_id=i + 1) for i in range(2))
+    return NavGraph(nodes=nodes, edges=edges)
+
+
+class ReferenceMemory:
+    """Step 1-3 of autonomy/obstacle_memory.py with numpy set operations."""
+
+    def __init__(self, cfg: NavigatorConfig, radius_m: float) -> None:
+        self.cfg, self.radius_m = cfg, radius_m
+        self.mem, self.mem_t = np.zeros((0, 2)), np.zeros(0)
+
+    def _blind(self, bx: np.ndarray, by: np.ndarray) -> np.ndarray:
+        cfg = self.cfg
+        return (bx > -cfg.camera_forward_m) & (np.hypot(bx, by) <= cfg.camera_min_range_m + 0.1) & (np.abs(by) < self.radius_m + 0.2)
+
+    def remember(self, pose: np.ndarray, obs: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
+        cfg = self.cfg
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        xy = pose[:2]
+        if len(self.mem):
+            rel = self.mem - xy
+            bx = c * rel[:, 0] + s * rel[:, 1] - cfg.camera_forward_m
+            by = -s * rel[:, 0] + c * rel[:, 1]
+            in_view = in_camera_view(bx, by, cfg, fov_fraction=0.9, near_pad_m=0.1, far_pad_m=0.2)
+            near = np.hypot(rel[:, 0], rel[:, 1]) <= cfg.memory_radius_m + 0.5
+            young = t - self.mem_t <= max(cfg.memory_s, cfg.backoff_memory_s)
+            keep = (young | self._blind(bx, by)) & ~in_view & near
+            self.mem, self.mem_t = self.mem[keep], self.mem_t[keep]
+        new = obs[np.hypot(obs[:, 0], obs[:, 1]) <= cfg.memory_radius_m]
+        # A dict of cells: old ones first, then this frame's overwrite with the time now.
+        cells: dict[tuple[int, int], float] = {}
+        for (x, y), tt in zip(self.mem, self.mem_t, strict=True):
+            cells[(round(x / cfg.memory_cell_m), round(y / cfg.memory_cell_m))] = tt
+        for x, y in new:
+            w = (c * x - s * y + pose[0], s * x + c * y + pose[1])
+            cells[(round(w[0] / cfg.memory_cell_m), round(w[1] / cfg.memory_cell_m))] = t
+        keys = sorted(cells)
+        self.mem = np.array([[i * cfg.memory_cell_m, j * cfg.memory_cell_m] for i, j in keys]).reshape(-1, 2)
+        self.mem_t = np.array([cells[k] for k in keys])
+        rel = self.mem - xy
+        out = np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]]).reshape(-1, 2)
+        recent = (t - self.mem_t <= cfg.memory_s) | self._blind(out[:, 0] - cfg.camera_forward_m, out[:, 1])
+        return out, out[recent]
+
+
+frame = st.tuples(
+    st.floats(-0.4, 0.4),  # dx
+    st.floats(-0.4, 0.4),  # dy
+    st.floats(-1.0, 1.0),  # dyaw
+    st.floats(0.02, 3.0),  # dt
+    st.integers(0, 60),  # obstacle points
+    st.integers(0, 2**31),  # their seed
+)
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.lists(frame, min_size=1, max_size=12), st.sampled_from([0.5, 2.0]), st.sampled_from([0.0, 30.0]))
+def test_memory_kernel_matches_the_reference(frames, memory_s: float, backoff_s: float) -> None:
+    cfg = NavigatorConfig(memory_s=memory_s, backoff_memory_s=backoff_s)
+    nav = Navigator(_graph(), cfg)
+    ref = ReferenceMemory(cfg, nav.avoid.radius_m)
+    pose, t = np.array([0.3, -0.2, 0.4]), 0.0
+    for dx, dy, dyaw, dt, n, seed in frames:
+        pose = pose + np.array([dx, dy, dyaw])
+        t += dt
+        rng = np.random.default_rng(seed)
+        # Points all round the robot, some beyond the memory's radius, some on shared cells.
+        obs = np.column_stack([rng.uniform(-2.6, 2.6, n), rng.uniform(-2.6, 2.6, n)])
+        obs[: n // 3] = np.round(obs[: n // 3] / 0.1) * 0.1
+        got = nav.remember(pose, obs, t)
+        want_all, want = ref.remember(pose, obs, t)
+        np.testing.assert_allclose(nav._mem, ref.mem, atol=1e-12)
+        np.testing.assert_array_equal(nav._mem_t, ref.mem_t)
+        np.testing.assert_allclose(nav._mem_all, want_all, atol=1e-12)
+        np.testing.assert_allclose(got, want, atol=1e-12)
+
+
+def test_memory_off_returns_the_frame() -> None:
+    nav = Navigator(_graph(), NavigatorConfig(memory_s=0.0))
+    obs = np.array([[1.0, 0.5], [0.0, 3.0]])
+    np.testing.assert_array_equal(nav.remember(np.zeros(3), obs, 0.0), obs)
+    assert nav._mem_all.shape == (0, 2)

@@ -10,7 +10,8 @@ cell with the latest time it was sensed. Each frame (:meth:`Navigator.remember`)
 3. the memory is returned in the robot frame, with the mask of what the avoidance uses
    (seen within ``memory_s``, or in the blind zone ahead).
 
-This replaced about 30 numpy calls (0.5 ms a frame on the 2-core machine) by one kernel;
+This replaced about 30 numpy calls (0.5 ms a frame on the 2-core machine with a few
+hundred points remembered; 0.1 ms now) by one kernel;
 the result is the same set of cells in the same (key-sorted) order.
 """
 

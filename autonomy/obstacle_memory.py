@@ -73,7 +73,7 @@ def update_memory(
     # New cells first, so that a cell seen now takes the current time (stable sort below).
     for i in range(n_obs):
         ox, oy = obs[i, 0], obs[i, 1]
-        if math.hypot(ox, oy) > sense_radius:
+        if not math.hypot(ox, oy) <= sense_radius:  # NaN points are dropped too
             continue
         wx = c * ox - s * oy + x
         wy = s * ox + c * oy + y
@@ -88,7 +88,7 @@ def update_memory(
         by = -s * rx + c * ry
         if _in_view(bx, by, view_half_fov, view_r_min, view_r_max):
             continue
-        if math.hypot(rx, ry) > keep_radius:
+        if not math.hypot(rx, ry) <= keep_radius:
             continue
         if t - mem_t[i] > keep_s and not _blind_ahead(bx, by, forward, blind_range, blind_half_width):
             continue

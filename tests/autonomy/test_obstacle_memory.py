@@ -97,3 +97,13 @@ def test_memory_off_returns_the_frame() -> None:
     obs = np.array([[1.0, 0.5], [0.0, 3.0]])
     np.testing.assert_array_equal(nav.remember(np.zeros(3), obs, 0.0), obs)
     assert nav._mem_all.shape == (0, 2)
+
+
+def test_non_finite_points_are_not_remembered() -> None:
+    """A NaN or infinite point fails the sensing radius, as in the numpy code (a NaN
+    cast to a grid cell would be an arbitrary cell)."""
+    nav = Navigator(_graph(), NavigatorConfig(memory_s=2.0))
+    obs = np.array([[np.nan, 0.5], [0.0, np.inf], [-0.5, 0.6]])
+    got = nav.remember(np.zeros(3), obs, 0.0)
+    np.testing.assert_allclose(got, [[-0.5, 0.6]], atol=0.03)
+    assert len(nav._mem) == 1 and np.isfinite(nav._mem).all()

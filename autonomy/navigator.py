@@ -30,11 +30,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from autonomy.avoidance import AvoidanceConfig, AvoidanceResult, choose_direction
-from autonomy.errors import require_non_negative, require_positive
+from autonomy.errors import InputError, require_non_negative, require_positive
 from autonomy.nearfield import line_points
 from autonomy.obstacle_memory import update_memory
 from autonomy.planner import astar, path_points
 from autonomy.vectormap import NavGraph
+
+_MEMORY_KEEP_MARGIN_M = 0.5
+"""Remembered points are dropped beyond memory_radius_m plus this (the robot moves on)."""
 
 
 @dataclass(frozen=True)
@@ -175,6 +178,14 @@ class NavigatorConfig:
             "map_blind_spots_m", "map_clearance_m", "proximity_speed_mps", "proximity_gap_m", "proximity_range_m",
             "corner_after_m", "corner_ramp_m", "near_wall_tol_m", "backoff_memory_s", "lane_shift_m", "lane_check_m",
         )
+        require_positive(self, "navigator.", "memory_cell_m", "memory_radius_m")
+        # The memory merges cells on a dense grid over memory_radius_m + 0.5 (obstacle_memory.py).
+        finest = (self.memory_radius_m + _MEMORY_KEEP_MARGIN_M) / 250
+        if self.memory_cell_m < finest:
+            raise InputError(
+                f"navigator.memory_cell_m: expected at least (memory_radius_m + {_MEMORY_KEEP_MARGIN_M}) / 250 = {finest:.4g} m, "
+                f"got {self.memory_cell_m!r}"
+            )
 
 
 @dataclass
@@ -372,7 +383,7 @@ class Navigator:
             cfg.memory_cell_m,
             max(cfg.memory_s, cfg.backoff_memory_s),
             cfg.memory_s,
-            cfg.memory_radius_m + 0.5,
+            cfg.memory_radius_m + _MEMORY_KEEP_MARGIN_M,
             cfg.memory_radius_m,
             cfg.camera_forward_m,
             # A little inside the view's edges, so what is replaced was really seen.

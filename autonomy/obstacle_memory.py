@@ -10,9 +10,11 @@ cell with the latest time it was sensed. Each frame (:meth:`Navigator.remember`)
 3. the memory is returned in the robot frame, with the mask of what the avoidance uses
    (seen within ``memory_s``, or in the blind zone ahead).
 
-This replaced about 30 numpy calls (0.5 ms a frame on the 2-core machine with a few
-hundred points remembered; 0.1 ms now) by one kernel;
-the result is the same set of cells in the same (key-sorted) order.
+Everything kept lies within ``keep_radius`` of the robot, so the cells are merged on a
+dense local grid around it rather than by sorting (the sort of a few thousand sensed
+points cost 0.4 ms a frame); the grid is read in order of (x cell, y cell), the order
+the numpy code's ``np.unique`` gave. This replaced about 30 numpy calls (0.5-0.8 ms a
+frame on the 2-core machine) by one kernel.
 """
 
 from __future__ import annotations
@@ -21,8 +23,6 @@ import math
 
 import numba
 import numpy as np
-
-_OFF = np.int64(1 << 30)
 
 
 @numba.njit(cache=True, inline="always")
@@ -34,6 +34,17 @@ def _in_view(bx: float, by: float, half_fov: float, r_min: float, r_max: float) 
 @numba.njit(cache=True, inline="always")
 def _blind_ahead(bx: float, by: float, forward: float, blind_range: float, blind_half_width: float) -> bool:  # pragma: no cover
     return bx > -forward and math.hypot(bx, by) <= blind_range and abs(by) < blind_half_width
+
+
+@numba.njit(cache=True, inline="always")
+def _grid_index(wx: float, wy: float, cell: float, cx0: int, cy0: int, side: int) -> int:  # pragma: no cover - numba
+    """Flat index of the cell of world point (wx, wy) on the local grid; -1 off the grid
+    (never for finite input within keep_radius; a non-finite pose lands here)."""
+    ix = np.int64(np.rint(wx / cell)) - cx0
+    iy = np.int64(np.rint(wy / cell)) - cy0
+    if ix < 0 or ix >= side or iy < 0 or iy >= side:
+        return -1
+    return ix * side + iy
 
 
 @numba.njit(cache=True)
@@ -63,26 +74,17 @@ def update_memory(
     this frame's obstacles in the robot frame. ``view_*`` describe the region whose
     remembered points are replaced (camera-relative, robot axes); ``blind_*`` the blind
     zone ahead. Returns the new ``mem``, ``mem_t``, all of it in the robot frame, and
-    the avoidance's mask.
+    the avoidance's mask. ``sense_radius`` must not exceed ``keep_radius``.
     """
     c, s = math.cos(yaw), math.sin(yaw)
-    n_old, n_obs = mem.shape[0], obs.shape[0]
-    keys = np.empty(n_obs + n_old, dtype=np.int64)
-    times = np.empty(n_obs + n_old)
-    k = 0
-    # New cells first, so that a cell seen now takes the current time (stable sort below).
-    for i in range(n_obs):
-        ox, oy = obs[i, 0], obs[i, 1]
-        if not math.hypot(ox, oy) <= sense_radius:  # NaN points are dropped too
-            continue
-        wx = c * ox - s * oy + x
-        wy = s * ox + c * oy + y
-        cx = np.int64(np.rint(wx / cell))
-        cy = np.int64(np.rint(wy / cell))
-        keys[k] = (cx + _OFF) * (_OFF << 1) + (cy + _OFF)
-        times[k] = t
-        k += 1
-    for i in range(n_old):
+    # The local grid: every cell within keep_radius of the robot's own cell.
+    half = int(math.ceil(keep_radius / cell)) + 1
+    side = 2 * half + 1
+    cx0 = np.int64(np.rint(x / cell)) - half
+    cy0 = np.int64(np.rint(y / cell)) - half
+    when = np.full(side * side, -np.inf)  # -inf: empty
+    n = 0
+    for i in range(mem.shape[0]):
         rx, ry = mem[i, 0] - x, mem[i, 1] - y
         bx = c * rx + s * ry - forward
         by = -s * rx + c * ry
@@ -92,33 +94,39 @@ def update_memory(
             continue
         if t - mem_t[i] > keep_s and not _blind_ahead(bx, by, forward, blind_range, blind_half_width):
             continue
-        cx = np.int64(np.rint(mem[i, 0] / cell))
-        cy = np.int64(np.rint(mem[i, 1] / cell))
-        keys[k] = (cx + _OFF) * (_OFF << 1) + (cy + _OFF)
-        times[k] = mem_t[i]
-        k += 1
-    order = np.argsort(keys[:k], kind="mergesort")
-    n = 0
-    for j in range(k):
-        if j == 0 or keys[order[j]] != keys[order[j - 1]]:
+        k = _grid_index(mem[i, 0], mem[i, 1], cell, cx0, cy0, side)
+        if k < 0:
+            continue
+        if when[k] == -np.inf:
             n += 1
+        when[k] = mem_t[i]
+    # This frame's points take the current time, over what was remembered there.
+    for i in range(obs.shape[0]):
+        ox, oy = obs[i, 0], obs[i, 1]
+        if not math.hypot(ox, oy) <= sense_radius:  # NaN points are dropped too
+            continue
+        wx = c * ox - s * oy + x
+        wy = s * ox + c * oy + y
+        k = _grid_index(wx, wy, cell, cx0, cy0, side)
+        if k < 0:
+            continue
+        if when[k] == -np.inf:
+            n += 1
+        when[k] = t
     new_mem = np.empty((n, 2))
     new_t = np.empty(n)
     rel = np.empty((n, 2))
     recent = np.empty(n, dtype=np.bool_)
     m = 0
-    for j in range(k):
-        kk = keys[order[j]]
-        if j > 0 and kk == keys[order[j - 1]]:
+    for k in range(side * side):
+        if when[k] == -np.inf:
             continue
-        cx = kk // (_OFF << 1) - _OFF
-        cy = kk % (_OFF << 1) - _OFF
-        wx, wy = cx * cell, cy * cell
+        wx, wy = (cx0 + k // side) * cell, (cy0 + k % side) * cell
         new_mem[m, 0], new_mem[m, 1] = wx, wy
-        new_t[m] = times[order[j]]
+        new_t[m] = when[k]
         rx, ry = wx - x, wy - y
         ux, uy = c * rx + s * ry, -s * rx + c * ry
         rel[m, 0], rel[m, 1] = ux, uy
-        recent[m] = t - new_t[m] <= memory_s or _blind_ahead(ux - forward, uy, forward, blind_range, blind_half_width)
+        recent[m] = t - when[k] <= memory_s or _blind_ahead(ux - forward, uy, forward, blind_range, blind_half_width)
         m += 1
     return new_mem, new_t, rel, recent

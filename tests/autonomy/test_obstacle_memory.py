@@ -6,9 +6,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from autonomy.errors import InputError
 from autonomy.navigator import Navigator, NavigatorConfig, in_camera_view
 from autonomy.vectormap import NavEdge, NavGraph, NavNode
 
@@ -71,9 +73,14 @@ frame = st.tuples(
 
 
 @settings(max_examples=80, deadline=None)
-@given(st.lists(frame, min_size=1, max_size=12), st.sampled_from([0.5, 2.0]), st.sampled_from([0.0, 30.0]))
-def test_memory_kernel_matches_the_reference(frames, memory_s: float, backoff_s: float) -> None:
-    cfg = NavigatorConfig(memory_s=memory_s, backoff_memory_s=backoff_s)
+@given(
+    st.lists(frame, min_size=1, max_size=12),
+    st.sampled_from([0.5, 2.0]),
+    st.sampled_from([0.0, 30.0]),
+    st.sampled_from([0.05, 0.03, 0.2]),
+)
+def test_memory_kernel_matches_the_reference(frames, memory_s: float, backoff_s: float, cell: float) -> None:
+    cfg = NavigatorConfig(memory_s=memory_s, backoff_memory_s=backoff_s, memory_cell_m=cell)
     nav = Navigator(_graph(), cfg)
     ref = ReferenceMemory(cfg, nav.avoid.radius_m)
     pose, t = np.array([0.3, -0.2, 0.4]), 0.0
@@ -107,3 +114,15 @@ def test_non_finite_points_are_not_remembered() -> None:
     got = nav.remember(np.zeros(3), obs, 0.0)
     np.testing.assert_allclose(got, [[-0.5, 0.6]], atol=0.03)
     assert len(nav._mem) == 1 and np.isfinite(nav._mem).all()
+
+
+def test_memory_grid_settings_are_checked() -> None:
+    for bad in (0.0, -0.05, float("nan")):
+        with pytest.raises(InputError, match=r"^navigator\.memory_cell_m: expected a positive number"):
+            NavigatorConfig(memory_cell_m=bad)
+    with pytest.raises(InputError, match=r"^navigator\.memory_radius_m: expected a positive number"):
+        NavigatorConfig(memory_radius_m=0.0)
+    # Too fine a grid for the radius (the kernel's dense local grid would be huge).
+    with pytest.raises(InputError, match=r"^navigator\.memory_cell_m: expected at least .* = 0\.01 m, got 0\.001$"):
+        NavigatorConfig(memory_cell_m=0.001)
+    NavigatorConfig(memory_cell_m=0.01)

@@ -38,7 +38,7 @@ lint: $(STAMP)
 
 ## Regenerate the shipped buildings in sim/assets from sim/blueprints.py.
 assets: $(STAMP)
-	$(PY) -m sim.blueprints
+	$(PY) -m sim.simulator.blueprints
 
 clean:
 	rm -rf runs .pytest_cache .numba_cache

@@ -35,7 +35,7 @@ def bench_env(results: dict[str, Result], quick: bool) -> None:
     import gymnasium as gym
 
     import sim  # noqa: F401  (registers DepthNav-v0)
-    from sim.env import DepthNavEnv
+    from sim.envs.depthnav import DepthNavEnv
 
     n = 300 if quick else 2000
     env = gym.make("DepthNav-v0")

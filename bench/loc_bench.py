@@ -37,9 +37,9 @@ PAPER_MS = {"kr": 0.0001 * FRAME_MS, "ks": 0.036 * FRAME_MS, "kc": 0.566 * FRAME
 
 def _frames(n: int) -> tuple[list[np.ndarray], list[np.ndarray], object, object]:
     """``n`` noisy uint16-millimetre frames along a corridor of the shipped building, with poses."""
-    from sim import blueprints
-    from sim.kinect import KinectCamera, KinectConfig
-    from sim.world import build_world
+    from sim.simulator import blueprints
+    from sim.simulator.kinect import KinectCamera, KinectConfig
+    from sim.simulator.world import build_world
 
     bp = blueprints.load_blueprint(ROOT / "sim" / "assets" / "corridor_loop")
     cfg = KinectConfig()

@@ -41,14 +41,14 @@ def corridor_frames(n: int = 8, seed: int = 0) -> tuple[list[np.ndarray], list[n
     import math
 
     from autonomy.planes import pose_transform
-    from sim.kinect import KinectCamera, KinectConfig
-    from sim.mapping_experiments import LoopDriver
+    from sim.experiments.mapping import LoopDriver
     from sim.scenes.corridor import (
         CorridorScene,
         build_corridor_world,
         corridor_path,
         robot_from_camera,
     )
+    from sim.simulator.kinect import KinectCamera, KinectConfig
 
     scene = CorridorScene()
     world = build_corridor_world(scene)

@@ -26,19 +26,19 @@ sys.path.insert(0, str(ROOT))
 
 from autonomy.fspf import FSPFConfig, fspf  # noqa: E402
 from autonomy.vectormap import load_vectormap, save_vectormap  # noqa: E402
-from sim import blueprints  # noqa: E402
-from sim.actors import Furniture  # noqa: E402
-from sim.kinect import KinectCamera, KinectConfig  # noqa: E402
-from sim.kinect_noise import apply_kinect_noise  # noqa: E402
-from sim.runner import random_people  # noqa: E402
-from sim.world import build_world  # noqa: E402
+from sim.experiments.runner import random_people  # noqa: E402
+from sim.simulator import blueprints  # noqa: E402
+from sim.simulator.actors import Furniture  # noqa: E402
+from sim.simulator.kinect import KinectCamera, KinectConfig  # noqa: E402
+from sim.simulator.kinect_noise import apply_kinect_noise  # noqa: E402
+from sim.simulator.world import build_world  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import Result, entry, timeit  # noqa: E402
 
 
 def bench_maps(results: dict[str, Result], quick: bool) -> None:
-    from sim.maprender import render_map
+    from sim.viz.maps import render_map
 
     large = blueprints.BuildingConfig.large()
     results["blueprint_large"] = entry(
@@ -172,7 +172,7 @@ def bench_sim(results: dict[str, Result], quick: bool) -> None:
     loc.reset(poses[0])
     from autonomy.avoidance import AvoidanceConfig, obstacle_points
     from autonomy.navigator import Navigator
-    from sim.robot import relative_pose
+    from sim.simulator.robot import relative_pose
 
     bp = blueprints.load_blueprint(ROOT / "sim" / "assets" / "corridor_loop")
     nav = Navigator(bp.navgraph, walls=np.asarray(vm.segments))

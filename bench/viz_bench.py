@@ -33,7 +33,7 @@ MAX_OVERHEAD = 0.2
 
 
 def bench_viz(results: dict[str, Result], quick: bool) -> None:
-    from sim.runner import run_scenario
+    from sim.experiments.runner import run_scenario
     from sim.scenario import SCENARIOS_DIR, load_scenario
 
     duration = 8.0 if quick else 20.0

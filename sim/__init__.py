@@ -2,7 +2,7 @@
 
 Headless rendering defaults to EGL (Mesa on CPU machines); set ``MUJOCO_GL`` before
 importing ``sim`` to choose another backend. Where no GL context can be made, the
-depth camera falls back to ray casting (:mod:`sim.kinect`).
+depth camera falls back to ray casting (:mod:`sim.simulator.kinect`).
 """
 
 import os
@@ -20,7 +20,7 @@ def _register_envs() -> None:
     except ImportError:  # pragma: no cover - gymnasium is a dependency
         return
     if "DepthNav-v0" not in registry:
-        register(id="DepthNav-v0", entry_point="sim.env:DepthNavEnv")
+        register(id="DepthNav-v0", entry_point="sim.envs.depthnav:DepthNavEnv")
 
 
 _register_envs()

@@ -70,7 +70,7 @@ def cmd_map_convert(args: argparse.Namespace) -> int:
 
 def cmd_map_render(args: argparse.Namespace) -> int:
     from autonomy.vectormap import load_navgraph, load_vectormap
-    from sim.maprender import render_map
+    from sim.viz.maps import render_map
 
     vm = load_vectormap(args.file)
     graph = load_navgraph(args.graph) if args.graph else None
@@ -94,9 +94,9 @@ def cmd_snapshot(args: argparse.Namespace) -> int:
     import numpy as np
 
     from autonomy.vectormap import load_vectormap
-    from sim.kinect import KinectCamera, KinectConfig
-    from sim.kinect_noise import apply_kinect_noise
-    from sim.world import build_world
+    from sim.simulator.kinect import KinectCamera, KinectConfig
+    from sim.simulator.kinect_noise import apply_kinect_noise
+    from sim.simulator.world import build_world
 
     pose = _parse_pose(args.pose)
     vm = load_vectormap(_map_arg(args.map))
@@ -141,7 +141,7 @@ def _save_depth_png(depth, path: Path) -> None:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from sim.experiments import load_experiment
+    from sim.experiments.kinds import load_experiment
 
     exp, scn = load_experiment(args.scenario, args.set or [])
     out = Path(args.out) if args.out else Path("runs") / scn.name
@@ -154,7 +154,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
-    from sim.sweep import SweepError, run_sweep
+    from sim.experiments.sweep import SweepError, run_sweep
 
     try:
         report = run_sweep(

@@ -20,13 +20,13 @@ from autonomy.navigator import NavigatorConfig
 from autonomy.nearfield import NearField
 from autonomy.observation import ObservationConfig
 from autonomy.raycast import VisibilityGridConfig
-from sim.actors import Furniture, Person
 from sim.config import apply_overrides, from_dict, read_toml
-from sim.kinect import KinectConfig
-from sim.robot import OdometryConfig, RobotConfig
-from sim.world import WorldConfig
+from sim.simulator.actors import Furniture, Person
+from sim.simulator.blueprints import ASSETS_DIR
+from sim.simulator.kinect import KinectConfig
+from sim.simulator.robot import OdometryConfig, RobotConfig
+from sim.simulator.world import WorldConfig
 
-ASSETS_DIR = Path(__file__).resolve().parent / "assets"
 #: Scenario files shipped with the project (the repo's scenarios/ folder).
 SCENARIOS_DIR = Path(__file__).resolve().parent.parent / "scenarios"
 
@@ -45,7 +45,7 @@ class MapConfig:
     navgraph: str = ""
     """Path to a *.navigation.json (relative to the scenario file)."""
     generate_seed: int = -1
-    """>= 0: draw a procedural building with this seed instead (sim.blueprints)."""
+    """>= 0: draw a procedural building with this seed instead (sim.simulator.blueprints)."""
 
     def __post_init__(self) -> None:
         given = sum([bool(self.name), bool(self.vectormap), self.generate_seed >= 0])

@@ -16,8 +16,8 @@ from gymnasium.utils.env_checker import check_env
 
 import sim  # noqa: F401  (registers DepthNav-v0)
 from autonomy.errors import InputError
-from sim.env import DepthNavEnv, EnvConfig
-from sim.env_geometry import GeodesicField, KCScanner
+from sim.envs.depthnav import DepthNavEnv, EnvConfig
+from sim.envs.geometry import GeodesicField, KCScanner
 from sim.scenario import SCENARIOS_DIR, LocalizationConfig
 from tests.helpers import GL
 
@@ -59,7 +59,7 @@ def test_import_sim_registers_without_importing_mujoco() -> None:
     code = (
         "import sys, sim, gymnasium as gym; "
         "assert 'DepthNav-v0' in gym.registry, 'not registered'; "
-        "assert gym.registry['DepthNav-v0'].entry_point == 'sim.env:DepthNavEnv'; "
+        "assert gym.registry['DepthNav-v0'].entry_point == 'sim.envs.depthnav:DepthNavEnv'; "
         "assert 'mujoco' not in sys.modules, 'mujoco imported eagerly'"
     )
     subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT)
@@ -162,7 +162,7 @@ def test_progress_term_follows_the_geodesic_distance() -> None:
 
 
 def test_geodesic_distance_goes_around_walls() -> None:
-    from sim import blueprints
+    from sim.simulator import blueprints
 
     bp = blueprints.load_blueprint("small_floor")
     # Goal inside the north-west office (door near x = 3.9 on the wall y = 6.2).
@@ -321,7 +321,7 @@ def test_from_scenario() -> None:
 
 
 def test_buildings_from_files(tmp_path: Path) -> None:
-    from sim import blueprints
+    from sim.simulator import blueprints
 
     bp = blueprints.generate_building(blueprints.BuildingConfig(width_m=30.0, height_m=24.0), 9)
     blueprints.save_blueprint(bp, tmp_path / "b9")

@@ -12,8 +12,8 @@ import pytest
 
 from autonomy.errors import InputError
 from sim.cli import main
-from sim.experiments import load_experiment
-from sim.mapping_experiments import (
+from sim.experiments.kinds import load_experiment
+from sim.experiments.mapping import (
     EXPERIMENTS,
     PAPER,
     CorridorExperiment,

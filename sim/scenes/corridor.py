@@ -7,7 +7,7 @@ in the paper are 10-16 m long.
 
 The blueprint is a closed ring corridor between an outer and an inner rectangle, with
 recessed doorways every ``door_spacing_m`` along the outer walls (the side the camera
-sees). The world is :func:`sim.world.build_spec` with the camera turned to the right.
+sees). The world is :func:`sim.simulator.world.build_spec` with the camera turned to the right.
 """
 
 from __future__ import annotations
@@ -20,9 +20,9 @@ import numpy as np
 from autonomy.camera import ROBOT_FROM_OPTICAL_LEVEL, CameraIntrinsics, CameraMount
 from autonomy.errors import InputError
 from autonomy.vectormap import VectorMap
-from sim.robot import RobotConfig
 from sim.scenes.rigs import optical_quat
-from sim.world import KINECT_CAMERA, World, WorldConfig, build_spec, compile_world
+from sim.simulator.robot import RobotConfig
+from sim.simulator.world import KINECT_CAMERA, World, WorldConfig, build_spec, compile_world
 
 
 @dataclass(frozen=True)

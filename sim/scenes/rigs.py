@@ -1,8 +1,8 @@
 """Small MuJoCo rigs with a free-standing depth camera (seed 003, Experiments I and II).
 
 A rig is a static scene (floor, boxes) plus a camera fixed in the world at a given
-optical-frame pose, compiled with the same visual settings as :mod:`sim.world` so
-:class:`sim.kinect.KinectCamera` renders it the same way.
+optical-frame pose, compiled with the same visual settings as :mod:`sim.simulator.world` so
+:class:`sim.simulator.kinect.KinectCamera` renders it the same way.
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ import mujoco
 import numpy as np
 
 from autonomy.camera import CameraIntrinsics
-from sim.kinect import KinectCamera, KinectConfig
-from sim.world import MJCAM_FROM_OPTICAL
+from sim.simulator.kinect import KinectCamera, KinectConfig
+from sim.simulator.world import MJCAM_FROM_OPTICAL
 
 #: Name of the rig's depth camera.
 RIG_CAMERA = "kinect"
@@ -38,7 +38,7 @@ class Rig:
 
 
 def new_spec(name: str, intr: CameraIntrinsics) -> mujoco.MjSpec:
-    """An empty spec with the depth-rendering settings of :func:`sim.world.build_spec`."""
+    """An empty spec with the depth-rendering settings of :func:`sim.simulator.world.build_spec`."""
     spec = mujoco.MjSpec()
     spec.modelname = name
     vis = spec.visual

@@ -127,7 +127,7 @@ def test_clutter_goes_to_outliers_and_the_wall_to_plane_points() -> None:
 
 
 def test_kinect_noise_does_not_stop_plane_finding() -> None:
-    from sim.kinect_noise import KinectNoiseConfig, apply_kinect_noise
+    from sim.simulator.kinect_noise import KinectNoiseConfig, apply_kinect_noise
 
     # Tilted planes whose depth stays inside the valid range. Beyond about 3 m the model's
     # per-pixel spread (Nguyen sigma_z ~ 2 cm at 3.5 m, plus 35 mm disparity steps)

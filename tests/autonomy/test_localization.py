@@ -218,7 +218,7 @@ def test_tracks_a_200_m_loop_with_20_percent_odometry_noise() -> None:
     20% multiplicative odometry noise on every frame's increment, as in the paper's
     replays; the long corridors constrain the along-corridor axis only at doors.
     """
-    from sim.blueprints import load_blueprint
+    from sim.simulator.blueprints import load_blueprint
 
     bp = load_blueprint("corridor_loop")
     segs = np.asarray(bp.vectormap.segments)

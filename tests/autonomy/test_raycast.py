@@ -19,7 +19,7 @@ from autonomy.raycast import (
     scene_lines,
 )
 from autonomy.vectormap import VectorMap
-from sim.blueprints import BuildingConfig, generate_building, load_blueprint
+from sim.simulator.blueprints import BuildingConfig, generate_building, load_blueprint
 
 N_RAYS = 20_000
 

@@ -1,6 +1,6 @@
 """A trivially cheap experiment kind for the sweep engine's tests (``tiny_test``).
 
-Registered at run time (``sim.experiments.KINDS["tiny_test"] = "tests.sim.sweep_kind"``);
+Registered at run time (``sim.experiments.kinds.KINDS["tiny_test"] = "tests.sim.sweep_kind"``);
 the engine passes the module name to its workers, which register it too. Each trial
 draws a number from its seed, optionally sleeps, and leaves a marker file per execution
 so tests can count how often each trial ran.
@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.experiments import Experiment
+from sim.experiments.kinds import Experiment
 
 KIND = "tiny_test"
 MODULE = "tests.sim.sweep_kind"
@@ -63,6 +63,6 @@ EXPERIMENTS = {KIND: Experiment(KIND, TinyConfig, run, trials, trial, summarize)
 
 
 def register() -> None:
-    from sim.experiments import KINDS
+    from sim.experiments.kinds import KINDS
 
     KINDS[KIND] = MODULE

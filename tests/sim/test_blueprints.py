@@ -11,7 +11,7 @@ import pytest
 
 from autonomy.errors import InputError
 from autonomy.vectormap import MapFormatError, NavGraph
-from sim.blueprints import (
+from sim.simulator.blueprints import (
     ASSETS_DIR,
     SHIPPED,
     Blueprint,
@@ -200,7 +200,7 @@ def test_small_floor_shape(shipped):
 @pytest.mark.parametrize("name", sorted(SHIPPED))
 def test_shipped_assets_match_generators(shipped, name):
     """The files in sim/assets are exactly what the functions produce (run
-    ``python -m sim.blueprints`` after changing a generator)."""
+    ``python -m sim.simulator.blueprints`` after changing a generator)."""
     bp = shipped[name]
     disk = load_blueprint(ASSETS_DIR / name)
     assert disk.name == bp.name == name

@@ -9,8 +9,14 @@ import pytest
 
 from autonomy.camera import CameraIntrinsics, CameraMount
 from autonomy.vectormap import VectorMap
-from sim.kinect import GLDepth, KinectCamera, KinectConfig, RaycastDepth, make_depth_backend
-from sim.world import WorldConfig, build_world
+from sim.simulator.kinect import (
+    GLDepth,
+    KinectCamera,
+    KinectConfig,
+    RaycastDepth,
+    make_depth_backend,
+)
+from sim.simulator.world import WorldConfig, build_world
 from tests.helpers import GL
 
 LEVEL = CameraMount(pitch_down_rad=0.0)
@@ -102,7 +108,7 @@ def test_same_seed_same_frame_and_different_seed_differs() -> None:
 
 
 def test_raycast_fallback_is_chosen_without_gl(monkeypatch: pytest.MonkeyPatch) -> None:
-    import sim.kinect as kinect
+    import sim.simulator.kinect as kinect
 
     def broken(*args, **kwargs):
         raise RuntimeError("no display")

@@ -11,8 +11,8 @@ import pytest
 
 from autonomy.camera import CameraIntrinsics
 from autonomy.errors import InputError
-from sim import kinect_noise as kn
-from sim.kinect_noise import (
+from sim.simulator import kinect_noise as kn
+from sim.simulator.kinect_noise import (
     KinectNoiseConfig,
     apply_kinect_noise,
     axial_sigma_m,

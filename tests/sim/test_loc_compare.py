@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from autonomy.errors import InputError
-from sim.experiments import load_experiment
-from sim.loc_compare import PAPER, trials
+from sim.experiments.kinds import load_experiment
+from sim.experiments.loc_compare import PAPER, trials
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIO = ROOT / "scenarios" / "localization_comparison.toml"
@@ -43,7 +43,7 @@ def test_trials_are_replays_per_approach_with_shared_seeds() -> None:
 
 @pytest.mark.slow
 def test_short_comparison_10_replays_x_4_approaches(tmp_path: Path) -> None:
-    from sim.sweep import run_sweep
+    from sim.experiments.sweep import run_sweep
 
     sets = [
         f"cache_dir={tmp_path / 'cache'}",

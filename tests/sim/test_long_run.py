@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from sim.runner import run_scenario
+from sim.experiments.runner import run_scenario
 from sim.scenario import SCENARIOS_DIR, load_scenario
 
 

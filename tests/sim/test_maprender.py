@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from autonomy.errors import InputError
-from sim.blueprints import BuildingConfig, generate_building, small_floor
-from sim.maprender import render_map
+from sim.simulator.blueprints import BuildingConfig, generate_building, small_floor
+from sim.viz.maps import render_map
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from autonomy.vectormap import NavEdge, NavGraph, NavNode, VectorMap, save_navgraph, save_vectormap
-from sim.runner import run_scenario
+from sim.experiments.runner import run_scenario
 from sim.scenario import load_scenario
 
 

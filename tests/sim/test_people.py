@@ -7,7 +7,7 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from sim.actors import PeopleController, Person
+from sim.simulator.actors import PeopleController, Person
 
 DT = 1.0 / 30.0
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from sim.cli import main
-from sim.runner import run_scenario
+from sim.experiments.runner import run_scenario
 from sim.scenario import SCENARIOS_DIR, load_scenario
 
 REQUIRED_METRICS = {"frames", "distance_m", "duration_s", "collisions", "waypoints_reached", "waypoints_failed", "realtime_factor"}
@@ -54,7 +54,7 @@ def test_same_seed_same_run(tmp_path: Path) -> None:
 
 
 def test_interrupted_run_still_writes_its_report(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    import sim.runner as runner
+    import sim.experiments.runner as runner
 
     calls = {"n": 0}
     real = runner.apply_kinect_noise
@@ -90,7 +90,7 @@ def test_demo_scenario_end_to_end_via_cli(tmp_path: Path) -> None:
 
 
 def test_collision_incidents_group_contact_events() -> None:
-    from sim.runner import collision_incidents
+    from sim.experiments.runner import collision_incidents
 
     ev = [
         {"t": 1.0, "bodies": ["person_0"]}, {"t": 1.1, "bodies": ["person_0"]}, {"t": 3.9, "bodies": ["person_0"]},

@@ -25,7 +25,7 @@ BASE = 'name = "t"\n[map]\nname = "small_floor"\n'
 def test_every_shipped_scenario_parses() -> None:
     items = list_scenarios()
     assert items, "no scenarios shipped"
-    from sim.experiments import load_experiment
+    from sim.experiments.kinds import load_experiment
 
     for path, desc in items:
         exp, cfg = load_experiment(path)
@@ -36,7 +36,7 @@ def test_every_shipped_scenario_parses() -> None:
 
 
 def test_kinds_are_checked(tmp_path: Path) -> None:
-    from sim.experiments import load_experiment
+    from sim.experiments.kinds import load_experiment
 
     p = tmp_path / "k.toml"
     p.write_text('kind = "teleport"\nname = "x"\n')

@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 
 from autonomy.errors import InputError
-from sim import experiments
-from sim.sweep import SweepError, read_trials, run_sweep
+from sim.experiments import kinds as experiments
+from sim.experiments.sweep import SweepError, read_trials, run_sweep
 from tests.sim import sweep_kind
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -89,7 +89,7 @@ def test_kill_part_way_then_resume_loses_nothing_and_runs_nothing_twice(tmp_path
     code = (
         f"import sys; sys.path.insert(0, {str(ROOT)!r})\n"
         "from tests.sim import sweep_kind; sweep_kind.register()\n"
-        "from sim.sweep import run_sweep\n"
+        "from sim.experiments.sweep import run_sweep\n"
         f"run_sweep({str(scn)!r}, [], {str(out)!r}, trials=24, workers=1, progress=False)\n"
     )
     proc = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, start_new_session=True)

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from sim.runner import run_scenario
+from sim.experiments.runner import run_scenario
 from sim.scenario import SCENARIOS_DIR, load_scenario
 
 
@@ -75,7 +75,7 @@ def test_trajectory_strips_are_bounded(tmp_path: Path) -> None:
     """A long path is logged as a chain of strips of at most TRAIL_CHUNK points each."""
     import numpy as np
 
-    from sim.viz import TRAIL_CHUNK, Recorder
+    from sim.viz.recording import TRAIL_CHUNK, Recorder
 
     rec = Recorder(tmp_path / "t.rrd", every=50)
     n = 3 * TRAIL_CHUNK + 10
@@ -90,7 +90,7 @@ def test_trajectory_strips_are_bounded(tmp_path: Path) -> None:
 
 def test_an_unwritable_recording_path_is_a_one_line_input_error(tmp_path: Path) -> None:
     from autonomy.errors import InputError
-    from sim.viz import Recorder
+    from sim.viz.recording import Recorder
 
     with pytest.raises(InputError, match="expected a file name for the rerun recording, got a directory"):
         Recorder(tmp_path)

@@ -10,8 +10,8 @@ import pytest
 
 from autonomy.errors import InputError
 from autonomy.vectormap import VectorMap
-from sim.actors import Furniture, Person
-from sim.world import WorldConfig, build_world
+from sim.simulator.actors import Furniture, Person
+from sim.simulator.world import WorldConfig, build_world
 from tests.helpers import box_room
 
 

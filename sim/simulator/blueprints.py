@@ -11,7 +11,7 @@ between internal corridors, some of them (partly) replaced by open atria with pi
 Doorways are gaps in the walls. Nav-graph edges keep at least
 ``config.min_clearance_m`` from every wall.
 
-Two fixed buildings ship in ``sim/assets`` (``python -m sim.blueprints`` regenerates
+Two fixed buildings ship in ``sim/assets`` (``python -m sim.simulator.blueprints`` regenerates
 them): :func:`corridor_loop` (about 60 x 40 m) and :func:`small_floor` (16 x 10 m).
 """
 
@@ -61,7 +61,7 @@ __all__ = [
 Box = tuple[float, float, float, float]
 """Axis-aligned box ``(xmin, ymin, xmax, ymax)`` in metres."""
 
-ASSETS_DIR = Path(__file__).resolve().parent / "assets"
+ASSETS_DIR = Path(__file__).resolve().parent.parent / "assets"
 """Where the shipped blueprints live."""
 
 _DOOR_INNER_M = 0.75
@@ -996,8 +996,8 @@ def load_blueprint(stem_path: str | os.PathLike[str]) -> Blueprint:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Regenerate the shipped blueprints' files (``python -m sim.blueprints``)."""
-    ap = argparse.ArgumentParser(prog="python -m sim.blueprints", description=main.__doc__)
+    """Regenerate the shipped blueprints' files (``python -m sim.simulator.blueprints``)."""
+    ap = argparse.ArgumentParser(prog="python -m sim.simulator.blueprints", description=main.__doc__)
     ap.add_argument("--out", type=Path, default=ASSETS_DIR, help="output directory (default: sim/assets)")
     args = ap.parse_args(argv)
     for name, fn in SHIPPED.items():

@@ -1,7 +1,7 @@
 """Experiment kinds: every scenario file names one, and each kind knows how to run and sweep.
 
 A scenario TOML may start with ``kind = "..."`` (default ``"mission"``, the waypoint runs
-of :mod:`sim.runner`). A kind is an :class:`Experiment`: the frozen dataclass its file is
+of :mod:`sim.experiments.runner`). A kind is an :class:`Experiment`: the frozen dataclass its file is
 parsed into, a ``run`` that writes ``report.json`` (and figures) for one invocation, and
 the three parts a sweep needs — ``trials`` (the seeded trial specs of an ``n``-trial
 sweep), ``trial`` (one spec in, one JSON-able result out; a plain module-level function so
@@ -24,11 +24,11 @@ from sim.config import apply_overrides, from_dict, read_toml
 
 #: kind → module that defines ``EXPERIMENTS[kind]``.
 KINDS: dict[str, str] = {
-    "mission": "sim.mission",
-    "localization_comparison": "sim.loc_compare",
-    "mapping_cuboid": "sim.mapping_experiments",
-    "mapping_wall": "sim.mapping_experiments",
-    "mapping_corridor": "sim.mapping_experiments",
+    "mission": "sim.experiments.mission",
+    "localization_comparison": "sim.experiments.loc_compare",
+    "mapping_cuboid": "sim.experiments.mapping",
+    "mapping_wall": "sim.experiments.mapping",
+    "mapping_corridor": "sim.experiments.mapping",
 }
 
 

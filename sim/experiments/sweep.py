@@ -1,7 +1,7 @@
 """Sweeps: many seeded trials of any experiment kind, on this machine or on a Ray cluster.
 
 ``depthnav sweep SCENARIO.toml [--trials N] [--engine local|ray] [--address ADDR]
-[--workers K] [--out DIR] [--resume]`` asks the scenario's kind (:mod:`sim.experiments`)
+[--workers K] [--out DIR] [--resume]`` asks the scenario's kind (:mod:`sim.experiments.kinds`)
 for ``N`` seeded trial specs, runs each with the kind's ``trial`` and hands all results
 to its ``summarize`` (report.json and figures). Engines:
 
@@ -12,7 +12,7 @@ to its ``summarize`` (report.json and figures). Engines:
   is given. Ray is imported only here (``pip install 'depthnav[ray]'``).
 
 Workers receive (scenario path, overrides, spec) and parse the scenario themselves
-(:func:`sim.experiments.load_experiment`; parsed once per process), so every node
+(:func:`sim.experiments.kinds.load_experiment`; parsed once per process), so every node
 needs the project installed and the scenario file at the same path. ``depthnav run``
 of a sweepable kind ships the parsed config instead.
 
@@ -43,7 +43,7 @@ from typing import Any
 
 from autonomy.errors import InputError
 from sim.config import to_dict
-from sim.experiments import KINDS, Experiment, experiment, load_experiment
+from sim.experiments.kinds import KINDS, Experiment, experiment, load_experiment
 
 ENGINES = ("local", "ray")
 SWEEP_VERSION = 1

@@ -1,6 +1,6 @@
 """The ``localization_comparison`` experiment kind: seed 000, VI-A and Figs. 5-7.
 
-One drive (:mod:`sim.logs`) is recorded once; each trial replays it offline with one
+One drive (:mod:`sim.experiments.drives`) is recorded once; each trial replays it offline with one
 approach and one seed: per frame, the observation is made from the stored depth frame
 (FSPF's plane-filtered points, or a laser scan simulated by KR / KS / KC,
 :mod:`autonomy.scans`), CGR predicts with the recorded odometry plus 20% multiplicative
@@ -49,9 +49,9 @@ from autonomy.scans import (
     scan_points,
 )
 from sim.config import to_dict
-from sim.experiments import Experiment
-from sim.logs import DriveLog, RecordingConfig, ensure_log, load_log
-from sim.robot import OdometryConfig
+from sim.experiments.drives import DriveLog, RecordingConfig, ensure_log, load_log
+from sim.experiments.kinds import Experiment
+from sim.simulator.robot import OdometryConfig
 
 #: Approaches: the paper's four, and plain MCL on FSPF's points (CGR without refinement)
 #: as an ablation.
@@ -170,7 +170,7 @@ def _scans_path(log_path: Path, scfg: ScanConfig) -> Path:
 
 def _deterministic_scans(log: DriveLog, scfg: ScanConfig, path: Path, progress: bool) -> tuple[dict, dict]:
     """KR and KC scans of every frame, computed once (timed) and cached beside the log."""
-    from sim.logs import _locked
+    from sim.experiments.drives import _locked
 
     def read() -> tuple[dict, dict] | None:
         try:
@@ -217,8 +217,8 @@ def prepare(cfg: LocComparisonConfig, progress: bool = False) -> Context:
     key = _context_key(cfg)
     if key in _CONTEXTS:
         return _CONTEXTS[key]
-    from sim import blueprints
     from sim.scenario import ASSETS_DIR
+    from sim.simulator import blueprints
 
     path = ensure_log(cfg.recording, cfg.cache_path(), name=cfg.name, progress=progress)
     log = load_log(path)
@@ -511,7 +511,7 @@ def run(cfg: LocComparisonConfig, out_dir: str | Path, *, seed: int | None = Non
     """``depthnav run``: ``cfg.replays`` replays per approach on this machine's cores (the
     sweep engine's local engine; an interrupted run resumes when run again into the same
     directory)."""
-    from sim.sweep import run_experiment
+    from sim.experiments.sweep import run_experiment
 
     if rrd or spawn:
         raise InputError("localization_comparison: --rrd/--spawn are not supported (replays render nothing)")

@@ -28,14 +28,19 @@ from autonomy.observation import correspond
 from autonomy.planner import astar, path_points
 from autonomy.raycast import SceneQuery, load_or_build
 from autonomy.vectormap import NavGraph, VectorMap, load_navgraph, load_vectormap
-from sim.actors import Furniture, Person, point_segment_distance
-from sim.blackbox import INCIDENT_GAP_S, FlightRecorder, render_incidents, starts_incident
 from sim.config import to_dict
-from sim.kinect import KinectCamera
-from sim.kinect_noise import apply_kinect_noise
-from sim.robot import Odometry
+from sim.experiments.blackbox import (
+    INCIDENT_GAP_S,
+    FlightRecorder,
+    render_incidents,
+    starts_incident,
+)
 from sim.scenario import ASSETS_DIR, Scenario
-from sim.world import World, build_world
+from sim.simulator.actors import Furniture, Person, point_segment_distance
+from sim.simulator.kinect import KinectCamera
+from sim.simulator.kinect_noise import apply_kinect_noise
+from sim.simulator.robot import Odometry
+from sim.simulator.world import World, build_world
 
 #: Report schema version (bump when keys change meaning).
 REPORT_VERSION = 1
@@ -62,7 +67,7 @@ class Building:
 
 def load_building(scn: Scenario) -> Building:
     """The building a scenario names (shipped asset, files, or a generated one)."""
-    from sim import blueprints
+    from sim.simulator import blueprints
 
     m = scn.map
     if m.generate_seed >= 0:
@@ -202,7 +207,7 @@ def _people_in_view(people: np.ndarray, pose: np.ndarray, scn: Scenario) -> np.n
 
 
 def collision_incidents(events: list[dict], gap_s: float = INCIDENT_GAP_S) -> int:
-    """Encounters behind the contact events (``sim.blackbox.starts_incident``)."""
+    """Encounters behind the contact events (``sim.experiments.blackbox.starts_incident``)."""
     last: dict[tuple, float] = {}
     return sum(starts_incident(last, e, gap_s) for e in events)
 
@@ -262,7 +267,7 @@ def run_scenario(
 
     recorder = None
     if rrd or spawn:
-        from sim.viz import Recorder
+        from sim.viz.recording import Recorder
 
         recorder = Recorder(
             rrd,
@@ -523,7 +528,7 @@ def run_scenario(
         files["trajectory_estimate"] = "trajectory_estimate.tum"
         write_tum(out / files["trajectory_estimate"], np.array(times[: len(estimates)]), np.array(estimates))
     if scn.report.figures:
-        from sim.maprender import render_map
+        from sim.viz.maps import render_map
 
         render_map(
             vm,

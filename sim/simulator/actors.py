@@ -13,7 +13,7 @@ import mujoco
 import numpy as np
 
 from autonomy.errors import InputError
-from sim.robot import COLL_PEOPLE, COLL_ROBOT, COLL_STATIC
+from sim.simulator.robot import COLL_PEOPLE, COLL_ROBOT, COLL_STATIC
 
 FURNITURE_KINDS = ("table", "chair", "box", "cabinet")
 

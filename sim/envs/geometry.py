@@ -1,4 +1,4 @@
-"""Geometry for the gymnasium env (:mod:`sim.env`): geodesic goal distance and a KC scan.
+"""Geometry for the gymnasium env (:mod:`sim.envs.depthnav`): geodesic goal distance and a KC scan.
 
 - Geodesic distance to the goal (the progress reward's potential): a multi-source
   Dijkstra over the navigation graph from the nodes that see the goal, then, per step,

@@ -1,4 +1,4 @@
-"""The ``mission`` experiment kind: waypoint runs and long-run trials (:mod:`sim.runner`).
+"""The ``mission`` experiment kind: waypoint runs and long-run trials (:mod:`sim.experiments.runner`).
 
 One trial of a sweep is one whole run with its own seed (people, furniture, waypoints,
 odometry and sensor noise all drawn from it), written without figures or recordings;
@@ -15,12 +15,12 @@ from typing import Any
 
 import numpy as np
 
-from sim.experiments import Experiment
+from sim.experiments.kinds import Experiment
 from sim.scenario import Scenario
 
 
 def run(cfg: Scenario, out_dir: str | Path, *, seed: int | None = None, rrd=None, spawn: bool = False, progress=None) -> dict:
-    from sim.runner import run_scenario
+    from sim.experiments.runner import run_scenario
 
     return run_scenario(cfg, out_dir, seed=seed, rrd=rrd, spawn=spawn, progress=progress)
 
@@ -35,7 +35,7 @@ def trial(cfg: Scenario, spec: dict) -> dict:
     """One run, headless and quiet; its metrics (plus the seed) as the result."""
     import dataclasses
 
-    from sim.runner import run_scenario
+    from sim.experiments.runner import run_scenario
 
     quiet = dataclasses.replace(cfg, report=dataclasses.replace(cfg.report, figures=False, progress=False))
     with tempfile.TemporaryDirectory(prefix="depthnav-trial-") as d:
@@ -46,7 +46,7 @@ def trial(cfg: Scenario, spec: dict) -> dict:
 
 
 def summarize(cfg: Scenario, results: list[dict], out_dir: Path) -> dict:
-    from sim.runner import PAPER_FIGURES
+    from sim.experiments.runner import PAPER_FIGURES
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)

@@ -4,7 +4,7 @@ Clean depth comes from the OpenGL depth buffer of the ``kinect`` camera (planar 
 i.e. distance along the optical axis, in metres; background -> 0), converted in one numba
 pass. Where no GL context can be made, :class:`RaycastDepth` casts one ray per pixel
 with ``mujoco.mj_multiRay`` instead (same geometry, same output, much slower). The noise
-model is :mod:`sim.kinect_noise`. The robot's own geoms (group 3) are hidden.
+model is :mod:`sim.simulator.kinect_noise`. The robot's own geoms (group 3) are hidden.
 """
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ import numpy as np
 
 from autonomy.camera import CameraIntrinsics, CameraMount, pixel_rays
 from autonomy.errors import InputError
-from sim.kinect_noise import KinectNoiseConfig, apply_kinect_noise
-from sim.robot import ROBOT_GEOM_GROUP
+from sim.simulator.kinect_noise import KinectNoiseConfig, apply_kinect_noise
+from sim.simulator.robot import ROBOT_GEOM_GROUP
 
 BACKENDS = ("auto", "gl", "raycast")
 

@@ -41,11 +41,11 @@ from autonomy.camera import CameraIntrinsics, CameraMount
 from autonomy.errors import InputError
 from autonomy.fspf import FSPFConfig
 from autonomy.navigator import NavigatorConfig
-from sim.actors import Furniture, Person
 from sim.config import to_dict
-from sim.kinect import KinectConfig
-from sim.robot import RobotConfig, relative_pose
-from sim.world import WorldConfig
+from sim.simulator.actors import Furniture, Person
+from sim.simulator.kinect import KinectConfig
+from sim.simulator.robot import RobotConfig, relative_pose
+from sim.simulator.world import WorldConfig
 
 #: Bump when the recorder or the file layout changes meaning (invalidates cached logs).
 LOG_VERSION = 1
@@ -293,11 +293,11 @@ def record_log(cfg: RecordingConfig, path: str | Path, *, progress: bool = False
     from autonomy.fspf import fspf
     from autonomy.navigator import Navigator
     from autonomy.nearfield import NearField
-    from sim import blueprints
-    from sim.kinect import KinectCamera
-    from sim.kinect_noise import apply_kinect_noise
     from sim.scenario import ASSETS_DIR
-    from sim.world import build_world
+    from sim.simulator import blueprints
+    from sim.simulator.kinect import KinectCamera
+    from sim.simulator.kinect_noise import apply_kinect_noise
+    from sim.simulator.world import build_world
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

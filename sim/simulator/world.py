@@ -16,8 +16,8 @@ import numpy as np
 from autonomy.camera import CameraIntrinsics, CameraMount
 from autonomy.errors import InputError
 from autonomy.vectormap import VectorMap
-from sim.actors import Furniture, PeopleController, Person, add_furniture, add_people
-from sim.robot import COLL_ROBOT, COLL_STATIC, RobotConfig, RobotHandle, add_robot
+from sim.simulator.actors import Furniture, PeopleController, Person, add_furniture, add_people
+from sim.simulator.robot import COLL_ROBOT, COLL_STATIC, RobotConfig, RobotHandle, add_robot
 
 #: Camera name of the Kinect in every world.
 KINECT_CAMERA = "kinect"

@@ -28,10 +28,8 @@ from autonomy.fspf import FSPFConfig, FSPFResult, fspf
 from autonomy.planner import adjacency
 from autonomy.raycast import SceneQuery, VisibilityGrid, load_or_build
 from autonomy.vectormap import load_navgraph, load_vectormap
-from sim import blueprints
-from sim.actors import Furniture, PeopleController, Person, point_segment_distance
-from sim.env_geometry import GeodesicField, KCScanner
-from sim.env_render import (
+from sim.envs.geometry import GeodesicField, KCScanner
+from sim.envs.render import (
     ESTIMATE,
     FRUSTUM,
     FURNITURE,
@@ -47,11 +45,13 @@ from sim.env_render import (
     draw_segments,
     fill_convex,
 )
-from sim.kinect import KinectCamera, KinectConfig
-from sim.robot import Odometry, OdometryConfig, RobotConfig, relative_pose
-from sim.runner import Building, random_people
+from sim.experiments.runner import Building, random_people
 from sim.scenario import ASSETS_DIR, LocalizationConfig, load_scenario
-from sim.world import World, WorldConfig, build_world
+from sim.simulator import blueprints
+from sim.simulator.actors import Furniture, PeopleController, Person, point_segment_distance
+from sim.simulator.kinect import KinectCamera, KinectConfig
+from sim.simulator.robot import Odometry, OdometryConfig, RobotConfig, relative_pose
+from sim.simulator.world import World, WorldConfig, build_world
 
 ENV_ID = "DepthNav-v0"
 
@@ -59,7 +59,7 @@ ENV_ID = "DepthNav-v0"
 GOAL_LIMIT_M = 1000.0
 #: Bound of positions in ``pose_estimate`` (metres).
 POSITION_LIMIT_M = 1.0e4
-#: Depth beyond the GL far plane cannot occur (sim.world sets it at 60 m).
+#: Depth beyond the GL far plane cannot occur (sim.simulator.world sets it at 60 m).
 FAR_PLANE_M = 60.0
 #: Where unused furniture and people are parked (outside any building).
 _PARK_XY = (-1.0e4, -1.0e4)
@@ -170,7 +170,7 @@ class EnvConfig:
     scan_max_height_m: float = 2.0
     """Scan: highest point height used."""
     geodesic_radius_m: float = 8.0
-    """Sight radius for the geodesic distance's straight legs (sim.env_geometry)."""
+    """Sight radius for the geodesic distance's straight legs (sim.envs.geometry)."""
     render_size: tuple[int, int] = (480, 640)
     """(rows, columns) of the rgb_array map view."""
     # -- simulation and the robot-side stack ----------------------------------------
@@ -440,7 +440,7 @@ class _Site:
 class DepthNavEnv(gym.Env):
     """Point-goal navigation in an office building from Kinect depth (``DepthNav-v0``).
 
-    The robot (an omnidirectional base, :mod:`sim.robot`) starts at a random node of a
+    The robot (an omnidirectional base, :mod:`sim.simulator.robot`) starts at a random node of a
     building's navigation graph and must reach a goal node drawn at a geodesic distance in
     ``[min_goal_distance_m, max_goal_distance_m]``. One env step is one camera frame
     (``1 / kinect.rate_hz`` s, 30 Hz by default): the action sets the velocity command,
@@ -460,7 +460,7 @@ class DepthNavEnv(gym.Env):
 
     ``Box(-1, 1, (3,), float32)``, a body-frame velocity command scaled to the robot's limits
     (the translational speed is limited on the norm, and the change of the command by the
-    acceleration limits, as :meth:`sim.robot.RobotHandle.command` does):
+    acceleration limits, as :meth:`sim.simulator.robot.RobotHandle.command` does):
 
     | Num | Action | Min | Max | Scaled to |
     | --- | --- | --- | --- | --- |
@@ -493,11 +493,11 @@ class DepthNavEnv(gym.Env):
 
     - ``progress``: ``progress_reward_per_m`` times the decrease of the geodesic distance to
       the goal (shortest route over the navigation graph, straight where the goal or a node
-      is in sight; see :mod:`sim.env_geometry`), on the true pose;
+      is in sight; see :mod:`sim.envs.geometry`), on the true pose;
     - ``success``: ``success_reward`` once, when the true position comes within
       ``goal_radius_m`` of the goal;
     - ``collision``: ``collision_reward`` per new contact episode (the robot starting to touch
-      a wall, furniture or a person, counted as :meth:`sim.world.World.step_frame` does);
+      a wall, furniture or a person, counted as :meth:`sim.simulator.world.World.step_frame` does);
     - ``time``: ``time_reward`` every step.
 
     ## Episode end
@@ -670,7 +670,7 @@ class DepthNavEnv(gym.Env):
             self._episodes_on_site = 0
 
     def _place_furniture(self, site: _Site, rng: np.random.Generator) -> None:
-        """Re-place the random pieces (same constraints as sim.runner.random_furniture)."""
+        """Re-place the random pieces (same constraints as sim.experiments.runner.random_furniture)."""
         cfg = self.config
         b = site.building
         zones = b.open_areas or b.rooms
@@ -1016,8 +1016,8 @@ class DepthNavEnv(gym.Env):
         return img
 
     def _log_rrd(self, path: str, new_episode: bool) -> None:
-        """Stream this step to the rerun recording (sim.viz.Recorder), made on first use."""
-        from sim.viz import Recorder
+        """Stream this step to the rerun recording (sim.viz.recording.Recorder), made on first use."""
+        from sim.viz.recording import Recorder
 
         site = self._site
         assert site is not None

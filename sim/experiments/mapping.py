@@ -51,12 +51,12 @@ from autonomy.planes import (
     register_planes,
 )
 from sim.config import to_dict
-from sim.experiments import Experiment
-from sim.kinect_noise import KinectNoiseConfig
-from sim.robot import OdometryConfig, RobotConfig
+from sim.experiments.kinds import Experiment
 from sim.scenes.corridor import CorridorScene
 from sim.scenes.cuboid import TABLE_I_VIEWS, ArmView, CuboidScene
 from sim.scenes.wall import WallScene
+from sim.simulator.kinect_noise import KinectNoiseConfig
+from sim.simulator.robot import OdometryConfig, RobotConfig
 
 REPORT_VERSION = 1
 ALGORITHMS = ("ransac", "hough")
@@ -98,10 +98,10 @@ class SensorConfig:
     noise: KinectNoiseConfig = field(default_factory=KinectNoiseConfig)
     """Kinect noise model (every term switchable)."""
     backend: str = "auto"
-    """auto, gl or raycast (see sim.kinect)."""
+    """auto, gl or raycast (see sim.simulator.kinect)."""
 
     def kinect(self):
-        from sim.kinect import KinectConfig
+        from sim.simulator.kinect import KinectConfig
 
         return KinectConfig(intrinsics=self.intrinsics, noise=self.noise, backend=self.backend)
 
@@ -309,7 +309,7 @@ def _match_face(det: PlaneDetection, n_true: np.ndarray, rho_true: float, max_an
 
 
 def measure_cuboid(cfg: CuboidExperiment, seed: int, progress: bool | None = False, rec=None) -> tuple[dict, dict, bool]:
-    """Run Experiment I: (metrics, details, interrupted); ``rec`` (sim.viz.Recorder) logs each frame's detections."""
+    """Run Experiment I: (metrics, details, interrupted); ``rec`` (sim.viz.recording.Recorder) logs each frame's detections."""
     from sim.scenes.cuboid import build_cuboid_rig, visible_side_faces
 
     kcfg = cfg.sensor.kinect()
@@ -384,7 +384,7 @@ def measure_cuboid(cfg: CuboidExperiment, seed: int, progress: bool | None = Fal
 
 
 def measure_wall(cfg: WallExperiment, seed: int, progress: bool | None = False, rec=None) -> tuple[dict, dict, bool]:
-    """Run Experiment II: (metrics, details, interrupted); ``rec`` (sim.viz.Recorder) logs each frame's detections."""
+    """Run Experiment II: (metrics, details, interrupted); ``rec`` (sim.viz.recording.Recorder) logs each frame's detections."""
     from sim.scenes.wall import build_wall_rig
 
     kcfg = cfg.sensor.kinect()
@@ -564,14 +564,14 @@ def measure_corridor(
 ) -> tuple[dict, dict, bool, list[str]]:
     """Run Experiment III: (metrics, details, interrupted, files written).
 
-    ``rec`` (sim.viz.Recorder) logs the corridor, the true and odometry paths, each mapped
+    ``rec`` (sim.viz.recording.Recorder) logs the corridor, the true and odometry paths, each mapped
     frame's detections and the growing plane maps (every ``rrd_every`` mapped frames).
     """
     import dataclasses
 
-    from sim.kinect import KinectCamera
-    from sim.robot import Odometry
     from sim.scenes.corridor import build_corridor_world, corridor_path, robot_from_camera
+    from sim.simulator.kinect import KinectCamera
+    from sim.simulator.robot import Odometry
 
     intr = cfg.sensor.intrinsics
     ss = np.random.SeedSequence(int(seed))
@@ -724,7 +724,7 @@ def _run(kind: str, cfg: Any, out_dir: str | Path, seed: int | None, rrd, spawn:
     t0 = time.perf_counter()
     rec = None
     if rrd or spawn:
-        from sim.viz import Recorder
+        from sim.viz.recording import Recorder
 
         rec = Recorder(rrd, spawn=spawn, every=max(1, round(30.0 / getattr(cfg, "map_rate_hz", 30.0))), recording_id=f"{cfg.name}-{seed}")
     try:

@@ -1,0 +1,1 @@
+"""Visualisation: rerun recordings (the only rerun importer) and map figures."""

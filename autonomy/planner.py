@@ -76,3 +76,30 @@ def path_points(graph: NavGraph, path: list[int]) -> np.ndarray:
     """(n, 2) coordinates of a node path."""
     xy = graph.node_xy()
     return np.array([xy[graph.index_of(i)] for i in path], dtype=np.float64).reshape(-1, 2)
+
+
+def dijkstra(adj: list[list[tuple[int, float]]], sources: dict[int, float]) -> tuple[np.ndarray, np.ndarray]:
+    """Shortest distances from a set of sources over adjacency lists (:func:`adjacency`).
+
+    ``sources`` maps node index -> starting distance (0 for a plain source; a goal seen
+    from several nodes starts each at its straight-line distance). Returns (distance per
+    node, inf where unreachable; parent index per node, -1 at the sources).
+    """
+    n = len(adj)
+    dist = np.full(n, np.inf)
+    parent = np.full(n, -1, dtype=np.int64)
+    heap = [(float(d), int(i)) for i, d in sources.items()]
+    for d, i in heap:
+        dist[i] = d
+    heapq.heapify(heap)
+    while heap:
+        d, u = heapq.heappop(heap)
+        if d > dist[u]:
+            continue
+        for v, w in adj[u]:
+            nd = d + w
+            if nd < dist[v]:
+                dist[v] = nd
+                parent[v] = u
+                heapq.heappush(heap, (nd, v))
+    return dist, parent

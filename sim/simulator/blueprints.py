@@ -344,6 +344,45 @@ class _Corridor:
             g.edge(a, b, max_clearance=clearance)
 
 
+def _door_centre(
+    room: Box,
+    side: str,
+    corr: _Corridor,
+    door_w: float,
+    rng: np.random.Generator | None,
+    door_t: float | None,
+) -> float:
+    """Where along its wall a room's door is centred: on the part of the wall that faces the
+    corridor, clear of the jambs; ``door_t`` if given, else drawn near one end of that part
+    (near its middle for a big room)."""
+    x0, y0, x1, y1 = room
+    m = door_w / 2 + _DOOR_JAMB_MARGIN_M
+    along = (x0, x1) if side in "SN" else (y0, y1)
+    s0, s1 = corr.span
+    a, b = max(along[0], s0) + m, min(along[1], s1) - m
+    if b < a:
+        raise InputError(f"room {room} has no {door_w:.2f} m door on side {side} facing its corridor")
+    if door_t is None:
+        assert rng is not None
+        u = float(rng.uniform(0.0, min(0.4, b - a)))
+        door_t = a + u if rng.random() < 0.5 else b - u
+        if along[1] - along[0] > 6.0:  # big rooms: door near the middle of the facing part
+            door_t = (a + b) / 2 + float(rng.uniform(-0.5, 0.5)) * min(1.0, (b - a) / 2)
+    return _q(min(max(door_t, a), b))
+
+
+def _door_wall(room: Box, side: str) -> tuple[float, float]:
+    """The coordinate of a room's wall on ``side`` and the direction into the room across it."""
+    x0, y0, x1, y1 = room
+    if side == "S":
+        return y0, 1.0
+    if side == "N":
+        return y1, -1.0
+    if side == "W":
+        return x0, 1.0
+    return x1, -1.0
+
+
 def _add_room(
     walls: _Walls,
     g: _Graph,
@@ -362,28 +401,9 @@ def _add_room(
     x0, y0, x1, y1 = room
     walls.rect(room)
     rooms.append(room)
-    m = door_w / 2 + _DOOR_JAMB_MARGIN_M
-    along = (x0, x1) if side in "SN" else (y0, y1)
-    s0, s1 = corr.span
-    a, b = max(along[0], s0) + m, min(along[1], s1) - m
-    if b < a:
-        raise InputError(f"room {room} has no {door_w:.2f} m door on side {side} facing its corridor")
-    if door_t is None:
-        assert rng is not None
-        u = float(rng.uniform(0.0, min(0.4, b - a)))
-        door_t = a + u if rng.random() < 0.5 else b - u
-        if along[1] - along[0] > 6.0:  # big rooms: door near the middle of the facing part
-            door_t = (a + b) / 2 + float(rng.uniform(-0.5, 0.5)) * min(1.0, (b - a) / 2)
-    t = _q(min(max(door_t, a), b))
+    t = _door_centre(room, side, corr, door_w, rng, door_t)
     lo, hi = _q(t - door_w / 2), _q(t + door_w / 2)
-    if side == "S":
-        wall, inward = y0, 1.0
-    elif side == "N":
-        wall, inward = y1, -1.0
-    elif side == "W":
-        wall, inward = x0, 1.0
-    else:
-        wall, inward = x1, -1.0
+    wall, inward = _door_wall(room, side)
     if side in "SN":
         walls.gap_h(wall, lo, hi)
         pts = [(t, corr.c), (t, wall), (t, wall + inward * _DOOR_INNER_M)]
@@ -427,16 +447,26 @@ def _add_open_area(
     the corridors in ``connect`` (keyed by the side 'S', 'N', 'W', 'E' they lie on)."""
     x0, y0, x1, y1 = box
     areas.append(box)
-
-    def grid(a: float, b: float) -> list[float]:
-        a, b = a + inset_m, b - inset_m
-        if b - a < 1e-6:
-            return [_q((a + b) / 2)]
-        n = max(1, round((b - a) / spacing_m))
-        return [_q(a + (b - a) * k / n) for k in range(n + 1)]
-
-    xs, ys = grid(x0, x1), grid(y0, y1)
+    xs, ys = _grid_coords(x0, x1, inset_m, spacing_m), _grid_coords(y0, y1, inset_m, spacing_m)
     ids = _node_grid(g, xs, ys)
+    _connect_area(g, ids, xs, ys, connect)
+    if pillars and len(xs) >= 2 and len(ys) >= 2:
+        _add_pillars(walls, xs, ys, pillar_size_m, pillar_sides)
+
+
+def _grid_coords(a: float, b: float, inset_m: float, spacing_m: float) -> list[float]:
+    """Evenly spaced coordinates about ``spacing_m`` apart from ``a + inset_m`` to ``b - inset_m``."""
+    a, b = a + inset_m, b - inset_m
+    if b - a < 1e-6:
+        return [_q((a + b) / 2)]
+    n = max(1, round((b - a) / spacing_m))
+    return [_q(a + (b - a) * k / n) for k in range(n + 1)]
+
+
+def _connect_area(
+    g: _Graph, ids: list[list[int]], xs: list[float], ys: list[float], connect: dict[str, _Corridor]
+) -> None:
+    """Join the outer nodes of an area's grid straight across to the corridors in ``connect``."""
     for side, corr in sorted(connect.items()):
         if side in "SN":
             row = 0 if side == "S" else len(ys) - 1
@@ -448,8 +478,11 @@ def _add_open_area(
             for j, y in enumerate(ys):
                 corr.stops.add(y)
                 g.edge(ids[j][col], g.node(corr.c, y), max_clearance=1.0)
-    if not pillars or len(xs) < 2 or len(ys) < 2:
-        return
+
+
+def _add_pillars(walls: _Walls, xs: list[float], ys: list[float], pillar_size_m: float, pillar_sides: int) -> None:
+    """A checkerboard of pillars in the cells of an area's node grid, where they leave the
+    robot room to pass between the nodes."""
     h = pillar_size_m / 2
     r = h if pillar_sides == 4 else h / math.cos(math.pi / pillar_sides)  # polygon circumradius
     reach = h * math.sqrt(2) if pillar_sides == 4 else r
@@ -637,174 +670,258 @@ def _split_range(
     return out
 
 
-def generate_building(config: BuildingConfig, rng: np.random.Generator | int) -> Blueprint:
-    """Draw a corridor-loop / grid office floor (same config and seed -> same floor)."""
-    cfg = config
-    if not isinstance(rng, np.random.Generator):
-        rng = np.random.default_rng(rng)
-    W, H = _q(cfg.width_m), _q(cfg.height_m)
-
-    def uni(r: tuple[float, float]) -> float:
-        return _q(rng.uniform(r[0], r[1]))
-
-    walls, g = _Walls(), _Graph()
-    rooms: list[Box] = []
-    areas: list[Box] = []
-
-    d_b, d_t, d_l, d_r = (uni(cfg.outer_room_depth_range_m) for _ in range(4))
-    cw_b, cw_t, cw_l, cw_r = (uni(cfg.corridor_width_range_m) for _ in range(4))
-    ix0, ix1 = _q(d_l + cw_l), _q(W - d_r - cw_r)
-    iy0, iy1 = _q(d_b + cw_b), _q(H - d_t - cw_t)
-    left = _Corridor(False, (d_l, d_b, ix0, _q(H - d_t)), 0.0, 0.0)
-    right = _Corridor(False, (ix1, d_b, _q(W - d_r), _q(H - d_t)), 0.0, 0.0)
-    bottom = _Corridor(True, (d_l, d_b, _q(W - d_r), iy0), left.c, right.c)
-    top = _Corridor(True, (d_l, iy1, _q(W - d_r), _q(H - d_t)), left.c, right.c)
-    left.lo, left.hi = bottom.c, top.c
-    right.lo, right.hi = bottom.c, top.c
-
-    # Blocks inside the loop, between internal corridors.
+def _n_blocks(length: float, block_m: float, cfg: BuildingConfig) -> int:
+    """How many blocks of about ``block_m`` (with corridors between them) fit in ``length``,
+    each still deep enough for two rows of offices."""
     cw_mean = sum(cfg.corridor_width_range_m) / 2
     dmin = cfg.room_depth_range_m[0]
-    iw, ih = ix1 - ix0, iy1 - iy0
-    n_cols = max(1, round((iw + cw_mean) / (cfg.block_width_m + cw_mean)))
-    while n_cols > 1 and (iw - (n_cols - 1) * cfg.corridor_width_range_m[1]) / n_cols * 0.85 < 2 * dmin:
-        n_cols -= 1
-    n_rows = max(1, round((ih + cw_mean) / (cfg.block_length_m + cw_mean)))
-    while n_rows > 1 and (ih - (n_rows - 1) * cfg.corridor_width_range_m[1]) / n_rows * 0.85 < 2 * dmin:
-        n_rows -= 1
-    vgaps = [uni(cfg.corridor_width_range_m) for _ in range(n_cols - 1)]
-    hgaps = [uni(cfg.corridor_width_range_m) for _ in range(n_rows - 1)]
-    cols = _split_range(ix0, ix1, n_cols, vgaps, rng)
-    rows_ = _split_range(iy0, iy1, n_rows, hgaps, rng)
-    vcorrs = [left]
-    for k in range(n_cols - 1):
-        vcorrs.append(_Corridor(False, (cols[k][1], iy0, cols[k + 1][0], iy1), bottom.c, top.c))
-    vcorrs.append(right)
-    hcorrs = [bottom]
-    for k in range(n_rows - 1):
-        hcorrs.append(_Corridor(True, (ix0, rows_[k][1], ix1, rows_[k + 1][0]), left.c, right.c))
-    hcorrs.append(top)
-    for vc in vcorrs:
-        for hc in hcorrs:
-            vc.stops.add(hc.c)
-            hc.stops.add(vc.c)
+    n = max(1, round((length + cw_mean) / (block_m + cw_mean)))
+    while n > 1 and (length - (n - 1) * cfg.corridor_width_range_m[1]) / n * 0.85 < 2 * dmin:
+        n -= 1
+    return n
 
-    wmin, wmax = cfg.room_width_range_m
 
-    def door_w() -> float:
-        return uni(cfg.door_width_range_m)
+def _block_box(vertical: bool, ua: float, ub: float, va: float, vb: float) -> Box:
+    """A box from its span ``ua..ub`` along a block's rows and ``va..vb`` across them."""
+    return (va, ua, vb, ub) if vertical else (ua, va, ub, vb)
 
-    # Outer ring of offices along the exterior walls (corner offices take the corners).
-    exterior_joints: dict[str, list[float]] = {}
-    for side in "SNWE":
-        lo, hi = (d_l, _q(W - d_r)) if side in "SN" else (d_b, _q(H - d_t))
-        cuts = [_q(lo + c) for c in _partition(hi - lo, wmin, wmax, cfg.large_room_prob, rng)]
-        if side in "SN":
-            bounds = [0.0] + cuts + [W]
-        else:
-            bounds = [lo] + cuts + [hi]
-        exterior_joints[side] = bounds
-        for a, b in zip(bounds[:-1], bounds[1:], strict=True):
-            if side == "S":
-                room, corr, dside = (a, 0.0, b, d_b), bottom, "N"
-            elif side == "N":
-                room, corr, dside = (a, _q(H - d_t), b, H), top, "S"
-            elif side == "W":
-                room, corr, dside = (0.0, a, d_l, b), left, "E"
-            else:
-                room, corr, dside = (_q(W - d_r), a, W, b), right, "W"
-            _add_room(walls, g, rooms, room, dside, corr, door_w(), rng)
-    walls.rect((0.0, 0.0, W, H))
 
-    # Blocks: offices back to back, facing the corridors on their long sides; some atria.
-    n_blocks = n_cols * n_rows
-    if cfg.n_atria > n_blocks:
-        raise InputError(
-            f"BuildingConfig.n_atria: {cfg.n_atria} atria do not fit in {n_blocks} blocks inside the loop"
-        )
-    atria = set(rng.choice(n_blocks, size=cfg.n_atria, replace=False).tolist()) if cfg.n_atria else set()
-    dmax = cfg.room_depth_range_m[1]
+def _block_facing(box: Box, side_c: dict[str, _Corridor]) -> tuple[bool, _Corridor, _Corridor]:
+    """Whether a block's office rows run along y (facing its W and E corridors) rather than
+    along x (facing S and N), and those two corridors, low side first."""
+    x0, y0, x1, y1 = box
+    vertical = (y1 - y0) >= (x1 - x0)
+    if vertical:
+        return vertical, side_c["W"], side_c["E"]
+    return vertical, side_c["S"], side_c["N"]
 
-    def fill_rooms(box: Box, vertical: bool, lo_c: _Corridor, hi_c: _Corridor) -> None:
-        """Offices in ``box``: rows along y facing W/E corridors (vertical) or along x facing S/N."""
-        x0, y0, x1, y1 = box
-        v0, v1, u0, u1 = (x0, x1, y0, y1) if vertical else (y0, y1, x0, x1)
 
-        def mk(ua: float, ub: float, va: float, vb: float) -> Box:
-            return (va, ua, vb, ub) if vertical else (ua, va, ub, vb)
+def _cut_atrium(box: Box, vertical: bool, a_len: float, at_low: bool) -> tuple[Box, Box, str]:
+    """Split a block into an atrium ``a_len`` long at its low or high end and the rest;
+    also the side of the atrium that the rest closes off."""
+    x0, y0, x1, y1 = box
+    if vertical:
+        cut = _q(y0 + a_len) if at_low else _q(y1 - a_len)
+        lo, hi = (x0, y0, x1, cut), (x0, cut, x1, y1)
+        return (lo, hi, "N") if at_low else (hi, lo, "S")
+    cut = _q(x0 + a_len) if at_low else _q(x1 - a_len)
+    lo, hi = (x0, y0, cut, y1), (cut, y0, x1, y1)
+    return (lo, hi, "E") if at_low else (hi, lo, "W")
 
-        span = v1 - v0
-        if span < 2 * dmin:
-            row_specs = [(v0, v1, lo_c, "W" if vertical else "S")]
-        else:
-            if span <= 2 * dmax + cfg.min_core_m:
-                da = _q(span * rng.uniform(0.45, 0.55))
-                db = _q(span - da)
-            else:
-                da, db = uni(cfg.room_depth_range_m), uni(cfg.room_depth_range_m)
-                core = mk(u0, u1, _q(v0 + da), _q(v1 - db))
-                walls.rect(core)
-                t = u0 + uni(cfg.core_partition_range_m)
-                while t < u1 - 2.0:
-                    if vertical:
-                        walls.hline(t, core[0], core[2])
-                    else:
-                        walls.vline(t, core[1], core[3])
-                    t += uni(cfg.core_partition_range_m)
-            row_specs = [
-                (v0, _q(v0 + da), lo_c, "W" if vertical else "S"),
-                (_q(v1 - db), v1, hi_c, "E" if vertical else "N"),
-            ]
-        for va, vb, corr, dside in row_specs:
-            cuts = _partition(u1 - u0, wmin, wmax, cfg.large_room_prob, rng)
-            bounds = [u0] + [_q(u0 + c) for c in cuts] + [u1]
-            for a, b in zip(bounds[:-1], bounds[1:], strict=True):
-                _add_room(walls, g, rooms, mk(a, b, va, vb), dside, corr, door_w(), rng)
 
-    for j in range(n_rows):
-        for i in range(n_cols):
-            box = (cols[i][0], rows_[j][0], cols[i][1], rows_[j][1])
-            x0, y0, x1, y1 = box
-            vertical = (y1 - y0) >= (x1 - x0)
-            side_c = {"W": vcorrs[i], "E": vcorrs[i + 1], "S": hcorrs[j], "N": hcorrs[j + 1]}
-            lo_c, hi_c = (side_c["W"], side_c["E"]) if vertical else (side_c["S"], side_c["N"])
-            if j * n_cols + i not in atria:
-                fill_rooms(box, vertical, lo_c, hi_c)
-                continue
-            long_len = (y1 - y0) if vertical else (x1 - x0)
-            a_len = uni(cfg.atrium_length_range_m)
-            connect = dict(side_c)
-            if long_len - a_len >= 2 * wmin + 1.0:
-                at_low = rng.random() < 0.5
-                if vertical:
-                    cut = _q(y0 + a_len) if at_low else _q(y1 - a_len)
-                    abox, rbox = ((x0, y0, x1, cut), (x0, cut, x1, y1)) if at_low else ((x0, cut, x1, y1), (x0, y0, x1, cut))
-                    connect.pop("N" if at_low else "S")
-                else:
-                    cut = _q(x0 + a_len) if at_low else _q(x1 - a_len)
-                    abox, rbox = ((x0, y0, cut, y1), (cut, y0, x1, y1)) if at_low else ((cut, y0, x1, y1), (x0, y0, cut, y1))
-                    connect.pop("E" if at_low else "W")
-                fill_rooms(rbox, vertical, lo_c, hi_c)
-            else:
-                abox = box
-            _add_open_area(
-                walls, g, areas, abox, connect, cfg.atrium_node_spacing_m, 1.25,
-                cfg.atrium_pillars, cfg.pillar_size_m, cfg.pillar_sides,
-            )
-
-    if cfg.pilaster_spacing_m is not None:
-        _add_pilasters(walls, W, H, exterior_joints, cfg.pilaster_spacing_m)
-
-    for corr in vcorrs + hcorrs:
-        corr.chain(g, cfg.node_spacing_m)
-    segs = walls.build(cfg.max_segment_m)
+def _assemble(
+    walls: _Walls,
+    g: _Graph,
+    rooms: list[Box],
+    areas: list[Box],
+    corridors: Sequence[Box],
+    max_segment_m: float | None,
+    name: str,
+) -> Blueprint:
+    """The finished :class:`Blueprint` from the builders and the zone lists."""
     return Blueprint(
-        vectormap=VectorMap(segs, name=cfg.name),
+        vectormap=VectorMap(walls.build(max_segment_m), name=name),
         navgraph=g.build(),
         rooms=tuple(rooms),
         open_areas=tuple(areas),
-        corridors=tuple(c.box for c in vcorrs + hcorrs),
-        name=cfg.name,
+        corridors=tuple(corridors),
+        name=name,
+    )
+
+
+@dataclass
+class _Grid:
+    """The corridors of a drawn floor: the loop and the internal corridors between blocks."""
+
+    depth: dict[str, float]
+    """Depth of the outer offices on each side ('S', 'N', 'W', 'E')."""
+    cols: list[tuple[float, float]]
+    """x span of each column of blocks inside the loop."""
+    rows: list[tuple[float, float]]
+    """y span of each row of blocks inside the loop."""
+    vcorrs: list[_Corridor]
+    """Vertical corridors west to east (the loop's west side first, its east side last)."""
+    hcorrs: list[_Corridor]
+    """Horizontal corridors south to north (the loop's south side first, its north side last)."""
+
+
+class _Floor:
+    """One floor being drawn: its config, random stream, walls, nav graph and zones.
+
+    The methods draw from ``rng`` in a fixed order, so a config and a seed give one floor.
+    """
+
+    def __init__(self, cfg: BuildingConfig, rng: np.random.Generator) -> None:
+        self.cfg, self.rng = cfg, rng
+        self.walls, self.g = _Walls(), _Graph()
+        self.rooms: list[Box] = []
+        self.areas: list[Box] = []
+        self.W, self.H = _q(cfg.width_m), _q(cfg.height_m)
+
+    def uni(self, r: tuple[float, float]) -> float:
+        """One uniform draw from the range ``r``, quantised."""
+        return _q(self.rng.uniform(r[0], r[1]))
+
+    def room(self, box: Box, door_side: str, corr: _Corridor) -> None:
+        """An office with a door of drawn width on ``door_side``, facing ``corr``."""
+        door_w = self.uni(self.cfg.door_width_range_m)
+        _add_room(self.walls, self.g, self.rooms, box, door_side, corr, door_w, self.rng)
+
+    def draw_grid(self) -> _Grid:
+        """The corridor loop inside the outer offices, and the corridors between the blocks."""
+        cfg, W, H = self.cfg, self.W, self.H
+        d_b, d_t, d_l, d_r = (self.uni(cfg.outer_room_depth_range_m) for _ in range(4))
+        cw_b, cw_t, cw_l, cw_r = (self.uni(cfg.corridor_width_range_m) for _ in range(4))
+        ix0, ix1 = _q(d_l + cw_l), _q(W - d_r - cw_r)
+        iy0, iy1 = _q(d_b + cw_b), _q(H - d_t - cw_t)
+        left = _Corridor(False, (d_l, d_b, ix0, _q(H - d_t)), 0.0, 0.0)
+        right = _Corridor(False, (ix1, d_b, _q(W - d_r), _q(H - d_t)), 0.0, 0.0)
+        bottom = _Corridor(True, (d_l, d_b, _q(W - d_r), iy0), left.c, right.c)
+        top = _Corridor(True, (d_l, iy1, _q(W - d_r), _q(H - d_t)), left.c, right.c)
+        left.lo, left.hi = bottom.c, top.c
+        right.lo, right.hi = bottom.c, top.c
+        n_cols = _n_blocks(ix1 - ix0, cfg.block_width_m, cfg)
+        n_rows = _n_blocks(iy1 - iy0, cfg.block_length_m, cfg)
+        vgaps = [self.uni(cfg.corridor_width_range_m) for _ in range(n_cols - 1)]
+        hgaps = [self.uni(cfg.corridor_width_range_m) for _ in range(n_rows - 1)]
+        cols = _split_range(ix0, ix1, n_cols, vgaps, self.rng)
+        rows = _split_range(iy0, iy1, n_rows, hgaps, self.rng)
+        inner_v = [
+            _Corridor(False, (cols[k][1], iy0, cols[k + 1][0], iy1), bottom.c, top.c) for k in range(n_cols - 1)
+        ]
+        inner_h = [
+            _Corridor(True, (ix0, rows[k][1], ix1, rows[k + 1][0]), left.c, right.c) for k in range(n_rows - 1)
+        ]
+        vcorrs, hcorrs = [left, *inner_v, right], [bottom, *inner_h, top]
+        for vc in vcorrs:
+            for hc in hcorrs:
+                vc.stops.add(hc.c)
+                hc.stops.add(vc.c)
+        depth = {"S": d_b, "N": d_t, "W": d_l, "E": d_r}
+        return _Grid(depth, cols, rows, vcorrs, hcorrs)
+
+    def add_outer_ring(self, grid: _Grid) -> dict[str, list[float]]:
+        """Offices along the exterior walls, each facing the loop (corner offices take the
+        corners), and the exterior walls; returns the room joints along each side."""
+        cfg, W, H, d = self.cfg, self.W, self.H, grid.depth
+        wmin, wmax = cfg.room_width_range_m
+        joints: dict[str, list[float]] = {}
+        for side in "SNWE":
+            lo, hi = (d["W"], _q(W - d["E"])) if side in "SN" else (d["S"], _q(H - d["N"]))
+            cuts = [_q(lo + c) for c in _partition(hi - lo, wmin, wmax, cfg.large_room_prob, self.rng)]
+            bounds = [0.0, *cuts, W] if side in "SN" else [lo, *cuts, hi]
+            joints[side] = bounds
+            for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+                self.room(*self._outer_room(grid, side, a, b))
+        self.walls.rect((0.0, 0.0, W, H))
+        return joints
+
+    def _outer_room(self, grid: _Grid, side: str, a: float, b: float) -> tuple[Box, str, _Corridor]:
+        """The box of an outer office spanning ``a..b`` on ``side``, its door side and corridor."""
+        W, H, d = self.W, self.H, grid.depth
+        if side == "S":
+            return (a, 0.0, b, d["S"]), "N", grid.hcorrs[0]
+        if side == "N":
+            return (a, _q(H - d["N"]), b, H), "S", grid.hcorrs[-1]
+        if side == "W":
+            return (0.0, a, d["W"], b), "E", grid.vcorrs[0]
+        return (_q(W - d["E"]), a, W, b), "W", grid.vcorrs[-1]
+
+    def add_blocks(self, grid: _Grid) -> None:
+        """The blocks inside the loop: offices back to back facing the corridors on their
+        long sides, ``n_atria`` of them (drawn) holding an open atrium instead."""
+        n_cols, n_rows = len(grid.cols), len(grid.rows)
+        n_blocks = n_cols * n_rows
+        n_atria = self.cfg.n_atria
+        if n_atria > n_blocks:
+            raise InputError(
+                f"BuildingConfig.n_atria: {n_atria} atria do not fit in {n_blocks} blocks inside the loop"
+            )
+        atria = set(self.rng.choice(n_blocks, size=n_atria, replace=False).tolist()) if n_atria else set()
+        for j in range(n_rows):
+            for i in range(n_cols):
+                box = (grid.cols[i][0], grid.rows[j][0], grid.cols[i][1], grid.rows[j][1])
+                side_c = {"W": grid.vcorrs[i], "E": grid.vcorrs[i + 1], "S": grid.hcorrs[j], "N": grid.hcorrs[j + 1]}
+                if j * n_cols + i in atria:
+                    self.add_atrium_block(box, side_c)
+                else:
+                    self.fill_rooms(box, *_block_facing(box, side_c))
+
+    def fill_rooms(self, box: Box, vertical: bool, lo_c: _Corridor, hi_c: _Corridor) -> None:
+        """Offices in ``box``: rows along y facing W/E corridors (vertical) or along x facing S/N."""
+        x0, y0, x1, y1 = box
+        v0, v1, u0, u1 = (x0, x1, y0, y1) if vertical else (y0, y1, x0, x1)
+        lo_side, hi_side = ("W", "E") if vertical else ("S", "N")
+        if v1 - v0 < 2 * self.cfg.room_depth_range_m[0]:
+            row_specs = [(v0, v1, lo_c, lo_side)]
+        else:
+            da, db = self._row_depths(vertical, u0, u1, v0, v1)
+            row_specs = [(v0, _q(v0 + da), lo_c, lo_side), (_q(v1 - db), v1, hi_c, hi_side)]
+        wmin, wmax = self.cfg.room_width_range_m
+        for va, vb, corr, dside in row_specs:
+            cuts = _partition(u1 - u0, wmin, wmax, self.cfg.large_room_prob, self.rng)
+            bounds = [u0] + [_q(u0 + c) for c in cuts] + [u1]
+            for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+                self.room(_block_box(vertical, a, b, va, vb), dside, corr)
+
+    def _row_depths(self, vertical: bool, u0: float, u1: float, v0: float, v1: float) -> tuple[float, float]:
+        """Depths of a block's two office rows; a block deeper than two rows plus
+        ``min_core_m`` gets a closed service core between them."""
+        cfg = self.cfg
+        span = v1 - v0
+        if span <= 2 * cfg.room_depth_range_m[1] + cfg.min_core_m:
+            da = _q(span * self.rng.uniform(0.45, 0.55))
+            return da, _q(span - da)
+        da, db = self.uni(cfg.room_depth_range_m), self.uni(cfg.room_depth_range_m)
+        self._add_core(_block_box(vertical, u0, u1, _q(v0 + da), _q(v1 - db)), vertical, u0, u1)
+        return da, db
+
+    def _add_core(self, core: Box, vertical: bool, u0: float, u1: float) -> None:
+        """A closed service core, cut by cross walls at drawn ``core_partition_range_m`` steps."""
+        self.walls.rect(core)
+        t = u0 + self.uni(self.cfg.core_partition_range_m)
+        while t < u1 - 2.0:
+            if vertical:
+                self.walls.hline(t, core[0], core[2])
+            else:
+                self.walls.vline(t, core[1], core[3])
+            t += self.uni(self.cfg.core_partition_range_m)
+
+    def add_atrium_block(self, box: Box, side_c: dict[str, _Corridor]) -> None:
+        """A block holding an open atrium joined to the corridors round it; a block long
+        enough keeps a row of offices beside the atrium (the atrium then opens on three sides)."""
+        cfg = self.cfg
+        vertical, lo_c, hi_c = _block_facing(box, side_c)
+        x0, y0, x1, y1 = box
+        long_len = (y1 - y0) if vertical else (x1 - x0)
+        a_len = self.uni(cfg.atrium_length_range_m)
+        connect = dict(side_c)
+        abox = box
+        if long_len - a_len >= 2 * cfg.room_width_range_m[0] + 1.0:
+            abox, rbox, closed = _cut_atrium(box, vertical, a_len, self.rng.random() < 0.5)
+            connect.pop(closed)
+            self.fill_rooms(rbox, vertical, lo_c, hi_c)
+        _add_open_area(
+            self.walls, self.g, self.areas, abox, connect, cfg.atrium_node_spacing_m, 1.25,
+            cfg.atrium_pillars, cfg.pillar_size_m, cfg.pillar_sides,
+        )
+
+
+def generate_building(config: BuildingConfig, rng: np.random.Generator | int) -> Blueprint:
+    """Draw a corridor-loop / grid office floor (same config and seed -> same floor)."""
+    if not isinstance(rng, np.random.Generator):
+        rng = np.random.default_rng(rng)
+    floor = _Floor(config, rng)
+    grid = floor.draw_grid()
+    joints = floor.add_outer_ring(grid)
+    floor.add_blocks(grid)
+    if config.pilaster_spacing_m is not None:
+        _add_pilasters(floor.walls, floor.W, floor.H, joints, config.pilaster_spacing_m)
+    corridors = grid.vcorrs + grid.hcorrs
+    for corr in corridors:
+        corr.chain(floor.g, config.node_spacing_m)
+    return _assemble(
+        floor.walls, floor.g, floor.rooms, floor.areas, [c.box for c in corridors], config.max_segment_m, config.name
     )
 
 
@@ -881,15 +998,7 @@ def small_floor() -> Blueprint:
     corr.chain(g, 3.0)
     g.edge(g.node(10.0, 5.1), ids[1][0], max_clearance=1.0)
     walls.rect((12.8, 3.1, 13.2, 3.5))  # one pillar between the open area's nodes
-    segs = walls.build(2.0)
-    return Blueprint(
-        vectormap=VectorMap(segs, name="small_floor"),
-        navgraph=g.build(),
-        rooms=tuple(rooms),
-        open_areas=tuple(areas),
-        corridors=(corr.box,),
-        name="small_floor",
-    )
+    return _assemble(walls, g, rooms, areas, [corr.box], 2.0, "small_floor")
 
 
 SHIPPED = {"corridor_loop": corridor_loop, "small_floor": small_floor}

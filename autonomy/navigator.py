@@ -31,6 +31,7 @@ import numpy as np
 
 from autonomy.avoidance import AvoidanceConfig, AvoidanceResult, choose_direction
 from autonomy.errors import InputError, require_non_negative, require_positive
+from autonomy.geometry import crosses_any, point_segment_projection, wrap_angle
 from autonomy.nearfield import line_points
 from autonomy.obstacle_memory import update_memory
 from autonomy.planner import astar, path_points
@@ -210,10 +211,6 @@ class NavCommand:
     """Near-field points (closer than the camera's minimum range) among the obstacles."""
 
 
-def _wrap(a: float) -> float:
-    return math.atan2(math.sin(a), math.cos(a))
-
-
 class Navigator:
     """Drives to nav-graph goals on a pose estimate, avoiding sensed obstacles."""
 
@@ -235,6 +232,9 @@ class Navigator:
         self.goal: int | None = None
         self.path = np.zeros((0, 2))
         self._cum = np.zeros(1)
+        self._segments = np.zeros((0, 4))
+        """The plan's segments (x1, y1, x2, y2) and their lengths (``_project``)."""
+        self._seg_len = np.zeros(0)
         self._best_s = 0.0
         self._progress_t = 0.0
         self._backoff_until = -1.0
@@ -263,7 +263,7 @@ class Navigator:
         if self.walls is None or not len(self.walls):
             return int(self.graph.nodes[int(order[0])].id)
         for k in order[:30]:
-            if not _crosses_any(xy, nodes[k], self.walls):
+            if not crosses_any(xy, nodes[k], self.walls):
                 return int(self.graph.nodes[int(k)].id)
         return int(self.graph.nodes[int(order[0])].id)
 
@@ -279,6 +279,9 @@ class Navigator:
         self._seg_speed = speeds[keep[1:]] if len(speeds) else speeds
         seg = np.hypot(*np.diff(self.path, axis=0).T) if len(self.path) > 1 else np.zeros(0)
         self._cum = np.concatenate([[0.0], np.cumsum(seg)])
+        self._segments = np.hstack([self.path[:-1], self.path[1:]])
+        d = self._segments[:, 2:] - self._segments[:, :2]
+        self._seg_len = np.sqrt(np.einsum("ij,ij->i", d, d))  # as _project's t measures them
         # Corners: inner vertices where the plan turns by more than corner_angle_rad.
         self._corners = np.zeros(0)
         if len(self.path) > 2:
@@ -292,13 +295,10 @@ class Navigator:
         return float(self._cum[-1])
 
     def _project(self, xy: np.ndarray) -> float:
-        a, b = self.path[:-1], self.path[1:]
-        d = b - a
-        L2 = np.einsum("ij,ij->i", d, d)
-        t = np.clip(np.einsum("ij,ij->i", xy - a, d) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
-        q = a + t[:, None] * d
-        k = int(np.argmin(np.hypot(xy[0] - q[:, 0], xy[1] - q[:, 1])))
-        return float(self._cum[k] + t[k] * math.sqrt(L2[k]))
+        """Arc length of the point of the plan nearest ``xy``."""
+        t, dist = point_segment_projection(xy, self._segments)
+        k = int(np.argmin(dist))
+        return float(self._cum[k] + t[k] * self._seg_len[k])
 
     def corner_speed_limit(self, s: float) -> float:
         """Speed limit at arc length ``s`` of the plan from its corners: ``corner_speed_mps``
@@ -632,7 +632,7 @@ class Navigator:
             t0 = t0 / max(1e-9, math.hypot(t0[0], t0[1]))
             carrot = carrot + shift * np.array([-t0[1], t0[0]])
         d = carrot - xy
-        desired = _wrap(math.atan2(d[1], d[0]) - float(pose[2]))
+        desired = wrap_angle(math.atan2(d[1], d[0]) - float(pose[2]))
         turn = float(np.clip(cfg.heading_gain * desired, -cfg.max_turn_rate_rad_s, cfg.max_turn_rate_rad_s))
         if abs(desired) > cfg.turn_in_place_rad:
             return NavCommand(np.array([0.0, 0.0, turn]), "turning", carrot=carrot, desired_rad=desired)
@@ -700,19 +700,6 @@ def in_camera_view(
 
 
 def _side_of(theta: float, desired: float, dead_band: float) -> int:
-    d = _wrap(theta - desired)
+    d = wrap_angle(theta - desired)
     return 0 if abs(d) <= dead_band else (1 if d > 0 else -1)
 
-
-def _crosses_any(p: np.ndarray, q: np.ndarray, walls: np.ndarray) -> bool:
-    """Whether segment p-q properly crosses any wall (vectorised)."""
-    a, b = walls[:, :2], walls[:, 2:]
-
-    def orient(u, v, w):
-        return (v[..., 0] - u[..., 0]) * (w[..., 1] - u[..., 1]) - (v[..., 1] - u[..., 1]) * (w[..., 0] - u[..., 0])
-
-    o1 = orient(p[None, :], q[None, :], a)
-    o2 = orient(p[None, :], q[None, :], b)
-    o3 = orient(a, b, p[None, :])
-    o4 = orient(a, b, q[None, :])
-    return bool(np.any((o1 * o2 < 0) & (o3 * o4 < 0)))

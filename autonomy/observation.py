@@ -32,6 +32,7 @@ import numba
 import numpy as np
 
 from autonomy.errors import InputError
+from autonomy.geometry import wrap_angle_nb
 
 
 @dataclass(frozen=True)
@@ -302,7 +303,7 @@ def _trust_clip(pose, start, lever_m, trust_m):  # pragma: no cover - numba
     """
     dx = pose[0] - start[0]
     dy = pose[1] - start[1]
-    dth = math.atan2(math.sin(pose[2] - start[2]), math.cos(pose[2] - start[2]))
+    dth = wrap_angle_nb(pose[2] - start[2])
     d = math.sqrt(dx * dx + dy * dy) + lever_m * abs(dth)
     if d <= trust_m:
         return False

@@ -1,0 +1,76 @@
+"""The shared plane-geometry helpers (autonomy/geometry.py)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from autonomy.geometry import (
+    compose_pose,
+    crosses_any,
+    point_segment_distance,
+    point_segment_projection,
+    relative_pose,
+    segments_cross_nb,
+    wrap_angle,
+    wrap_angle_nb,
+    wrap_angles,
+)
+
+
+@pytest.mark.parametrize("a", [0.0, 1.0, -1.0, math.pi - 1e-9, 3 * math.pi + 0.5, -7.5, 100.0])
+def test_wrap_angle_lands_in_minus_pi_pi_on_the_same_direction(a: float) -> None:
+    w = wrap_angle(a)
+    assert -math.pi <= w <= math.pi
+    assert math.cos(w) == pytest.approx(math.cos(a), abs=1e-12) and math.sin(w) == pytest.approx(math.sin(a), abs=1e-12)
+    assert wrap_angle_nb(a) == w
+    assert wrap_angles(np.array([a]))[0] == pytest.approx(w, abs=1e-15)
+
+
+def test_relative_and_compose_pose_are_inverse() -> None:
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        a = np.array([*rng.normal(0, 5, 2), rng.uniform(-math.pi, math.pi)])
+        b = np.array([*rng.normal(0, 5, 2), rng.uniform(-math.pi, math.pi)])
+        c = compose_pose(a, relative_pose(a, b))
+        assert c[:2] == pytest.approx(b[:2], abs=1e-9)
+        assert wrap_angle(c[2] - b[2]) == pytest.approx(0.0, abs=1e-12)
+
+
+def _brute_distance(p: np.ndarray, seg: np.ndarray) -> float:
+    s = np.linspace(0.0, 1.0, 20001)
+    q = seg[:2] + s[:, None] * (seg[2:] - seg[:2])
+    return float(np.min(np.hypot(q[:, 0] - p[0], q[:, 1] - p[1])))
+
+
+def test_point_segment_distance_against_dense_sampling() -> None:
+    rng = np.random.default_rng(1)
+    segs = rng.normal(0, 2, (12, 4))
+    segs[3, 2:] = segs[3, :2]  # a zero-length segment is its end point
+    pts = rng.normal(0, 3, (5, 2))
+    got = point_segment_distance(pts, segs)
+    assert got.shape == (5, 12)
+    for i, p in enumerate(pts):
+        one = point_segment_distance(p, segs)
+        assert np.array_equal(one, got[i])  # a point alone gives the same numbers, bit for bit
+        for j, seg in enumerate(segs):
+            assert one[j] == pytest.approx(_brute_distance(p, seg), abs=1e-3)
+    t, d = point_segment_projection(pts[0], segs)
+    assert np.array_equal(d, got[0]) and ((t >= 0) & (t <= 1)).all() and t[3] == 0.0
+
+
+@pytest.mark.parametrize(
+    ("seg", "want"),
+    [
+        ((0.0, -1.0, 0.0, 1.0), True),  # crosses
+        ((0.0, 0.5, 0.0, 1.0), False),  # beside
+        ((1.0, -1.0, 1.0, 1.0), False),  # touches the end: not a proper crossing
+        ((-1.0, 0.0, 0.5, 0.0), False),  # collinear
+    ],
+)
+def test_crossing_is_proper_and_the_kernel_agrees(seg: tuple[float, ...], want: bool) -> None:
+    p, q = np.array([-1.0, 0.0]), np.array([1.0, 0.0])
+    assert crosses_any(p, q, np.array([seg])) is want
+    assert segments_cross_nb(p[0], p[1], q[0], q[1], *seg) is want

@@ -38,6 +38,7 @@ import socket
 import sys
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -268,6 +269,195 @@ def default_trials(cfg: Any) -> int:
     return int(n) if isinstance(n, int) and n > 0 else DEFAULT_TRIALS
 
 
+#: The ``sweep.json`` keys that must match for a directory to hold the same sweep.
+_SAME_SWEEP_KEYS = ("version", "kind", "trials", "seed", "config_hash")
+
+
+@dataclass
+class _Sweep:
+    """One sweep as :func:`run_experiment` set it up: what to run, where, and how."""
+
+    exp: Experiment
+    cfg: Any
+    out: Path
+    specs: list[dict]
+    meta: dict
+    """What ``sweep.json`` records."""
+    engine: str
+    workers: int
+    address: str | None
+    source: tuple
+    """How workers get the config: ``("config", cfg)`` or ``("path", scenario, overrides)``."""
+    hint: str
+    """The command that resumes this sweep."""
+
+    @property
+    def trials_path(self) -> Path:
+        return self.out / "trials.jsonl"
+
+    @property
+    def ids(self) -> list[str]:
+        return [s["id"] for s in self.specs]
+
+
+def _check_args(cfg: Any, engine: str, trials: int | None, workers: int | None, address: str | None) -> int:
+    """Check the sweep's options; the number of trials."""
+    if engine not in ENGINES:
+        raise InputError(f"--engine {engine!r}: expected one of {', '.join(ENGINES)}")
+    n = default_trials(cfg) if trials is None else int(trials)
+    if n < 1:
+        raise InputError(f"--trials {trials}: expected an integer >= 1")
+    if workers is not None and workers < 1:
+        raise InputError(f"--workers {workers}: expected an integer >= 1")
+    if address and engine != "ray":
+        raise InputError("--address: only with --engine ray")
+    return n
+
+
+def _trial_specs(exp: Experiment, cfg: Any, n: int, seed: int) -> list[dict]:
+    specs = exp.trials(cfg, n, seed)
+    ids = [s["id"] for s in specs]
+    if len(set(ids)) != len(ids):
+        raise RuntimeError(f"experiment kind {exp.kind!r} produced duplicate trial ids")
+    return specs
+
+
+def _read_meta(path: Path) -> dict | None:
+    """The ``sweep.json`` already in the output directory, if it is readable."""
+    if not path.is_file():
+        return None
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError):
+        return None
+
+
+def _finished_trials(sw: _Sweep, resume: bool | str) -> dict[str, dict]:
+    """Check ``resume`` against what the output directory holds, drop what this sweep
+    cannot use, write ``sweep.json``; the finished trials this sweep keeps, by id."""
+    meta_path, trials_path, meta, out = sw.out / "sweep.json", sw.trials_path, sw.meta, sw.out
+    old = _read_meta(meta_path)
+    same = old is not None and all(old.get(k) == meta[k] for k in _SAME_SWEEP_KEYS)
+    if resume is True:
+        if old is not None and not same:
+            diff = [k for k in ("kind", "trials", "seed", "config_hash") if old.get(k) != meta[k]]
+            what = ", ".join(f"{k} {old.get(k)!r} there vs {meta[k]!r} now" for k in diff) or "an older sweep format"
+            raise InputError(f"--resume: {out} holds a different sweep ({what})")
+    elif resume == "auto":
+        if not same:
+            trials_path.unlink(missing_ok=True)
+    else:
+        existing, _ = read_trials(trials_path)
+        if existing:
+            raise InputError(f"--out {out}: already holds a sweep with {len(existing)} finished trials (pass --resume to finish it, or choose another --out)")
+    done: dict[str, dict] = {}
+    if trials_path.is_file():
+        done, skipped = read_trials(trials_path, set(sw.ids))
+        if skipped:
+            _rewrite(trials_path, list(done.values()))
+    meta_path.write_text(json.dumps(meta, indent=2) + "\n", encoding="utf-8")
+    return done
+
+
+def _prepare(kind_module: str, cfg: Any, progress: bool) -> None:
+    """Call the kind module's ``prepare(cfg, progress)``, if it has one."""
+    prep: Callable | None = getattr(importlib.import_module(kind_module), "prepare", None) if kind_module else None
+    if prep is not None:
+        prep(cfg, progress)
+
+
+def _progress_bar(sw: _Sweep, initial: int):
+    from tqdm import tqdm
+
+    desc = f"{sw.meta['scenario']} ({sw.engine}, {sw.workers} workers)"
+    return tqdm(total=len(sw.specs), initial=initial, unit="trial", desc=desc, file=sys.stderr, smoothing=0.05)
+
+
+def _run_pending(
+    sw: _Sweep, pending: list[dict], done: dict[str, dict], progress: bool
+) -> tuple[list[tuple[str, str]], float, bool]:
+    """Run the pending trials on the sweep's engine, appending each finished one to
+    ``trials.jsonl`` and to ``done``; the failures (id, message), wall time and whether
+    Ctrl-C stopped the run."""
+    kind_module = KINDS.get(sw.exp.kind, "")
+    if pending:
+        _prepare(kind_module, sw.cfg, progress)
+    bar = _progress_bar(sw, len(done)) if progress and pending else None
+    errors: list[tuple[str, str]] = []
+    appender = _Appender(sw.trials_path)
+
+    def on_done(rec: dict) -> None:
+        appender.write(rec)
+        done[rec["id"]] = rec
+        if bar is not None:
+            bar.update(1)
+
+    def on_error(spec: dict, exc: BaseException) -> None:
+        msg = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
+        errors.append((spec["id"], f"{type(exc).__name__}: {msg}"))
+        print(f"depthnav sweep: trial {spec['id']} failed: {type(exc).__name__}: {msg}", file=sys.stderr)
+
+    t0 = time.perf_counter()
+    interrupted = False
+    try:
+        if pending:
+            if sw.engine == "local":
+                _run_local(sw.source, sw.exp.kind, kind_module, pending, sw.workers, on_done, on_error)
+            else:
+                _run_ray(sw.source, sw.exp.kind, kind_module, pending, sw.workers, sw.address, on_done, on_error)
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        appender.close()
+        if bar is not None:
+            bar.close()
+    return errors, time.perf_counter() - t0, interrupted
+
+
+def _write_report(out: Path, report: dict) -> dict:
+    (out / "report.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    return report
+
+
+def _interrupted_report(sw: _Sweep, wall: float) -> dict:
+    """Report what a resume will find after Ctrl-C."""
+    # Read the file, not the in-memory count: Ctrl-C can land between a record's write
+    # and its count.
+    done, _ = read_trials(sw.trials_path, set(sw.ids))
+    n = len(sw.specs)
+    print(f"interrupted: {len(done)} of {n} trials finished and kept in {sw.trials_path}; resume with: {sw.hint}", file=sys.stderr)
+    partial = {
+        "scenario": sw.meta["scenario"],
+        "kind": sw.exp.kind,
+        "interrupted": True,
+        "metrics": {"trials_done": len(done), "trials_total": n},
+        "resume": sw.hint,
+        "sweep": {"engine": sw.engine, "workers": sw.workers, "trials": n, "trials_file": sw.trials_path.name, "out_dir": str(sw.out), "wall_s": round(wall, 2)},
+    }
+    return _write_report(sw.out, partial)
+
+
+def _final_report(sw: _Sweep, done: dict[str, dict], run_now: int, resumed: int, wall: float) -> dict:
+    """The kind's summary of all trials, with the sweep's bookkeeping added."""
+    results = [done[i]["result"] for i in sw.ids]
+    report = sw.exp.summarize(sw.cfg, results, sw.out)
+    report["sweep"] = {
+        "engine": sw.engine,
+        "workers": sw.workers,
+        "address": sw.address,
+        "trials": len(sw.specs),
+        "run_now": run_now,
+        "resumed": resumed,
+        "seed": sw.meta["seed"],
+        "wall_s": round(wall, 2),
+        "trials_file": sw.trials_path.name,
+        "out_dir": str(sw.out),
+    }
+    report.setdefault("metrics", {})["sweep_wall_s"] = round(wall, 2)
+    report.setdefault("interrupted", False)
+    return _write_report(sw.out, report)
+
+
 def run_experiment(
     exp: Experiment,
     cfg: Any,
@@ -291,23 +481,12 @@ def run_experiment(
     False refuses a directory that already holds finished trials; "auto" resumes when
     ``sweep.json`` matches and starts afresh otherwise.
     """
-    if engine not in ENGINES:
-        raise InputError(f"--engine {engine!r}: expected one of {', '.join(ENGINES)}")
-    n = default_trials(cfg) if trials is None else int(trials)
-    if n < 1:
-        raise InputError(f"--trials {trials}: expected an integer >= 1")
-    if workers is not None and workers < 1:
-        raise InputError(f"--workers {workers}: expected an integer >= 1")
-    if address and engine != "ray":
-        raise InputError("--address: only with --engine ray")
+    n = _check_args(cfg, engine, trials, workers, address)
     workers = workers or os.cpu_count() or 1
     seed = int(getattr(cfg, "seed", 0)) if seed is None else int(seed)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    specs = exp.trials(cfg, n, seed)
-    ids = [s["id"] for s in specs]
-    if len(set(ids)) != len(ids):
-        raise RuntimeError(f"experiment kind {exp.kind!r} produced duplicate trial ids")
+    specs = _trial_specs(exp, cfg, n, seed)
     meta = {
         "version": SWEEP_VERSION,
         "kind": exp.kind,
@@ -316,115 +495,19 @@ def run_experiment(
         "trials": n,
         "seed": seed,
         "config_hash": config_hash(cfg),
-        "trial_ids": len(ids),
+        "trial_ids": len(specs),
     }
-    meta_path = out / "sweep.json"
-    trials_path = out / "trials.jsonl"
-    old = None
-    if meta_path.is_file():
-        try:
-            old = json.loads(meta_path.read_text(encoding="utf-8"))
-        except (json.JSONDecodeError, UnicodeDecodeError):
-            old = None
-    same = old is not None and all(old.get(k) == meta[k] for k in ("version", "kind", "trials", "seed", "config_hash"))
-    done: dict[str, dict] = {}
-    if resume is True:
-        if old is not None and not same:
-            diff = [k for k in ("kind", "trials", "seed", "config_hash") if old.get(k) != meta[k]]
-            what = ", ".join(f"{k} {old.get(k)!r} there vs {meta[k]!r} now" for k in diff) or "an older sweep format"
-            raise InputError(f"--resume: {out} holds a different sweep ({what})")
-    elif resume == "auto":
-        if not same:
-            trials_path.unlink(missing_ok=True)
-    else:
-        existing, _ = read_trials(trials_path)
-        if existing:
-            raise InputError(f"--out {out}: already holds a sweep with {len(existing)} finished trials (pass --resume to finish it, or choose another --out)")
-    if trials_path.is_file():
-        done, skipped = read_trials(trials_path, set(ids))
-        if skipped:
-            _rewrite(trials_path, list(done.values()))
-    meta_path.write_text(json.dumps(meta, indent=2) + "\n", encoding="utf-8")
+    hint = resume_hint or f"depthnav sweep {meta['scenario']} --out {out} --resume" + (f" --trials {n}" if trials is not None else "")
+    sw = _Sweep(exp, cfg, out, specs, meta, engine, workers, address, source if source is not None else ("config", cfg), hint)
+    done = _finished_trials(sw, resume)
     pending = [s for s in specs if s["id"] not in done]
     resumed = len(done)
-    kind_module = KINDS.get(exp.kind, "")
-    if source is None:
-        source = ("config", cfg)
-
-    if pending:
-        prep: Callable | None = getattr(importlib.import_module(kind_module), "prepare", None) if kind_module else None
-        if prep is not None:
-            prep(cfg, progress)
-    bar = None
-    if progress and pending:
-        from tqdm import tqdm
-
-        bar = tqdm(total=len(specs), initial=resumed, unit="trial", desc=f"{meta['scenario']} ({engine}, {workers} workers)", file=sys.stderr, smoothing=0.05)
-    errors: list[tuple[str, str]] = []
-    appender = _Appender(trials_path)
-
-    def on_done(rec: dict) -> None:
-        appender.write(rec)
-        done[rec["id"]] = rec
-        if bar is not None:
-            bar.update(1)
-
-    def on_error(spec: dict, exc: BaseException) -> None:
-        msg = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
-        errors.append((spec["id"], f"{type(exc).__name__}: {msg}"))
-        print(f"depthnav sweep: trial {spec['id']} failed: {type(exc).__name__}: {msg}", file=sys.stderr)
-
-    hint = resume_hint or f"depthnav sweep {meta['scenario']} --out {out} --resume" + (f" --trials {n}" if trials is not None else "")
-    t0 = time.perf_counter()
-    interrupted = False
-    try:
-        if pending:
-            if engine == "local":
-                _run_local(source, exp.kind, kind_module, pending, workers, on_done, on_error)
-            else:
-                _run_ray(source, exp.kind, kind_module, pending, workers, address, on_done, on_error)
-    except KeyboardInterrupt:
-        interrupted = True
-    finally:
-        appender.close()
-        if bar is not None:
-            bar.close()
-    wall = time.perf_counter() - t0
+    errors, wall, interrupted = _run_pending(sw, pending, done, progress)
     if interrupted:
-        # What a resume will find: the file, not the in-memory count (Ctrl-C can land
-        # between a record's write and its count; the CI run caught 3 kept, 2 reported).
-        done, _ = read_trials(trials_path, {sp["id"] for sp in specs})
-        print(f"interrupted: {len(done)} of {len(specs)} trials finished and kept in {trials_path}; resume with: {hint}", file=sys.stderr)
-        partial = {
-            "scenario": meta["scenario"],
-            "kind": exp.kind,
-            "interrupted": True,
-            "metrics": {"trials_done": len(done), "trials_total": len(specs)},
-            "resume": hint,
-            "sweep": {"engine": engine, "workers": workers, "trials": len(specs), "trials_file": trials_path.name, "out_dir": str(out), "wall_s": round(wall, 2)},
-        }
-        (out / "report.json").write_text(json.dumps(partial, indent=2) + "\n", encoding="utf-8")
-        return partial
+        return _interrupted_report(sw, wall)
     if errors:
-        raise SweepError(f"{len(errors)} of {len(specs)} trials failed (first: {errors[0][0]}: {errors[0][1]}); the {len(done)} finished are kept in {trials_path}; fix and resume with: {hint}")
-    results = [done[i]["result"] for i in ids]
-    report = exp.summarize(cfg, results, out)
-    report["sweep"] = {
-        "engine": engine,
-        "workers": workers,
-        "address": address,
-        "trials": len(specs),
-        "run_now": len(pending),
-        "resumed": resumed,
-        "seed": seed,
-        "wall_s": round(wall, 2),
-        "trials_file": trials_path.name,
-        "out_dir": str(out),
-    }
-    report.setdefault("metrics", {})["sweep_wall_s"] = round(wall, 2)
-    report.setdefault("interrupted", False)
-    (out / "report.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
-    return report
+        raise SweepError(f"{len(errors)} of {len(specs)} trials failed (first: {errors[0][0]}: {errors[0][1]}); the {len(done)} finished are kept in {sw.trials_path}; fix and resume with: {hint}")
+    return _final_report(sw, done, len(pending), resumed, wall)
 
 
 def run_sweep(

@@ -1,4 +1,4 @@
-"""Seed 003's three experiments as scenario kinds: ``mapping_cuboid``, ``mapping_wall``, ``mapping_corridor``.
+"""PlaneMap's three experiments as scenario kinds: ``mapping_cuboid``, ``mapping_wall``, ``mapping_corridor``.
 
 - I, cuboid angle (III-A, Table II): a cuboid seen from the four arm views of Table I;
   both detectors report the angle between the two side faces they find.
@@ -9,7 +9,7 @@
   odometry pose (no loop closure), exported and drawn; time to the first plane, per
   plane, and the maps' sizes.
 
-Every run writes ``report.json`` with ``metrics`` (ours) and ``paper`` (the seed's
+Every run writes ``report.json`` with ``metrics`` (ours) and ``paper`` (PlaneMap's
 figures under the same names). A sweep trial is one seeded noise draw of the whole
 experiment; the summary gives each metric's mean, std, min and max over trials.
 
@@ -20,12 +20,14 @@ the camera and the Hough accumulator's pole points at the ceiling.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
 import platform
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -60,8 +62,10 @@ from sim.simulator.robot import OdometryConfig, RobotConfig
 
 REPORT_VERSION = 1
 ALGORITHMS = ("ransac", "hough")
+_FRAME_DT_S = 1.0 / 30.0
+"""The Kinect's frame period: the corridor run steps the world one frame at a time."""
 
-#: The seed's figures, under our metric names.
+#: PlaneMap's figures, under our metric names.
 PAPER: dict[str, dict[str, float]] = {
     # Table II: angle between the two detected faces of the cuboid, views 1-4.
     "mapping_cuboid": {
@@ -250,6 +254,25 @@ def _finite(v: float) -> float | None:
     return round(float(v), 4) if v is not None and math.isfinite(float(v)) else None
 
 
+def _median(xs: list[float]) -> float:
+    return float(np.median(xs)) if xs else float("nan")
+
+
+def _until_interrupted(work: Callable[[], None], bar, *close: Callable[[], None]) -> bool:
+    """Run ``work()``; whether Ctrl-C stopped it (what it measured so far is kept). The
+    ``close`` callables and the progress bar are closed either way."""
+    try:
+        work()
+    except KeyboardInterrupt:
+        return True
+    finally:
+        for c in close:
+            c()
+        if bar is not None:
+            bar.close()
+    return False
+
+
 def _progress(progress: bool | None, total: int, desc: str):
     show = progress if progress is not None else sys.stderr.isatty()
     if not show:
@@ -308,63 +331,87 @@ def _match_face(det: PlaneDetection, n_true: np.ndarray, rho_true: float, max_an
     return best
 
 
-def measure_cuboid(cfg: CuboidExperiment, seed: int, progress: bool | None = False, rec=None) -> tuple[dict, dict, bool]:
-    """Run Experiment I: (metrics, details, interrupted); ``rec`` (sim.viz.recording.Recorder) logs each frame's detections."""
-    from sim.scenes.cuboid import build_cuboid_rig, visible_side_faces
+def _cuboid_faces(cfg: CuboidExperiment, view: ArmView, pos: np.ndarray) -> list[tuple[np.ndarray, float]]:
+    """The two visible side faces as (normal, rho) in the sensor-centred frame, normals
+    pointing away from the camera."""
+    from sim.scenes.cuboid import visible_side_faces
 
-    kcfg = cfg.sensor.kinect()
-    intr = cfg.sensor.intrinsics
-    n_frames = cfg.frames_per_view
-    seeds = _seeds(seed, 2 * n_frames * len(cfg.views))
-    angles: dict[str, list[list[float]]] = {a: [[] for _ in cfg.views] for a in ALGORITHMS}
-    times: dict[str, list[float]] = {a: [] for a in ALGORITHMS}
-    planes_found: dict[str, list[int]] = {a: [] for a in ALGORITHMS}
-    bar = _progress(progress, n_frames * len(cfg.views), cfg.name)
-    interrupted = False
-    acc = SparseAccumulator(cfg.detectors.hough)
+    faces = []
+    for n_out, d in visible_side_faces(cfg.scene, view):
+        n, rho = -n_out, -(d - float(n_out @ pos))
+        faces.append((n, rho) if rho >= 0 else (-n, -rho))
+    return faces
+
+
+def _face_angle(cfg: CuboidExperiment, det: PlaneDetection, faces: list[tuple[np.ndarray, float]]) -> float | None:
+    """Angle between the planes detected for the two faces; None unless both are found
+    as two different planes."""
+    k1 = _match_face(det, *faces[0], cfg.match_angle_deg, cfg.match_distance_m)
+    k2 = _match_face(det, *faces[1], cfg.match_angle_deg, cfg.match_distance_m)
+    if k1 >= 0 and k2 >= 0 and k1 != k2:
+        return angle_between_planes_deg(det.planes[k1].normal, det.planes[k2].normal)
+    return None
+
+
+@dataclass
+class _CuboidTally:
+    """What Experiment I measures, per detector: face angles per view, frame times, planes found."""
+
+    n_views: int
+    angles: dict[str, list[list[float]]] = field(init=False)
+    times: dict[str, list[float]] = field(init=False)
+    planes_found: dict[str, list[int]] = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.angles = {a: [[] for _ in range(self.n_views)] for a in ALGORITHMS}
+        self.times = {a: [] for a in ALGORITHMS}
+        self.planes_found = {a: [] for a in ALGORITHMS}
+
+    def add(self, alg: str, view: int, det: PlaneDetection, angle: float | None) -> None:
+        self.times[alg].append(det.total_ms)
+        self.planes_found[alg].append(len(det.planes))
+        if angle is not None:
+            self.angles[alg][view].append(angle)
+
+
+def _cuboid_view(
+    cfg: CuboidExperiment, vi: int, seeds: list[int], acc: SparseAccumulator, tally: _CuboidTally, rec, bar
+) -> None:
+    """Capture the noisy frames of view ``vi`` and measure the face angle in each."""
+    from sim.scenes.cuboid import build_cuboid_rig
+
+    intr, n_frames = cfg.sensor.intrinsics, cfg.frames_per_view
+    rig = build_cuboid_rig(cfg.scene, cfg.views[vi], intr)
+    cam = rig.camera(cfg.sensor.kinect())
+    rot, pos = rig.world_from_camera[:3, :3], rig.world_from_camera[:3, 3]
+    faces = _cuboid_faces(cfg, cfg.views[vi], pos)
     try:
-        for vi, view in enumerate(cfg.views):
-            rig = build_cuboid_rig(cfg.scene, view, intr)
-            cam = rig.camera(kcfg)
-            rot, pos = rig.world_from_camera[:3, :3], rig.world_from_camera[:3, 3]
-            # The two side faces in the sensor-centred frame, normals away from the camera.
-            faces = []
-            for n_out, d in visible_side_faces(cfg.scene, view):
-                n, rho = -n_out, -(d - float(n_out @ pos))
-                faces.append((n, rho) if rho >= 0 else (-n, -rho))
-            try:
-                for f in range(n_frames):
-                    s = seeds[2 * (vi * n_frames + f)]
-                    depth = cam.capture(rig.data, s % (2**31))
-                    pts, _ = depth_to_cloud(depth, intr, rot, stride=cfg.detectors.stride)
-                    if rec is not None:
-                        rec.set_time(vi * n_frames + f, float(vi * n_frames + f))
-                    for alg in ALGORITHMS:
-                        det = _detect(alg, pts, cfg.detectors, seeds[2 * (vi * n_frames + f) + 1], acc)
-                        if rec is not None:
-                            rec.log_detection(alg, pts, det.labels, det.planes, origin=pos)
-                        times[alg].append(det.total_ms)
-                        planes_found[alg].append(len(det.planes))
-                        k1 = _match_face(det, *faces[0], cfg.match_angle_deg, cfg.match_distance_m)
-                        k2 = _match_face(det, *faces[1], cfg.match_angle_deg, cfg.match_distance_m)
-                        if k1 >= 0 and k2 >= 0 and k1 != k2:
-                            angles[alg][vi].append(angle_between_planes_deg(det.planes[k1].normal, det.planes[k2].normal))
-                    if bar is not None:
-                        bar.update(1)
-            finally:
-                cam.close()
-    except KeyboardInterrupt:
-        interrupted = True
+        for f in range(n_frames):
+            i = vi * n_frames + f
+            depth = cam.capture(rig.data, seeds[2 * i] % (2**31))
+            pts, _ = depth_to_cloud(depth, intr, rot, stride=cfg.detectors.stride)
+            if rec is not None:
+                rec.set_time(i, float(i))
+            for alg in ALGORITHMS:
+                det = _detect(alg, pts, cfg.detectors, seeds[2 * i + 1], acc)
+                if rec is not None:
+                    rec.log_detection(alg, pts, det.labels, det.planes, origin=pos)
+                tally.add(alg, vi, det, _face_angle(cfg, det, faces))
+            if bar is not None:
+                bar.update(1)
     finally:
-        if bar is not None:
-            bar.close()
+        cam.close()
+
+
+def _cuboid_summary(cfg: CuboidExperiment, tally: _CuboidTally) -> tuple[dict, dict]:
+    """Experiment I's metrics (Table II's angles, faces found, errors, frame time) and details."""
     metrics: dict[str, float] = {}
     details: dict[str, Any] = {"views": [to_dict(v) for v in cfg.views], "per_view": {}}
     for alg in ALGORITHMS:
         errs = []
         found = 0
         for vi in range(len(cfg.views)):
-            a = angles[alg][vi]
+            a = tally.angles[alg][vi]
             metrics[f"{alg}_angle_view{vi + 1}_deg"] = float(np.mean(a)) if a else float("nan")
             errs += [abs(x - 90.0) for x in a]
             found += len(a)
@@ -372,84 +419,123 @@ def measure_cuboid(cfg: CuboidExperiment, seed: int, progress: bool | None = Fal
                 "angles_deg": [round(x, 3) for x in a],
                 "std_deg": round(float(np.std(a)), 4) if a else None,
             }
-        total = n_frames * len(cfg.views)
-        metrics[f"{alg}_faces_found_fraction"] = found / total
+        times, planes_found = tally.times[alg], tally.planes_found[alg]
+        metrics[f"{alg}_faces_found_fraction"] = found / (cfg.frames_per_view * len(cfg.views))
         metrics[f"{alg}_mean_abs_error_deg"] = float(np.mean(errs)) if errs else float("nan")
-        metrics[f"{alg}_frame_ms"] = float(np.median(times[alg])) if times[alg] else float("nan")
-        details[f"{alg}_planes_per_frame"] = float(np.mean(planes_found[alg])) if planes_found[alg] else 0.0
-    return metrics, details, interrupted
+        metrics[f"{alg}_frame_ms"] = float(np.median(times)) if times else float("nan")
+        details[f"{alg}_planes_per_frame"] = float(np.mean(planes_found)) if planes_found else 0.0
+    return metrics, details
+
+
+def measure_cuboid(cfg: CuboidExperiment, seed: int, progress: bool | None = False, rec=None) -> tuple[dict, dict, bool]:
+    """Run Experiment I: (metrics, details, interrupted); ``rec`` (sim.viz.recording.Recorder) logs each frame's detections."""
+    seeds = _seeds(seed, 2 * cfg.frames_per_view * len(cfg.views))
+    tally = _CuboidTally(len(cfg.views))
+    bar = _progress(progress, cfg.frames_per_view * len(cfg.views), cfg.name)
+    acc = SparseAccumulator(cfg.detectors.hough)
+
+    def work() -> None:
+        for vi in range(len(cfg.views)):
+            _cuboid_view(cfg, vi, seeds, acc, tally, rec, bar)
+
+    interrupted = _until_interrupted(work, bar)
+    return (*_cuboid_summary(cfg, tally), interrupted)
 
 
 # -- Experiment II: wall distance ------------------------------------------------------------
 
 
-def measure_wall(cfg: WallExperiment, seed: int, progress: bool | None = False, rec=None) -> tuple[dict, dict, bool]:
-    """Run Experiment II: (metrics, details, interrupted); ``rec`` (sim.viz.recording.Recorder) logs each frame's detections."""
+def _wall_plane(det: PlaneDetection, dist: float, gate_m: float) -> int:
+    """Index of the detected plane taken for the wall (normal within 10 degrees of the
+    wall's, rho within ``gate_m`` of its distance, the most points), or -1."""
+    n_true = np.array([1.0, 0.0, 0.0])
+    best = -1
+    for j, p in enumerate(det.planes):
+        if p.normal @ n_true > math.cos(math.radians(10)) and abs(p.rho - dist) < gate_m:
+            if best < 0 or p.n_points > det.planes[best].n_points:
+                best = j
+    return best
+
+
+@dataclass
+class _WallTally:
+    """One detector's measurements of the wall at one distance: the residuals in rho of the
+    points near the detected wall and of its inliers, and each frame's error in rho."""
+
+    resid: list[np.ndarray] = field(default_factory=list)
+    inlier_resid: list[np.ndarray] = field(default_factory=list)
+    rho_err: list[float] = field(default_factory=list)
+
+    def add(self, det: PlaneDetection, best: int, pts: np.ndarray, dist: float, gate_m: float) -> None:
+        p = det.planes[best]
+        self.rho_err.append(p.rho - dist)
+        r = pts @ p.normal.astype(np.float32) - np.float32(p.rho)
+        self.resid.append(r[np.abs(r) < gate_m])
+        self.inlier_resid.append(r[det.labels == best])
+
+    def summarize(self, alg: str, tag: str, dist: float, metrics: dict, details: dict) -> None:
+        """Add Table III's standard deviation of the error in rho (and the bias) under ``tag``."""
+        rr = np.concatenate(self.resid) if self.resid else np.zeros(0)
+        ri = np.concatenate(self.inlier_resid) if self.inlier_resid else np.zeros(0)
+        e = np.array(self.rho_err)
+        metrics[f"{alg}_rho_std_mm_{tag}"] = float(np.std(rr)) * 1e3 if len(rr) else float("nan")
+        metrics[f"{alg}_inlier_rho_std_mm_{tag}"] = float(np.std(ri)) * 1e3 if len(ri) else float("nan")
+        metrics[f"{alg}_frame_rho_std_mm_{tag}"] = float(np.std(e)) * 1e3 if len(e) else float("nan")
+        metrics[f"{alg}_rho_bias_mm_{tag}"] = float(np.mean(e)) * 1e3 if len(e) else float("nan")
+        details[f"{alg}_{tag}"] = {
+            "frames_with_wall": len(e),
+            "points_per_frame": round(len(rr) / max(len(e), 1)),
+            "rho_m": [round(dist + x, 6) for x in e],
+        }
+
+
+def _wall_distance(
+    cfg: WallExperiment, di: int, seeds: list[int], acc: SparseAccumulator, rec, bar
+) -> dict[str, _WallTally]:
+    """Capture the noisy frames at distance ``di`` and measure the wall in each."""
     from sim.scenes.wall import build_wall_rig
 
-    kcfg = cfg.sensor.kinect()
-    intr = cfg.sensor.intrinsics
+    intr, dist = cfg.sensor.intrinsics, cfg.distances_m[di]
+    rig = build_wall_rig(dist, cfg.scene, intr)
+    cam = rig.camera(cfg.sensor.kinect())
+    rot = rig.world_from_camera[:3, :3]
+    tally = {a: _WallTally() for a in ALGORITHMS}
+    try:
+        for f in range(cfg.frames):
+            i = di * cfg.frames + f
+            depth = cam.capture(rig.data, seeds[2 * i] % (2**31))
+            pts, _ = depth_to_cloud(depth, intr, rot, stride=cfg.detectors.stride)
+            if rec is not None:
+                rec.set_time(i, float(i))
+            for alg in ALGORITHMS:
+                det = _detect(alg, pts, cfg.detectors, seeds[2 * i + 1], acc)
+                if rec is not None:
+                    rec.log_detection(alg, pts, det.labels, det.planes, origin=rig.world_from_camera[:3, 3])
+                best = _wall_plane(det, dist, cfg.gate_m)
+                if best >= 0:
+                    tally[alg].add(det, best, pts, dist, cfg.gate_m)
+            if bar is not None:
+                bar.update(1)
+    finally:
+        cam.close()
+    return tally
+
+
+def measure_wall(cfg: WallExperiment, seed: int, progress: bool | None = False, rec=None) -> tuple[dict, dict, bool]:
+    """Run Experiment II: (metrics, details, interrupted); ``rec`` (sim.viz.recording.Recorder) logs each frame's detections."""
     seeds = _seeds(seed, 2 * cfg.frames * len(cfg.distances_m))
     bar = _progress(progress, cfg.frames * len(cfg.distances_m), cfg.name)
     metrics: dict[str, float] = {}
     details: dict[str, Any] = {}
-    interrupted = False
     acc = SparseAccumulator(cfg.detectors.hough)
-    try:
+
+    def work() -> None:
         for di, dist in enumerate(cfg.distances_m):
-            tag = f"{round(dist * 100)}cm"
-            rig = build_wall_rig(dist, cfg.scene, intr)
-            cam = rig.camera(kcfg)
-            rot = rig.world_from_camera[:3, :3]
-            n_true = np.array([1.0, 0.0, 0.0])
-            resid: dict[str, list[np.ndarray]] = {a: [] for a in ALGORITHMS}
-            inl_resid: dict[str, list[np.ndarray]] = {a: [] for a in ALGORITHMS}
-            rho_err: dict[str, list[float]] = {a: [] for a in ALGORITHMS}
-            try:
-                for f in range(cfg.frames):
-                    k = 2 * (di * cfg.frames + f)
-                    depth = cam.capture(rig.data, seeds[k] % (2**31))
-                    pts, _ = depth_to_cloud(depth, intr, rot, stride=cfg.detectors.stride)
-                    if rec is not None:
-                        rec.set_time(di * cfg.frames + f, float(di * cfg.frames + f))
-                    for alg in ALGORITHMS:
-                        det = _detect(alg, pts, cfg.detectors, seeds[k + 1], acc)
-                        if rec is not None:
-                            rec.log_detection(alg, pts, det.labels, det.planes, origin=rig.world_from_camera[:3, 3])
-                        best = -1
-                        for j, p in enumerate(det.planes):
-                            if p.normal @ n_true > math.cos(math.radians(10)) and abs(p.rho - dist) < cfg.gate_m:
-                                if best < 0 or p.n_points > det.planes[best].n_points:
-                                    best = j
-                        if best < 0:
-                            continue
-                        p = det.planes[best]
-                        rho_err[alg].append(p.rho - dist)
-                        r = pts @ p.normal.astype(np.float32) - np.float32(p.rho)
-                        resid[alg].append(r[np.abs(r) < cfg.gate_m])
-                        inl_resid[alg].append(r[det.labels == best])
-                    if bar is not None:
-                        bar.update(1)
-            finally:
-                cam.close()
+            tally = _wall_distance(cfg, di, seeds, acc, rec, bar)
             for alg in ALGORITHMS:
-                rr = np.concatenate(resid[alg]) if resid[alg] else np.zeros(0)
-                ri = np.concatenate(inl_resid[alg]) if inl_resid[alg] else np.zeros(0)
-                e = np.array(rho_err[alg])
-                metrics[f"{alg}_rho_std_mm_{tag}"] = float(np.std(rr)) * 1e3 if len(rr) else float("nan")
-                metrics[f"{alg}_inlier_rho_std_mm_{tag}"] = float(np.std(ri)) * 1e3 if len(ri) else float("nan")
-                metrics[f"{alg}_frame_rho_std_mm_{tag}"] = float(np.std(e)) * 1e3 if len(e) else float("nan")
-                metrics[f"{alg}_rho_bias_mm_{tag}"] = float(np.mean(e)) * 1e3 if len(e) else float("nan")
-                details[f"{alg}_{tag}"] = {
-                    "frames_with_wall": len(e),
-                    "points_per_frame": round(len(rr) / max(len(e), 1)),
-                    "rho_m": [round(dist + x, 6) for x in e],
-                }
-    except KeyboardInterrupt:
-        interrupted = True
-    finally:
-        if bar is not None:
-            bar.close()
+                tally[alg].summarize(alg, f"{round(dist * 100)}cm", dist, metrics, details)
+
+    interrupted = _until_interrupted(work, bar)
     return metrics, details, interrupted
 
 
@@ -559,6 +645,164 @@ def draw_maps(path: Path, maps: dict[str, PlaneOctree], segs: np.ndarray, truth:
     return path
 
 
+class _CorridorRun:
+    """Experiment III under way: the world and camera, odometry, the loop driver, both
+    detectors' maps under both octree policies, and what is measured along the way."""
+
+    def __init__(self, cfg: CorridorExperiment, seed: int) -> None:
+        from sim.scenes.corridor import build_corridor_world, corridor_path, robot_from_camera
+        from sim.simulator.kinect import KinectCamera
+        from sim.simulator.robot import Odometry
+
+        self.cfg = cfg
+        ss = np.random.SeedSequence(int(seed))
+        rng_odom = np.random.default_rng(ss.spawn(1)[0])
+        self.noise_base, self.det_base = (int(v) for v in np.random.default_rng(ss.spawn(1)[0]).integers(0, 2**31, 2))
+        self.world = build_corridor_world(cfg.scene, robot=cfg.robot, intrinsics=cfg.sensor.intrinsics)
+        self.cam = KinectCamera(self.world.model, self.world.camera_id, cfg.sensor.kinect())
+        self.r_from_c = robot_from_camera(cfg.scene)
+        start = self.world.robot.pose(self.world.data)
+        self.odom = Odometry(cfg.odometry, rng_odom, start)
+        self.driver = LoopDriver(corridor_path(cfg.scene), cfg.laps, cfg.speed_mps)
+        self.other = "merge" if cfg.octree.policy == "overwrite" else "overwrite"
+        """The octree policy not named in the config (its maps are built too)."""
+        self.policies = (cfg.octree.policy, self.other)
+        self.maps = {
+            (alg, pol): PlaneOctree(dataclasses.replace(cfg.octree, policy=pol)) for alg in ALGORITHMS for pol in self.policies
+        }
+        self.n_sub = max(1, round(_FRAME_DT_S / self.world.config.timestep_s))
+        self.every = max(1, round(30.0 / cfg.map_rate_hz))
+        self.acc = SparseAccumulator(cfg.detectors.hough)
+        self.stats: dict[str, dict[str, list[float]]] = {
+            a: {"first": [], "per_plane": [], "frame": [], "planes": []} for a in ALGORITHMS
+        }
+        self.render_ms: list[float] = []
+        self.truth, self.est = [start.copy()], [self.odom.pose.copy()]
+        self.distance = 0.0
+        self.frame = 0
+        self.mapped = 0
+        self.max_frames = int(4.0 * self.driver.goal_m / max(cfg.speed_mps, 1e-3) * 30) + 300
+
+    def run(self, bar, rec) -> None:
+        """Drive the loop (at most ``max_frames``), mapping every ``every``-th frame."""
+        while self.frame < self.max_frames:
+            new = self.drive_frame()
+            if new is None:
+                break
+            if bar is not None:
+                bar.update(1)
+            if rec is not None:
+                rec.set_time(self.frame, self.frame * _FRAME_DT_S)
+                rec.log_pose(self.frame, new)
+                rec.log_estimate(self.frame, self.odom.pose)
+            if self.frame % self.every:
+                continue
+            self.map_frame(new, rec)
+            if rec is not None and self.mapped % self.cfg.rrd_every == 0:
+                for alg in ALGORITHMS:
+                    rec.log_plane_map(self.maps[(alg, self.cfg.octree.policy)], alg)
+
+    def drive_frame(self) -> np.ndarray | None:
+        """Drive one camera frame along the loop; the new true pose, or None when the
+        distance is driven."""
+        world = self.world
+        pose = world.robot.pose(world.data)
+        cmd = self.driver.command(pose)
+        if cmd is None:
+            return None
+        world.robot.command(world.data, cmd, _FRAME_DT_S)
+        world.step_frame(self.n_sub)
+        new = world.robot.pose(world.data)
+        self.odom.update(new)
+        self.distance += float(np.hypot(*(new[:2] - pose[:2])))
+        self.truth.append(new)
+        self.est.append(self.odom.pose.copy())
+        self.frame += 1
+        return new
+
+    def map_frame(self, true_pose: np.ndarray, rec) -> None:
+        """Capture a frame, detect planes with both detectors and register them into the
+        maps at the configured pose (odometry or truth)."""
+        cfg = self.cfg
+        t0 = time.perf_counter()
+        depth = self.cam.capture(self.world.data, (self.noise_base + self.frame) % (2**31))
+        self.render_ms.append((time.perf_counter() - t0) * 1e3)
+        rot, w_from_sensor = detection_frame(true_pose if cfg.pose_source == "truth" else self.odom.pose, self.r_from_c)
+        pts, _ = depth_to_cloud(depth, cfg.sensor.intrinsics, rot, stride=cfg.detectors.stride)
+        for alg in ALGORITHMS:
+            det = _detect(alg, pts, cfg.detectors, self.det_base + 2 * self.frame + (alg == "hough"), self.acc)
+            st = self.stats[alg]
+            st["frame"].append(det.total_ms)
+            st["planes"].append(len(det.planes))
+            if det.planes:
+                st["first"].append(det.first_plane_ms)
+                st["per_plane"].append(sum(det.plane_ms) / len(det.planes))
+            for pol in self.policies:
+                register_planes(self.maps[(alg, pol)], det, w_from_sensor, stamp=self.frame, source=alg)
+            if rec is not None:
+                rec.log_detection(alg, pts, det.labels, det.planes, origin=w_from_sensor[:3, 3])
+        self.mapped += 1
+
+    def summary(self) -> tuple[dict, dict]:
+        """Experiment III's metrics (odometry drift, detector times, the maps' sizes and
+        their walls' error) and details."""
+        cfg, other = self.cfg, self.other
+        truth_a, est_a = np.array(self.truth), np.array(self.est)
+        dh = truth_a[-1, 2] - est_a[-1, 2]
+        segs = np.asarray(self.world.vectormap.segments)
+        metrics: dict[str, float] = {
+            "frames_mapped": self.mapped,
+            "distance_m": self.distance,
+            "duration_s": self.frame * _FRAME_DT_S,
+            "odometry_end_error_m": float(np.hypot(*(truth_a[-1, :2] - est_a[-1, :2]))),
+            "odometry_end_heading_error_deg": math.degrees(abs(math.atan2(math.sin(dh), math.cos(dh)))),
+            "render_ms": _median(self.render_ms),
+        }
+        details: dict[str, Any] = {"policies": [cfg.octree.policy, other], "maps": {}}
+        for alg in ALGORITHMS:
+            st = self.stats[alg]
+            metrics[f"{alg}_first_plane_ms"] = _median(st["first"])
+            metrics[f"{alg}_per_plane_ms"] = _median(st["per_plane"])
+            metrics[f"{alg}_frame_ms"] = _median(st["frame"])
+            metrics[f"{alg}_planes_per_frame"] = float(np.mean(st["planes"])) if st["planes"] else 0.0
+            main, alt = self.maps[(alg, cfg.octree.policy)], self.maps[(alg, other)]
+            metrics[f"{alg}_map_planes"] = main.n_leaves
+            metrics[f"{alg}_map_planes_{other}"] = alt.n_leaves
+            metrics[f"{alg}_map_wall_error_m"] = map_wall_error(main, segs)
+            metrics[f"{alg}_map_wall_error_m_{other}"] = map_wall_error(alt, segs)
+            size = main.size()
+            metrics[f"{alg}_map_json_kb"] = size["json_bytes"] / 1024
+            details["maps"][alg] = {cfg.octree.policy: size, other: alt.size(), f"{other}_stats": vars(alt.stats), f"{cfg.octree.policy}_stats": vars(main.stats)}
+        details["hough_accumulator_mb"] = accumulator_nbytes(cfg.detectors.hough) / 1e6
+        details["hough_dense_accumulator_mb"] = dense_accumulator_nbytes(dataclasses.replace(cfg.detectors.hough, equal_area=False)) / 1e6
+        return metrics, details
+
+    def log_maps(self, rec) -> None:
+        """Log every finished map (the other policy's under ``<alg>_<policy>``)."""
+        for (alg, pol), tree in self.maps.items():
+            rec.log_plane_map(tree, alg if pol == self.cfg.octree.policy else f"{alg}_{pol}")
+
+    def export(self, out_dir: Path) -> list[str]:
+        """Write every map (JSON, PLY, GLB) and the top view; the file names."""
+        cfg = self.cfg
+        out_dir.mkdir(parents=True, exist_ok=True)
+        files: list[str] = []
+        for (alg, pol), tree in self.maps.items():
+            stem = f"map_{alg}" if pol == cfg.octree.policy else f"map_{alg}_{pol}"
+            for ext in (".json", ".ply", ".glb"):
+                f = out_dir / f"{stem}{ext}"
+                tree.save_json(f) if ext == ".json" else tree.export_mesh(f)
+                files.append(f.name)
+        draw_maps(
+            out_dir / "map_top.png",
+            {f"{alg} ({pol})": self.maps[(alg, pol)] for pol in self.policies for alg in ALGORITHMS},
+            np.asarray(self.world.vectormap.segments), np.array(self.truth), np.array(self.est),
+            f"{cfg.name}: plane maps at the {cfg.pose_source} pose, {self.distance:.1f} m driven",
+        )
+        files.append("map_top.png")
+        return files
+
+
 def measure_corridor(
     cfg: CorridorExperiment, seed: int, progress: bool | None = False, out_dir: Path | None = None, rec=None
 ) -> tuple[dict, dict, bool, list[str]]:
@@ -567,139 +811,15 @@ def measure_corridor(
     ``rec`` (sim.viz.recording.Recorder) logs the corridor, the true and odometry paths, each mapped
     frame's detections and the growing plane maps (every ``rrd_every`` mapped frames).
     """
-    import dataclasses
-
-    from sim.scenes.corridor import build_corridor_world, corridor_path, robot_from_camera
-    from sim.simulator.kinect import KinectCamera
-    from sim.simulator.robot import Odometry
-
-    intr = cfg.sensor.intrinsics
-    ss = np.random.SeedSequence(int(seed))
-    rng_odom = np.random.default_rng(ss.spawn(1)[0])
-    noise_base, det_base = (int(v) for v in np.random.default_rng(ss.spawn(1)[0]).integers(0, 2**31, 2))
-    world = build_corridor_world(cfg.scene, robot=cfg.robot, intrinsics=intr)
-    cam = KinectCamera(world.model, world.camera_id, cfg.sensor.kinect())
-    r_from_c = robot_from_camera(cfg.scene)
-    start = world.robot.pose(world.data)
-    odom = Odometry(cfg.odometry, rng_odom, start)
-    driver = LoopDriver(corridor_path(cfg.scene), cfg.laps, cfg.speed_mps)
-    other = "merge" if cfg.octree.policy == "overwrite" else "overwrite"
-    maps = {
-        (alg, pol): PlaneOctree(dataclasses.replace(cfg.octree, policy=pol)) for alg in ALGORITHMS for pol in (cfg.octree.policy, other)
-    }
-    frame_dt = 1.0 / 30.0
-    n_sub = max(1, round(frame_dt / world.config.timestep_s))
-    every = max(1, round(30.0 / cfg.map_rate_hz))
-    acc = SparseAccumulator(cfg.detectors.hough)
-    stats: dict[str, dict[str, list[float]]] = {a: {"first": [], "per_plane": [], "frame": [], "planes": []} for a in ALGORITHMS}
-    render_ms: list[float] = []
-    truth, est = [start.copy()], [odom.pose.copy()]
-    distance = 0.0
-    frame = 0
-    mapped = 0
-    max_frames = int(4.0 * driver.goal_m / max(cfg.speed_mps, 1e-3) * 30) + 300
-    bar = _progress(progress, max_frames, cfg.name)
-    interrupted = False
+    run = _CorridorRun(cfg, seed)
+    bar = _progress(progress, run.max_frames, cfg.name)
     if rec is not None:
-        rec.log_map(world.vectormap, None, world.config.wall_height_m)
-    try:
-        while frame < max_frames:
-            pose = world.robot.pose(world.data)
-            cmd = driver.command(pose)
-            if cmd is None:
-                break
-            world.robot.command(world.data, cmd, frame_dt)
-            world.step_frame(n_sub)
-            new = world.robot.pose(world.data)
-            odom.update(new)
-            distance += float(np.hypot(*(new[:2] - pose[:2])))
-            truth.append(new)
-            est.append(odom.pose.copy())
-            frame += 1
-            if bar is not None:
-                bar.update(1)
-            if rec is not None:
-                rec.set_time(frame, frame * frame_dt)
-                rec.log_pose(frame, new)
-                rec.log_estimate(frame, odom.pose)
-            if frame % every:
-                continue
-            t0 = time.perf_counter()
-            depth = cam.capture(world.data, (noise_base + frame) % (2**31))
-            render_ms.append((time.perf_counter() - t0) * 1e3)
-            rot, w_from_sensor = detection_frame(new if cfg.pose_source == "truth" else odom.pose, r_from_c)
-            pts, _ = depth_to_cloud(depth, intr, rot, stride=cfg.detectors.stride)
-            for alg in ALGORITHMS:
-                det = _detect(alg, pts, cfg.detectors, det_base + 2 * frame + (alg == "hough"), acc)
-                st = stats[alg]
-                st["frame"].append(det.total_ms)
-                st["planes"].append(len(det.planes))
-                if det.planes:
-                    st["first"].append(det.first_plane_ms)
-                    st["per_plane"].append(sum(det.plane_ms) / len(det.planes))
-                for pol in (cfg.octree.policy, other):
-                    register_planes(maps[(alg, pol)], det, w_from_sensor, stamp=frame, source=alg)
-                if rec is not None:
-                    rec.log_detection(alg, pts, det.labels, det.planes, origin=w_from_sensor[:3, 3])
-            mapped += 1
-            if rec is not None and mapped % cfg.rrd_every == 0:
-                for alg in ALGORITHMS:
-                    rec.log_plane_map(maps[(alg, cfg.octree.policy)], alg)
-    except KeyboardInterrupt:
-        interrupted = True
-    finally:
-        cam.close()
-        if bar is not None:
-            bar.close()
+        rec.log_map(run.world.vectormap, None, run.world.config.wall_height_m)
+    interrupted = _until_interrupted(lambda: run.run(bar, rec), bar, run.cam.close)
     if rec is not None:
-        for (alg, pol), tree in maps.items():
-            rec.log_plane_map(tree, alg if pol == cfg.octree.policy else f"{alg}_{pol}")
-    truth_a, est_a = np.array(truth), np.array(est)
-    end_err = float(np.hypot(*(truth_a[-1, :2] - est_a[-1, :2])))
-    head_err = math.degrees(abs(math.atan2(math.sin(truth_a[-1, 2] - est_a[-1, 2]), math.cos(truth_a[-1, 2] - est_a[-1, 2]))))
-    segs = np.asarray(world.vectormap.segments)
-    med = lambda xs: float(np.median(xs)) if xs else float("nan")  # noqa: E731
-    metrics: dict[str, float] = {
-        "frames_mapped": mapped,
-        "distance_m": distance,
-        "duration_s": frame * frame_dt,
-        "odometry_end_error_m": end_err,
-        "odometry_end_heading_error_deg": head_err,
-        "render_ms": med(render_ms),
-    }
-    details: dict[str, Any] = {"policies": [cfg.octree.policy, other], "maps": {}}
-    for alg in ALGORITHMS:
-        st = stats[alg]
-        metrics[f"{alg}_first_plane_ms"] = med(st["first"])
-        metrics[f"{alg}_per_plane_ms"] = med(st["per_plane"])
-        metrics[f"{alg}_frame_ms"] = med(st["frame"])
-        metrics[f"{alg}_planes_per_frame"] = float(np.mean(st["planes"])) if st["planes"] else 0.0
-        main, alt = maps[(alg, cfg.octree.policy)], maps[(alg, other)]
-        metrics[f"{alg}_map_planes"] = main.n_leaves
-        metrics[f"{alg}_map_planes_{other}"] = alt.n_leaves
-        metrics[f"{alg}_map_wall_error_m"] = map_wall_error(main, segs)
-        metrics[f"{alg}_map_wall_error_m_{other}"] = map_wall_error(alt, segs)
-        size = main.size()
-        metrics[f"{alg}_map_json_kb"] = size["json_bytes"] / 1024
-        details["maps"][alg] = {cfg.octree.policy: size, other: alt.size(), f"{other}_stats": vars(alt.stats), f"{cfg.octree.policy}_stats": vars(main.stats)}
-    details["hough_accumulator_mb"] = accumulator_nbytes(cfg.detectors.hough) / 1e6
-    details["hough_dense_accumulator_mb"] = dense_accumulator_nbytes(dataclasses.replace(cfg.detectors.hough, equal_area=False)) / 1e6
-    files: list[str] = []
-    if out_dir is not None and cfg.export:
-        out_dir.mkdir(parents=True, exist_ok=True)
-        for (alg, pol), tree in maps.items():
-            stem = f"map_{alg}" if pol == cfg.octree.policy else f"map_{alg}_{pol}"
-            for ext in (".json", ".ply", ".glb"):
-                f = out_dir / f"{stem}{ext}"
-                tree.save_json(f) if ext == ".json" else tree.export_mesh(f)
-                files.append(f.name)
-        draw_maps(
-            out_dir / "map_top.png",
-            {f"{alg} ({pol})": maps[(alg, pol)] for pol in (cfg.octree.policy, other) for alg in ALGORITHMS},
-            segs, truth_a, est_a,
-            f"{cfg.name}: plane maps at the {cfg.pose_source} pose, {distance:.1f} m driven",
-        )
-        files.append("map_top.png")
+        run.log_maps(rec)
+    metrics, details = run.summary()
+    files = run.export(out_dir) if out_dir is not None and cfg.export else []
     return metrics, details, interrupted, files
 
 
@@ -761,8 +881,6 @@ def trials(cfg: Any, n: int, seed: int) -> list[dict]:
 
 
 def _trial(kind: str, cfg: Any, spec: dict) -> dict:
-    import dataclasses
-
     s = int(spec["seed"])
     if kind == "mapping_corridor":
         cfg = dataclasses.replace(cfg, export=False)

@@ -9,17 +9,16 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from autonomy.avoidance import AvoidanceConfig
-from autonomy.cgr import CGRConfig
 from autonomy.errors import InputError
 from autonomy.fspf import FSPFConfig
 from autonomy.navigator import NavigatorConfig
 from autonomy.nearfield import NearField
-from autonomy.observation import ObservationConfig
-from autonomy.raycast import VisibilityGridConfig
+from autonomy.stack import LocalizationConfig as StackLocalizationConfig
+from autonomy.stack import StackConfig
 from sim.config import apply_overrides, from_dict, read_toml
 from sim.simulator.actors import Furniture, Person
 from sim.simulator.blueprints import ASSETS_DIR
@@ -111,17 +110,9 @@ class MissionConfig:
 
 
 @dataclass(frozen=True)
-class LocalizationConfig:
-    """CGR localization on FSPF points in the loop (seed 000, IV)."""
+class LocalizationConfig(StackLocalizationConfig):
+    """The robot stack's CGR localization (BV2012, IV), plus the run's check against the truth."""
 
-    enabled: bool = True
-    """Run the localization every frame."""
-    cgr: CGRConfig = field(default_factory=CGRConfig)
-    """Particle filter parameters."""
-    observation: ObservationConfig = field(default_factory=ObservationConfig)
-    """Point-cloud observation model parameters."""
-    grid: VisibilityGridConfig = field(default_factory=lambda: VisibilityGridConfig(cell_m=0.5, max_range_m=6.0))
-    """Visibility grid for the analytic ray cast."""
     reset_error_m: float = 1.0
     """Error above which the run counts a localization reset and re-initialises at the
     true pose (the paper's failure threshold)."""
@@ -179,6 +170,17 @@ class Scenario:
     base_dir: str = ""
     """Directory that relative paths resolve against (set by the loader)."""
 
+    def __post_init__(self) -> None:
+        # The stack avoids with the body the simulator drives: one radius, robot.radius_m.
+        if self.avoidance.robot_radius_m != self.robot.radius_m:
+            object.__setattr__(self, "avoidance", replace(self.avoidance, robot_radius_m=self.robot.radius_m))
+
+    def stack_config(self) -> StackConfig:
+        """The robot stack's configuration: the camera as the Kinect model defines it (one
+        source for its intrinsics, mount and range), FSPF, localization, avoidance and the
+        navigator."""
+        return StackConfig(self.kinect.depth_camera(), self.fspf, self.localization, self.avoidance, self.navigator)
+
     def resolve(self, path: str) -> Path:
         p = Path(path)
         return p if p.is_absolute() else Path(self.base_dir or ".") / p
@@ -195,6 +197,8 @@ def load_scenario(path: str | Path, overrides: list[str] | None = None) -> Scena
         raise InputError(f"{src}: key 'kind': this is a {data['kind']!r} experiment, not a mission scenario")
     data.pop("kind", None)
     data = apply_overrides(data, overrides or [])
+    if isinstance(data.get("avoidance"), dict) and "robot_radius_m" in data["avoidance"]:
+        raise InputError(f"{src}: key 'avoidance.robot_radius_m': set 'robot.radius_m' (the stack avoids with the simulated body's radius)")
     data["base_dir"] = str(path.resolve().parent)
     scn = from_dict(Scenario, data, source=src)
     # Map files must exist now, not halfway through a run.

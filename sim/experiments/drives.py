@@ -31,7 +31,7 @@ import sys
 import time
 import zipfile
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -40,11 +40,13 @@ from autonomy.avoidance import AvoidanceConfig
 from autonomy.camera import CameraIntrinsics, CameraMount
 from autonomy.errors import InputError
 from autonomy.fspf import FSPFConfig
+from autonomy.geometry import relative_pose
 from autonomy.navigator import NavigatorConfig
 from sim.config import to_dict
 from sim.simulator.actors import Furniture, Person
 from sim.simulator.kinect import KinectConfig
-from sim.simulator.robot import RobotConfig, relative_pose
+from sim.simulator.robot import RobotConfig
+from sim.simulator.step import SimFrame
 from sim.simulator.world import WorldConfig
 
 #: Bump when the recorder or the file layout changes meaning (invalidates cached logs).
@@ -90,6 +92,9 @@ class RecordingConfig:
             raise InputError("recording.max_duration_s: expected a positive number")
         if not self.waypoint_timeout_s > 0:
             raise InputError("recording.waypoint_timeout_s: expected a positive number")
+        # The recording robot avoids with the body the simulator drives.
+        if self.avoidance.robot_radius_m != self.robot.radius_m:
+            object.__setattr__(self, "avoidance", replace(self.avoidance, robot_radius_m=self.robot.radius_m))
 
     def key(self) -> str:
         """Hash of everything that changes the recorded log."""
@@ -287,16 +292,52 @@ def _write_npz(path: Path, **arrays: np.ndarray) -> None:
                 np.lib.format.write_array(f, np.asanyarray(a), allow_pickle=False)
 
 
+def _start_pose(cfg: RecordingConfig, graph, nodes: list[int]) -> np.ndarray:
+    xy = graph.node_xy()
+    p0 = xy[graph.index_of(nodes[0])]
+    p1 = xy[graph.index_of(nodes[1])]
+    heading = cfg.start_heading_rad if math.isfinite(cfg.start_heading_rad) else math.atan2(p1[1] - p0[1], p1[0] - p0[0])
+    return np.array([p0[0], p0[1], heading])
+
+
+def _to_mm(depth: np.ndarray) -> np.ndarray:
+    """Depth in metres -> uint16 millimetres, as the Kinect's driver gives it."""
+    d = np.rint(depth * 1000.0)
+    return np.clip(d, 0, 65535).astype(np.uint16)
+
+
+class _Recording:
+    """Frames, poses and people as they are recorded; depth goes to a memory map."""
+
+    def __init__(self, path: Path, max_frames: int, shape: tuple[int, int]) -> None:
+        self.tmp = _working_copy(path).with_name(f"{_working_copy(path).name}.{os.getpid()}.tmp")
+        self.depth = np.lib.format.open_memmap(self.tmp, mode="w+", dtype=np.uint16, shape=(max_frames, *shape))
+        self.t: list[float] = []
+        self.poses: list[np.ndarray] = []
+        self.people: list[np.ndarray] = []
+
+    def add(self, frame: SimFrame, people: np.ndarray) -> np.ndarray:
+        """Store a frame; returns its depth as the robot reads it back (metres, from mm)."""
+        k = len(self.t)
+        self.depth[k] = _to_mm(frame.depth)
+        self.t.append(frame.t)
+        self.poses.append(frame.pose)
+        self.people.append(people.astype(np.float32).reshape(-1, 3))
+        return self.depth[k].astype(np.float32) * np.float32(0.001)
+
+
 def record_log(cfg: RecordingConfig, path: str | Path, *, progress: bool = False) -> Path:
-    """Drive the route in the simulator and write the log to ``path`` (atomically)."""
-    from autonomy.avoidance import obstacle_points
-    from autonomy.fspf import fspf
-    from autonomy.navigator import Navigator
-    from autonomy.nearfield import NearField
-    from sim.scenario import ASSETS_DIR
+    """Drive the route in the simulator and write the log to ``path`` (atomically).
+
+    The recording robot is the robot stack without localization, navigating on the true
+    pose, sensing the millimetre depth it records (as a replay reads it).
+    """
+    from autonomy.stack import LocalizationConfig, RobotStack, StackConfig
     from sim.simulator import blueprints
+    from sim.simulator.blueprints import ASSETS_DIR
     from sim.simulator.kinect import KinectCamera
-    from sim.simulator.kinect_noise import apply_kinect_noise
+    from sim.simulator.robot import Odometry, OdometryConfig
+    from sim.simulator.step import SimStep
     from sim.simulator.world import build_world
 
     path = Path(path)
@@ -306,89 +347,67 @@ def record_log(cfg: RecordingConfig, path: str | Path, *, progress: bool = False
     bp = blueprints.load_blueprint(ASSETS_DIR / cfg.map)
     vm, graph = bp.vectormap, bp.navgraph
     nodes = _route_nodes(graph, cfg.route)
-    xy = graph.node_xy()
-    p0 = xy[graph.index_of(nodes[0])]
-    p1 = xy[graph.index_of(nodes[1])]
-    heading = cfg.start_heading_rad if math.isfinite(cfg.start_heading_rad) else math.atan2(p1[1] - p0[1], p1[0] - p0[0])
-    start = np.array([p0[0], p0[1], heading])
+    start = _start_pose(cfg, graph, nodes)
     kin = cfg.kinect
     intr = kin.intrinsics
     world = build_world(
         vm, world=cfg.world, robot=cfg.robot, intrinsics=intr, mount=kin.mount,
         furniture=cfg.furniture, people=cfg.people, start_pose=tuple(start),
     )
-    camera = KinectCamera(world.model, world.camera_id, kin)
-    nav = Navigator(graph, cfg.navigator, cfg.avoidance, walls=np.asarray(vm.segments))
-    frame_dt = 1.0 / kin.rate_hz
-    n_sub = max(1, round(frame_dt / cfg.world.timestep_s))
-    max_frames = int(math.ceil(cfg.max_duration_s / frame_dt)) + 1
-    ss = np.random.SeedSequence(cfg.seed)
-    noise_base, fspf_base = (int(v) for v in np.random.default_rng(ss).integers(0, 2**31, size=2))
-
-    wc_tmp = _working_copy(path).with_name(f"{_working_copy(path).name}.{os.getpid()}.tmp")
-    hold = [np.lib.format.open_memmap(wc_tmp, mode="w+", dtype=np.uint16, shape=(max_frames, intr.height, intr.width))]
-    t_l: list[float] = []
-    poses: list[np.ndarray] = []
-    people: list[np.ndarray] = []
+    noise_seed, fspf_seed = (int(v) for v in np.random.default_rng(np.random.SeedSequence(cfg.seed)).integers(0, 2**31, size=2))
+    # The log keeps the true increments (replays add their own noise): noise-free odometry.
+    odometry = Odometry(OdometryConfig(0.0, 0.0, 0.0), np.random.default_rng(0), start)
+    sim = SimStep(world, KinectCamera(world.model, world.camera_id, kin), odometry, noise_seed)
+    scfg = StackConfig(kin.depth_camera(), cfg.fspf, LocalizationConfig(enabled=False), cfg.avoidance, cfg.navigator)
+    stack = RobotStack(vm, graph, scfg, rng=np.random.default_rng(0), fspf_seed=fspf_seed)
+    stack.reset(start)
+    max_frames = int(math.ceil(cfg.max_duration_s / sim.frame_dt)) + 1
+    rec = _Recording(path, max_frames, (intr.height, intr.width))
     events: list[dict] = []
     collisions = 0
-
-    def capture(k: int) -> np.ndarray:
-        d = apply_kinect_noise(camera.render_clean(world.data), intr, kin.noise, (noise_base + k) % (2**31))
-        np.multiply(d, 1000.0, out=d)
-        np.rint(d, out=d)
-        hold[0][k] = np.clip(d, 0, 65535).astype(np.uint16)
-        pose = world.robot.pose(world.data)
-        t_l.append(float(world.data.time))
-        poses.append(pose)
-        people.append(world.people.positions().astype(np.float32).reshape(-1, 3))
-        return hold[0][k]
-
-    near_field = NearField(intr, kin.mount, kin.noise.min_range_m, cfg.avoidance.robot_radius_m, cfg.avoidance.near_field)
-
-    def sense(k: int, depth_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        depth = depth_mm.astype(np.float32) * np.float32(0.001)
-        planes = fspf(depth, intr, cfg.fspf, seed=fspf_base + k, mount=kin.mount)
-        return obstacle_points(np.vstack([planes.points, planes.outliers]), cfg.avoidance), near_field.sight_lines(depth)
-
     bar = None
     if progress:
         from tqdm import tqdm
 
         bar = tqdm(total=max_frames, unit="frame", desc="recording the drive", leave=False, file=sys.stderr)
     wall0 = time.perf_counter()
-    obstacles, near = sense(0, capture(0))
+    stack.perceive(rec.add(sim.first(), world.people.positions()))
     current = 1
-    nav.set_goal(nodes[current], start, 0.0)
+    stack.set_goal(nodes[current], 0.0, start)
     leg_start = 0.0
-    k = 1
     try:
-        while k < max_frames:
+        while len(rec.t) < max_frames:
             t = float(world.data.time)
             pose = world.robot.pose(world.data)
-            cmd = nav.command(pose, obstacles, t, near)
+            cmd = stack.decide(t, pose)
             if cmd.state == "arrived" or t - leg_start > cfg.waypoint_timeout_s:
                 events.append({"t": round(t, 3), "node": nodes[current], "status": "reached" if cmd.state == "arrived" else "timeout"})
                 current += 1
                 if current >= len(nodes):
                     break
-                nav.set_goal(nodes[current], pose, t)
+                stack.set_goal(nodes[current], t, pose)
                 leg_start = t
-                cmd = nav.command(pose, obstacles, t, near)
-            world.robot.command(world.data, cmd.velocity, frame_dt)
-            world.people.update(world.data, t + frame_dt, pose[:2])
-            collisions += world.step_frame(n_sub)
-            obstacles, near = sense(k, capture(k))
-            k += 1
+                cmd = stack.decide(t, pose)
+            frame = sim.step(cmd.velocity)
+            collisions += frame.new_contacts
+            stack.perceive(rec.add(frame, world.people.positions()))
             if bar is not None:
                 bar.update(1)
     finally:
         if bar is not None:
             bar.close()
-        camera.close()
-    n = len(t_l)
-    hold[0].flush()
-    poses_a = np.array(poses)
+        sim.camera.close()
+    meta_extra = {"events": events, "collisions": collisions, "completed": current >= len(nodes), "record_wall_s": round(time.perf_counter() - wall0, 2)}
+    _write_log(cfg, path, rec, nodes, meta_extra)
+    return path
+
+
+def _write_log(cfg: RecordingConfig, path: Path, rec: _Recording, nodes: list[int], extra: dict) -> None:
+    """The compressed log and its uncompressed working copy, each renamed into place."""
+    kin = cfg.kinect
+    n = len(rec.t)
+    rec.depth.flush()
+    poses_a = np.array(rec.poses)
     inc = np.zeros((n, 3))
     for i in range(1, n):
         inc[i] = relative_pose(poses_a[i - 1], poses_a[i])
@@ -397,27 +416,26 @@ def record_log(cfg: RecordingConfig, path: str | Path, *, progress: bool = False
         "key": cfg.key(),
         "map": cfg.map,
         "route_nodes": nodes,
-        "intrinsics": to_dict(intr),
+        "intrinsics": to_dict(kin.intrinsics),
         "mount": to_dict(kin.mount),
         "rate_hz": kin.rate_hz,
         "frames": n,
-        "duration_s": round(t_l[-1] - t_l[0], 4),
+        "duration_s": round(rec.t[-1] - rec.t[0], 4),
         "distance_m": round(float(np.hypot(*np.diff(poses_a[:, :2], axis=0).T).sum()), 3),
-        "collisions": collisions,
-        "events": events,
-        "completed": current >= len(nodes),
-        "record_wall_s": round(time.perf_counter() - wall0, 2),
+        "collisions": extra["collisions"],
+        "events": extra["events"],
+        "completed": extra["completed"],
+        "record_wall_s": extra["record_wall_s"],
         "config": _jsonable(to_dict(cfg)),
     }
-    depth = hold[0][:n]
+    depth = rec.depth[:n]
     tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp.npz")
     _write_npz(
-        tmp, depth_mm=depth, t=np.array(t_l), poses=poses_a, increments=inc,
-        people=np.array(people, dtype=np.float32), meta=np.array(json.dumps(meta)),
+        tmp, depth_mm=depth, t=np.array(rec.t), poses=poses_a, increments=inc,
+        people=np.array(rec.people, dtype=np.float32), meta=np.array(json.dumps(meta)),
     )
     del depth
-    hold.clear()  # close the memory map before the file is truncated
-    _truncate_npy(wc_tmp, n)
-    os.replace(wc_tmp, _working_copy(path))
+    rec.depth = None  # close the memory map before the file is truncated
+    _truncate_npy(rec.tmp, n)
+    os.replace(rec.tmp, _working_copy(path))
     os.replace(tmp, path)
-    return path

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import os
+import time
 import warnings
 from dataclasses import dataclass, field
 
@@ -18,7 +19,7 @@ import mujoco
 import numba
 import numpy as np
 
-from autonomy.camera import CameraIntrinsics, CameraMount, pixel_rays
+from autonomy.camera import CameraIntrinsics, CameraMount, DepthCamera, pixel_rays
 from autonomy.errors import InputError
 from sim.simulator.kinect_noise import KinectNoiseConfig, apply_kinect_noise
 from sim.simulator.robot import ROBOT_GEOM_GROUP
@@ -62,6 +63,11 @@ class KinectConfig:
                 f"kinect.render_far_m: expected 0 (from the noise model's range) or more than "
                 f"kinect.noise.min_range_m ({self.noise.min_range_m} m), got {self.render_far_m!r}"
             )
+
+    def depth_camera(self) -> DepthCamera:
+        """The camera as the robot-side stack knows it: the same intrinsics, mount and
+        valid range (the noise model's), so the two cannot disagree."""
+        return DepthCamera(self.intrinsics, self.mount, float(self.noise.min_range_m), float(self.noise.max_range_m))
 
     def far_m(self) -> float:
         """The render's far clipping distance in metres (inf = the model's own)."""
@@ -274,6 +280,8 @@ class KinectCamera:
         self.cfg = cfg
         self._backend = None
         self._clean = np.zeros((cfg.intrinsics.height, cfg.intrinsics.width), dtype=np.float32)
+        self.last_render_s = 0.0
+        self.last_noise_s = 0.0
 
     @property
     def backend_name(self) -> str:
@@ -291,9 +299,14 @@ class KinectCamera:
         return self.backend.render(data, self._clean)
 
     def capture(self, data: mujoco.MjData, seed: int, out: np.ndarray | None = None) -> np.ndarray:
-        """A Kinect frame: clean render followed by the noise model, seeded."""
+        """A Kinect frame: clean render followed by the noise model, seeded. The seconds
+        each took are kept in ``last_render_s`` and ``last_noise_s``."""
+        t0 = time.perf_counter()
         clean = self.render_clean(data)
-        return apply_kinect_noise(clean, self.cfg.intrinsics, self.cfg.noise, seed, out=out)
+        t1 = time.perf_counter()
+        depth = apply_kinect_noise(clean, self.cfg.intrinsics, self.cfg.noise, seed, out=out)
+        self.last_render_s, self.last_noise_s = t1 - t0, time.perf_counter() - t1
+        return depth
 
     def close(self) -> None:
         if self._backend is not None:

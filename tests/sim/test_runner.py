@@ -54,10 +54,10 @@ def test_same_seed_same_run(tmp_path: Path) -> None:
 
 
 def test_interrupted_run_still_writes_its_report(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    import sim.experiments.runner as runner
+    import sim.simulator.kinect as kinect
 
     calls = {"n": 0}
-    real = runner.apply_kinect_noise
+    real = kinect.apply_kinect_noise
 
     def flaky(*args, **kwargs):
         calls["n"] += 1
@@ -65,7 +65,7 @@ def test_interrupted_run_still_writes_its_report(tmp_path: Path, monkeypatch: py
             raise KeyboardInterrupt
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(runner, "apply_kinect_noise", flaky)
+    monkeypatch.setattr(kinect, "apply_kinect_noise", flaky)
     rep = run_scenario(_short_demo(), tmp_path, seed=1, progress=False)
     assert rep["interrupted"] is True
     assert rep["metrics"]["frames"] == 18  # call 1 is the frame captured before the loop

@@ -241,7 +241,7 @@ def tick(run: Run, recorder) -> bool:
     obstacles = stack.perception.obstacles
     frame = run.sim.step(nav.velocity)
     note_contacts(run, frame, pose, t, nav, control_pose, obstacles)
-    stack.perceive(frame.depth, seed=run.seeds.fspf_seed + run.frames)
+    stack.perceive(frame.depth)
     run.fspf_counts.append(_fspf_counts(stack))
     stack.localize(frame.increment)
     check_localization(run, frame)

@@ -33,7 +33,7 @@ class EpisodeSeeds:
     localization: np.random.Generator
     """CGR's sampling (the robot stack)."""
     noise_seed: int
-    """Base of the per-frame Kinect noise seeds."""
+    """Base of the per-frame Kinect noise seeds (frame k uses ``noise_seed + k``)."""
     fspf_seed: int
     """Base of the per-frame FSPF seeds (the robot stack)."""
 
@@ -78,7 +78,7 @@ class SimStep:
         self.frames = 0
 
     def _capture(self) -> tuple[np.ndarray, float, float]:
-        seed = (self.noise_seed + max(0, self.frames - 1)) % NOISE_SEED_MODULUS
+        seed = (self.noise_seed + self.frames) % NOISE_SEED_MODULUS
         self.frames += 1
         depth = self.camera.capture(self.world.data, seed)
         return depth, self.camera.last_render_s, self.camera.last_noise_s

@@ -90,6 +90,16 @@ def frame_record(
     }
 
 
+_ROBOT_COLOR = "#1f77b4"
+_PERSON_COLOR = "#d62728"
+_COMMAND_COLOR = "#2ca02c"
+_MAX_PANELS = 12
+_VIEW_HALF_M = 3.0
+"""Each panel shows this far round the contact."""
+_PERSON_NEAR_M = 4.0
+"""A person's track is drawn when it passes this close to the contact."""
+
+
 def render_incidents(
     incidents: list[dict],
     walls: np.ndarray,
@@ -106,56 +116,81 @@ def render_incidents(
 
     matplotlib.use("Agg")
     from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.collections import LineCollection
     from matplotlib.figure import Figure
-    from matplotlib.patches import Circle
 
-    shown = incidents[:12]
+    shown = incidents[:_MAX_PANELS]
     cols = min(3, len(shown))
     rows = int(math.ceil(len(shown) / cols))
     fig = Figure(figsize=(4.2 * cols, 4.2 * rows))
     FigureCanvasAgg(fig)
     segs = np.asarray(walls, dtype=np.float64).reshape(-1, 4)
     for k, inc in enumerate(shown):
-        ax = fig.add_subplot(rows, cols, k + 1)
-        ev, tr = inc["event"], inc["trace"]
-        cx, cy = float(ev["x"]), float(ev["y"])
-        ax.add_collection(LineCollection(segs.reshape(-1, 2, 2), colors="k", linewidths=1.2))
-        if tr:
-            xy = np.array([f["truth"][:2] for f in tr])
-            ax.plot(xy[:, 0], xy[:, 1], "-", color="#1f77b4", lw=1.5, label="robot")
-            est = np.array([f["estimate"][:2] for f in tr])
-            ax.plot(est[:, 0], est[:, 1], ":", color="#1f77b4", lw=1.0, label="estimate")
-            ppl = np.array([f["people"] for f in tr if f["people"]])
-            if ppl.size:
-                for j in range(ppl.shape[1]):
-                    if np.min(np.hypot(ppl[:, j, 0] - cx, ppl[:, j, 1] - cy)) < 4.0:
-                        ax.plot(ppl[:, j, 0], ppl[:, j, 1], "-", color="#d62728", lw=1.0)
-                        ax.add_patch(Circle((ppl[-1, j, 0], ppl[-1, j, 1]), person_radius_m, fill=False, color="#d62728", lw=1.2))
-                        ax.text(ppl[-1, j, 0], ppl[-1, j, 1], f" p{j}", fontsize=7, color="#d62728", clip_on=True)
-            for f in tr[:: max(1, len(tr) // 12)]:
-                th = f["truth"][2]
-                vx, vy = f["cmd"][0], f["cmd"][1]
-                wx, wy = math.cos(th) * vx - math.sin(th) * vy, math.sin(th) * vx + math.cos(th) * vy
-                ax.arrow(f["truth"][0], f["truth"][1], wx, wy, width=0.01, color="#2ca02c", length_includes_head=True)
-        ax.add_patch(Circle((cx, cy), robot_radius_m, fill=False, color="#1f77b4", lw=1.5))
-        h = math.radians(ev.get("heading_deg", 0.0))
-        ax.plot([cx, cx + robot_radius_m * math.cos(h)], [cy, cy + robot_radius_m * math.sin(h)], color="#1f77b4")
-        b = ev.get("bearing_deg")
-        if b is not None and math.isfinite(b):
-            a = h + math.radians(b)
-            ax.plot(cx + robot_radius_m * math.cos(a), cy + robot_radius_m * math.sin(a), "x", color="k", ms=8)
-        ax.set_xlim(cx - 3.0, cx + 3.0)
-        ax.set_ylim(cy - 3.0, cy + 3.0)
-        ax.set_aspect("equal")
-        seen = ev.get("person_in_view_s_ago")
-        ax.set_title(
-            f"t={ev['t']:.0f}s {','.join(ev.get('bodies', []))} {ev.get('nav_state', '')}"
-            + (f"\nseen {seen:.1f}s ago" if seen is not None else ""),
-            fontsize=8,
-        )
-        ax.tick_params(labelsize=7)
+        _draw_incident(fig.add_subplot(rows, cols, k + 1), inc, segs, robot_radius_m, person_radius_m)
     fig.tight_layout()
     out = Path(out_png)
     fig.savefig(out, dpi=dpi)
     return out
+
+
+def _draw_incident(ax, inc: dict, segs: np.ndarray, robot_radius_m: float, person_radius_m: float) -> None:
+    """One incident's panel, centred on the contact."""
+    from matplotlib.collections import LineCollection
+
+    ev, tr = inc["event"], inc["trace"]
+    cx, cy = float(ev["x"]), float(ev["y"])
+    ax.add_collection(LineCollection(segs.reshape(-1, 2, 2), colors="k", linewidths=1.2))
+    if tr:
+        _draw_tracks(ax, tr, cx, cy, person_radius_m)
+        _draw_commands(ax, tr)
+    _draw_contact(ax, ev, cx, cy, robot_radius_m)
+    ax.set_xlim(cx - _VIEW_HALF_M, cx + _VIEW_HALF_M)
+    ax.set_ylim(cy - _VIEW_HALF_M, cy + _VIEW_HALF_M)
+    ax.set_aspect("equal")
+    seen = ev.get("person_in_view_s_ago")
+    ax.set_title(
+        f"t={ev['t']:.0f}s {','.join(ev.get('bodies', []))} {ev.get('nav_state', '')}"
+        + (f"\nseen {seen:.1f}s ago" if seen is not None else ""),
+        fontsize=8,
+    )
+    ax.tick_params(labelsize=7)
+
+
+def _draw_tracks(ax, tr: list[dict], cx: float, cy: float, person_radius_m: float) -> None:
+    """The robot's true and estimated tracks, and the tracks of the people who came near
+    the contact (each with its body at the end)."""
+    from matplotlib.patches import Circle
+
+    xy = np.array([f["truth"][:2] for f in tr])
+    ax.plot(xy[:, 0], xy[:, 1], "-", color=_ROBOT_COLOR, lw=1.5, label="robot")
+    est = np.array([f["estimate"][:2] for f in tr])
+    ax.plot(est[:, 0], est[:, 1], ":", color=_ROBOT_COLOR, lw=1.0, label="estimate")
+    ppl = np.array([f["people"] for f in tr if f["people"]])
+    if not ppl.size:
+        return
+    for j in range(ppl.shape[1]):
+        if np.min(np.hypot(ppl[:, j, 0] - cx, ppl[:, j, 1] - cy)) < _PERSON_NEAR_M:
+            ax.plot(ppl[:, j, 0], ppl[:, j, 1], "-", color=_PERSON_COLOR, lw=1.0)
+            ax.add_patch(Circle((ppl[-1, j, 0], ppl[-1, j, 1]), person_radius_m, fill=False, color=_PERSON_COLOR, lw=1.2))
+            ax.text(ppl[-1, j, 0], ppl[-1, j, 1], f" p{j}", fontsize=7, color=_PERSON_COLOR, clip_on=True)
+
+
+def _draw_commands(ax, tr: list[dict]) -> None:
+    """Arrows for the commanded velocity (in world axes) at about a dozen frames."""
+    for f in tr[:: max(1, len(tr) // 12)]:
+        th = f["truth"][2]
+        vx, vy = f["cmd"][0], f["cmd"][1]
+        wx, wy = math.cos(th) * vx - math.sin(th) * vy, math.sin(th) * vx + math.cos(th) * vy
+        ax.arrow(f["truth"][0], f["truth"][1], wx, wy, width=0.01, color=_COMMAND_COLOR, length_includes_head=True)
+
+
+def _draw_contact(ax, ev: dict, cx: float, cy: float, robot_radius_m: float) -> None:
+    """The robot's footprint and heading at the contact, a cross where it was touched."""
+    from matplotlib.patches import Circle
+
+    ax.add_patch(Circle((cx, cy), robot_radius_m, fill=False, color=_ROBOT_COLOR, lw=1.5))
+    h = math.radians(ev.get("heading_deg", 0.0))
+    ax.plot([cx, cx + robot_radius_m * math.cos(h)], [cy, cy + robot_radius_m * math.sin(h)], color=_ROBOT_COLOR)
+    b = ev.get("bearing_deg")
+    if b is not None and math.isfinite(b):
+        a = h + math.radians(b)
+        ax.plot(cx + robot_radius_m * math.cos(a), cy + robot_radius_m * math.sin(a), "x", color="k", ms=8)

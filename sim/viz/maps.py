@@ -55,41 +55,18 @@ def render_map(
     array of world positions.
     """
     out = Path(out_png)
-    segs = vm.segments
-    if vm.n_segments:
-        x0, y0, x1, y1 = vm.extent()
-    else:
-        x0 = y0 = 0.0
-        x1 = y1 = 1.0
+    x0, y0, x1, y1 = vm.extent() if vm.n_segments else (0.0, 0.0, 1.0, 1.0)
     w, h = max(x1 - x0, 1.0), max(y1 - y0, 1.0)
     fig_w = 10.0
     fig_h = min(max(fig_w * h / w + 0.8, 3.0), 16.0)
     fig = Figure(figsize=(fig_w, fig_h), dpi=dpi)
     FigureCanvasAgg(fig)
     ax = fig.add_subplot(1, 1, 1)
-
-    lw = 0.8 if vm.n_segments < 3000 else 0.5
-    ax.add_collection(
-        LineCollection(segs.reshape(-1, 2, 2), colors="black", linewidths=lw, zorder=2, label="walls")
-    )
+    _draw_walls(ax, vm)
     if graph is not None:
-        es = graph.edge_segments()
-        if es.shape[0]:
-            ax.add_collection(
-                LineCollection(es.reshape(-1, 2, 2), colors="#9ecae1", linewidths=0.6, zorder=1)
-            )
-        xy = graph.node_xy()
-        ax.plot(xy[:, 0], xy[:, 1], linestyle="none", marker="o", markersize=1.5,
-                color="#6baed6", zorder=1, label="nav graph")
-    for k, (name, traj) in enumerate((trajectories or {}).items()):
-        p = _xy(name, traj, "trajectory")
-        ax.plot(p[:, 0], p[:, 1], color=_TRAJ_COLORS[k % len(_TRAJ_COLORS)], linewidth=1.2,
-                zorder=3, label=name)
-    for k, (name, pts) in enumerate((markers or {}).items()):
-        p = _xy(name, pts, "marker set")
-        ax.plot(p[:, 0], p[:, 1], linestyle="none", marker="x", markersize=6, markeredgewidth=1.5,
-                color=_MARKER_COLORS[k % len(_MARKER_COLORS)], zorder=4, label=name)
-
+        _draw_graph(ax, graph)
+    _draw_trajectories(ax, trajectories or {})
+    _draw_markers(ax, markers or {})
     pad = 0.02 * max(w, h)
     ax.set_xlim(x0 - pad, x1 + pad)
     ax.set_ylim(y0 - pad, y1 + pad)
@@ -103,3 +80,37 @@ def render_map(
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=dpi, format="png")
     return out
+
+
+def _draw_walls(ax, vm: VectorMap) -> None:
+    """The walls as one LineCollection, thinner on large maps."""
+    lw = 0.8 if vm.n_segments < 3000 else 0.5
+    ax.add_collection(
+        LineCollection(vm.segments.reshape(-1, 2, 2), colors="black", linewidths=lw, zorder=2, label="walls")
+    )
+
+
+def _draw_graph(ax, graph: NavGraph) -> None:
+    """The nav graph's edges and nodes, light, under the walls."""
+    es = graph.edge_segments()
+    if es.shape[0]:
+        ax.add_collection(
+            LineCollection(es.reshape(-1, 2, 2), colors="#9ecae1", linewidths=0.6, zorder=1)
+        )
+    xy = graph.node_xy()
+    ax.plot(xy[:, 0], xy[:, 1], linestyle="none", marker="o", markersize=1.5,
+            color="#6baed6", zorder=1, label="nav graph")
+
+
+def _draw_trajectories(ax, trajectories: dict[str, np.ndarray]) -> None:
+    for k, (name, traj) in enumerate(trajectories.items()):
+        p = _xy(name, traj, "trajectory")
+        ax.plot(p[:, 0], p[:, 1], color=_TRAJ_COLORS[k % len(_TRAJ_COLORS)], linewidth=1.2,
+                zorder=3, label=name)
+
+
+def _draw_markers(ax, markers: dict[str, np.ndarray]) -> None:
+    for k, (name, pts) in enumerate(markers.items()):
+        p = _xy(name, pts, "marker set")
+        ax.plot(p[:, 0], p[:, 1], linestyle="none", marker="x", markersize=6, markeredgewidth=1.5,
+                color=_MARKER_COLORS[k % len(_MARKER_COLORS)], zorder=4, label=name)

@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
+from autonomy.constants import KINECT_MAX_RANGE_M, ROBOT_RADIUS_M
 from autonomy.errors import InputError
 from autonomy.nearfield import NearFieldConfig
 
@@ -47,11 +48,11 @@ from autonomy.nearfield import NearFieldConfig
 class AvoidanceConfig:
     """Obstacle avoidance parameters (seed 000, Section V)."""
 
-    robot_radius_m: float = 0.3
+    robot_radius_m: float = ROBOT_RADIUS_M
     """r: robot radius (Eq. 3-4)."""
     safety_margin_m: float = 0.1
     """Clearance added to r for the corridor test and open length (Eq. 3-4)."""
-    max_range_m: float = 4.0
+    max_range_m: float = KINECT_MAX_RANGE_M
     """Cap on the open path length d(theta): the depth sensor's range."""
     n_directions: int = 61
     """Number of candidate directions theta in the fan."""

@@ -9,12 +9,13 @@ Depth images are planar depth (distance along the optical axis) in float32 metre
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numba
 import numpy as np
 
-from autonomy.errors import InputError
+from autonomy.constants import KINECT_FOCAL_PX, KINECT_MAX_RANGE_M, KINECT_MIN_RANGE_M
+from autonomy.errors import InputError, require_positive
 
 #: Rotation taking optical-frame vectors (x right, y down, z forward) to a level
 #: robot-style frame (x forward, y left, z up).
@@ -36,9 +37,9 @@ class CameraIntrinsics:
     """Image width in pixels."""
     height: int = 480
     """Image height in pixels."""
-    fx: float = 580.0
+    fx: float = KINECT_FOCAL_PX
     """Focal length along x in pixels."""
-    fy: float = 580.0
+    fy: float = KINECT_FOCAL_PX
     """Focal length along y in pixels."""
     cx: float = 319.5
     """Principal point x (pixel-centre coordinates: the first pixel's centre is 0)."""
@@ -109,6 +110,44 @@ class CameraMount:
         t[:3, :3] = self.rotation()
         t[:3, 3] = self.translation()
         return t
+
+
+@dataclass(frozen=True)
+class DepthCamera:
+    """The depth camera as the robot-side stack knows it: intrinsics, mount, valid range."""
+
+    intrinsics: CameraIntrinsics = field(default_factory=CameraIntrinsics)
+    """Pinhole intrinsics of the depth image."""
+    mount: CameraMount = field(default_factory=CameraMount)
+    """Where the camera sits on the robot."""
+    min_range_m: float = KINECT_MIN_RANGE_M
+    """Nothing closer than this is measured."""
+    max_range_m: float = KINECT_MAX_RANGE_M
+    """Nor anything farther than this."""
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.intrinsics, CameraIntrinsics):
+            raise InputError(f"camera.intrinsics: expected CameraIntrinsics, got {type(self.intrinsics).__name__}")
+        if not isinstance(self.mount, CameraMount):
+            raise InputError(f"camera.mount: expected CameraMount, got {type(self.mount).__name__}")
+        require_positive(self, "camera.", "min_range_m")
+        hi = self.max_range_m
+        if isinstance(hi, bool) or not (isinstance(hi, (int, float)) and hi > self.min_range_m):
+            raise InputError(f"camera.max_range_m: expected a number above min_range_m ({self.min_range_m!r}), got {hi!r}")
+
+    @property
+    def fov_h_rad(self) -> float:
+        """Horizontal field of view (from the intrinsics)."""
+        return self.intrinsics.fov_h_rad
+
+    @property
+    def forward_m(self) -> float:
+        """Optical centre ahead of the base centre (from the mount)."""
+        return float(self.mount.translation()[0])
+
+
+KINECT_V1 = DepthCamera()
+"""The Kinect v1 on the CoBot-style mount: every default above (a default argument)."""
 
 
 @numba.njit(cache=True)

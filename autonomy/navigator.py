@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from autonomy.avoidance import AvoidanceConfig, AvoidanceResult, choose_direction
+from autonomy.camera import KINECT_V1, DepthCamera
 from autonomy.errors import InputError, require_non_negative, require_positive
 from autonomy.geometry import crosses_any, point_segment_projection, wrap_angle
 from autonomy.nearfield import line_points
@@ -160,14 +161,6 @@ class NavigatorConfig:
     memory_radius_m: float = 2.0
     """Only obstacles sensed within this distance of the robot are remembered: the
     blind zone beside and right in front of the robot is what the memory covers."""
-    camera_fov_rad: float = math.radians(57.8)
-    """Horizontal field of view of the camera (for the memory's in-view test)."""
-    camera_min_range_m: float = 0.8
-    """The camera sees nothing closer than this."""
-    camera_max_range_m: float = 4.0
-    """... nor farther than this."""
-    camera_forward_m: float = 0.22
-    """Camera position ahead of the base centre."""
 
     def __post_init__(self) -> None:
         require_positive(
@@ -212,7 +205,11 @@ class NavCommand:
 
 
 class Navigator:
-    """Drives to nav-graph goals on a pose estimate, avoiding sensed obstacles."""
+    """Drives to nav-graph goals on a pose estimate, avoiding sensed obstacles.
+
+    ``camera``: the depth camera's field of view, mount and valid range, which decide
+    what the robot can see now (the obstacle memory, the map's blind spots, look-first).
+    """
 
     def __init__(
         self,
@@ -220,10 +217,12 @@ class Navigator:
         cfg: NavigatorConfig = NavigatorConfig(),
         avoid: AvoidanceConfig = AvoidanceConfig(),
         walls: np.ndarray | None = None,
+        camera: DepthCamera = KINECT_V1,
     ) -> None:
         self.graph = graph
         self.cfg = cfg
         self.avoid = avoid
+        self.camera = camera
         self.walls = None if walls is None else np.asarray(walls, dtype=np.float64).reshape(-1, 4)
         self._wall_pts = None if self.walls is None else wall_points(self.walls, WALL_STEP_M)
         self._local = np.zeros((0, 2))
@@ -348,7 +347,7 @@ class Navigator:
         w = self.map_points(pose, cfg.map_blind_spots_m)
         if not len(w):
             return w
-        return w[~in_camera_view(w[:, 0] - cfg.camera_forward_m, w[:, 1], cfg)]
+        return w[~in_camera_view(w[:, 0] - self.camera.forward_m, w[:, 1], self.camera)]
 
     def _point_at(self, s: float) -> np.ndarray:
         s = min(max(s, 0.0), float(self._cum[-1]))
@@ -367,7 +366,7 @@ class Navigator:
         persist for ``memory_s``. Points stay remembered for ``backoff_memory_s`` for
         the back-off's check of the way back only (:meth:`_backoff_velocity`).
         """
-        cfg = self.cfg
+        cfg, cam = self.cfg, self.camera
         obs = np.asarray(obstacles, dtype=np.float64).reshape(-1, 2)
         if cfg.memory_s <= 0:
             self._mem_all = np.zeros((0, 2))
@@ -385,12 +384,12 @@ class Navigator:
             cfg.memory_s,
             cfg.memory_radius_m + _MEMORY_KEEP_MARGIN_M,
             cfg.memory_radius_m,
-            cfg.camera_forward_m,
+            cam.forward_m,
             # A little inside the view's edges, so what is replaced was really seen.
-            0.5 * 0.9 * cfg.camera_fov_rad,
-            cfg.camera_min_range_m + 0.1,
-            cfg.camera_max_range_m - 0.2,
-            cfg.camera_min_range_m + 0.1,
+            0.5 * 0.9 * cam.fov_h_rad,
+            cam.min_range_m + 0.1,
+            cam.max_range_m - 0.2,
+            cam.min_range_m + 0.1,
             self.avoid.radius_m + 0.2,
         )
         self._mem_all = out
@@ -401,9 +400,9 @@ class Navigator:
         if self.cfg.memory_s <= 0 or not len(obstacles):
             return False
         o = np.asarray(obstacles, dtype=np.float64).reshape(-1, 2)
-        rng = np.hypot(o[:, 0] - self.cfg.camera_forward_m, o[:, 1])
+        rng = np.hypot(o[:, 0] - self.camera.forward_m, o[:, 1])
         ahead = (o[:, 0] > 0.0) & (np.abs(o[:, 1]) < self.avoid.radius_m)
-        return bool(np.any(ahead & (rng < self.cfg.camera_min_range_m + 0.1)))
+        return bool(np.any(ahead & (rng < self.camera.min_range_m + 0.1)))
 
     def map_points(self, pose: np.ndarray, radius_m: float) -> np.ndarray:
         """The map's walls within ``radius_m`` of the pose as points every
@@ -656,7 +655,7 @@ class Navigator:
             return NavCommand(np.array([0.0, 0.0, turn]), "blocked", carrot, desired, res.theta_star, res.open_length_m, fan)
         th = res.theta_star
         omega = float(np.clip(cfg.heading_gain * th, -cfg.max_turn_rate_rad_s, cfg.max_turn_rate_rad_s))
-        if abs(th) > 0.5 * cfg.camera_fov_rad:
+        if abs(th) > 0.5 * self.camera.fov_h_rad:
             if cfg.look_first:
                 return NavCommand(np.array([0.0, 0.0, omega]), "turning", carrot, desired, th, res.open_length_m, fan)
             if cfg.unseen_speed_mps > 0:
@@ -686,16 +685,16 @@ def wall_points(walls: np.ndarray, step_m: float) -> np.ndarray:
 
 
 def in_camera_view(
-    x: np.ndarray, y: np.ndarray, cfg: NavigatorConfig, fov_fraction: float = 1.0, near_pad_m: float = 0.0, far_pad_m: float = 0.0
+    x: np.ndarray, y: np.ndarray, camera: DepthCamera, fov_fraction: float = 1.0, near_pad_m: float = 0.0, far_pad_m: float = 0.0
 ) -> np.ndarray:
     """Which points (x, y relative to the camera, robot axes) lie inside the camera's
     horizontal view: within ``fov_fraction`` of its field of view and between its minimum
     and maximum range (narrowed by the pads). Occlusion is not considered."""
     r = np.hypot(x, y)
     return (
-        (np.abs(np.arctan2(y, x)) < 0.5 * fov_fraction * cfg.camera_fov_rad)
-        & (r > cfg.camera_min_range_m + near_pad_m)
-        & (r < cfg.camera_max_range_m - far_pad_m)
+        (np.abs(np.arctan2(y, x)) < 0.5 * fov_fraction * camera.fov_h_rad)
+        & (r > camera.min_range_m + near_pad_m)
+        & (r < camera.max_range_m - far_pad_m)
     )
 
 

@@ -31,9 +31,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from autonomy.camera import CameraIntrinsics, CameraMount
+from autonomy.constants import KINECT_FOCAL_PX
 from autonomy.errors import InputError, require_int, require_positive
 
-REFERENCE_FX_PX = 580.0
+REFERENCE_FX_PX = KINECT_FOCAL_PX
 """Focal length (px) that ``min_run_px`` is given for (the Kinect v1, DESIGN.md)."""
 
 

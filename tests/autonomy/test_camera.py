@@ -9,7 +9,14 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from autonomy.camera import CameraIntrinsics, CameraMount, backproject, pixel_rays, transform_points
+from autonomy.camera import (
+    CameraIntrinsics,
+    CameraMount,
+    DepthCamera,
+    backproject,
+    pixel_rays,
+    transform_points,
+)
 from autonomy.errors import InputError
 
 
@@ -64,3 +71,28 @@ def test_bad_shapes_and_intrinsics_are_errors() -> None:
         backproject(np.zeros((10, 10), np.float32), CameraIntrinsics())
     with pytest.raises(InputError, match="fx"):
         CameraIntrinsics(fx=0.0)
+
+
+def test_depth_camera_derives_field_of_view_and_forward_offset() -> None:
+    cam = DepthCamera()
+    assert cam.fov_h_rad == CameraIntrinsics().fov_h_rad == 2.0 * math.atan(320.0 / 580.0)
+    assert cam.forward_m == 0.22 and (cam.min_range_m, cam.max_range_m) == (0.8, 4.0)
+    wide = DepthCamera(intrinsics=CameraIntrinsics(fx=320.0, fy=320.0), mount=CameraMount(forward_m=0.1))
+    assert wide.fov_h_rad == pytest.approx(math.pi / 2) and wide.forward_m == 0.1
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "field"),
+    [
+        ({"min_range_m": 4.0, "max_range_m": 4.0}, "camera.max_range_m"),
+        ({"min_range_m": 5.0}, "camera.max_range_m"),
+        ({"max_range_m": float("nan")}, "camera.max_range_m"),
+        ({"min_range_m": 0.0}, "camera.min_range_m"),
+        ({"min_range_m": -0.5}, "camera.min_range_m"),
+        ({"intrinsics": "kinect"}, "camera.intrinsics"),
+    ],
+)
+def test_depth_camera_rejects_a_range_that_is_not_increasing(kwargs: dict, field: str) -> None:
+    with pytest.raises(InputError, match=field) as err:
+        DepthCamera(**kwargs)
+    assert "\n" not in str(err.value)

@@ -7,8 +7,9 @@ import math
 import numpy as np
 import pytest
 
+from autonomy.camera import DepthCamera
 from autonomy.errors import InputError
-from autonomy.navigator import Navigator, NavigatorConfig
+from autonomy.navigator import Navigator, NavigatorConfig, in_camera_view
 from autonomy.vectormap import NavEdge, NavGraph, NavNode
 
 
@@ -95,7 +96,7 @@ def test_backs_off_until_a_remembered_obstacle_in_the_blind_zone_is_in_view() ->
         cmd = nav.command(np.array([x, 0.0, 0.0]), np.zeros((0, 2)), t)
     # It backed off past backoff_time_s, until the wall's place came into view (and was
     # seen empty), then drove on.
-    assert t > 0.5 and 0.4 - x > NavigatorConfig().camera_min_range_m + NavigatorConfig().camera_forward_m
+    assert t > 0.5 and 0.4 - x > DepthCamera().min_range_m + DepthCamera().forward_m
     assert cmd.state == "driving"
 
 
@@ -201,15 +202,14 @@ def test_backs_off_away_from_a_wall_behind_it_and_not_into_one() -> None:
 
 
 def test_in_camera_view_is_the_cone_between_the_ranges() -> None:
-    from autonomy.navigator import in_camera_view
 
-    cfg = NavigatorConfig()
+    cam = DepthCamera()
     ang = np.radians([0.0, 0.0, 0.0, 28.0, 30.0, -28.0, 180.0])
     rng = np.array([2.0, 0.5, 4.5, 2.0, 2.0, 2.0, 2.0])
-    got = in_camera_view(rng * np.cos(ang), rng * np.sin(ang), cfg)
+    got = in_camera_view(rng * np.cos(ang), rng * np.sin(ang), cam)
     assert got.tolist() == [True, False, False, True, False, True, False]
     # The memory's narrower test: 28 degrees is outside 90% of the +-28.9 degree view.
-    assert not in_camera_view(np.array([2 * math.cos(math.radians(28))]), np.array([2 * math.sin(math.radians(28))]), cfg, 0.9)[0]
+    assert not in_camera_view(np.array([2 * math.cos(math.radians(28))]), np.array([2 * math.sin(math.radians(28))]), cam, 0.9)[0]
 
 
 def l_graph() -> NavGraph:
@@ -383,3 +383,18 @@ def test_backs_off_clear_of_furniture_seen_long_before() -> None:
         assert len(nav.remember(turned, np.zeros((0, 2)), 10.0)) == 0  # forgotten by the avoidance
         v = nav._backoff_velocity(turned, np.zeros((0, 2)))
         assert np.allclose(v[:2], [-0.15, 0.0]) == straight, v
+
+
+def test_the_navigator_sees_through_its_camera() -> None:
+    # A point 1.0 m ahead of the camera is in view of the Kinect (0.8-4 m), not of a
+    # camera that sees nothing closer than 1.5 m: there it is a blind spot.
+    x = np.array([1.0])
+    assert in_camera_view(x, np.zeros(1), DepthCamera())[0]
+    assert not in_camera_view(x, np.zeros(1), DepthCamera(min_range_m=1.5))[0]
+    walls = np.array([[1.3, -1.0, 1.3, 1.0]])  # 1.08 m ahead of the camera
+    near = Navigator(line_graph(), NavigatorConfig(map_blind_spots_m=1.5), walls=walls)
+    far = Navigator(line_graph(), NavigatorConfig(map_blind_spots_m=1.5), walls=walls, camera=DepthCamera(min_range_m=1.5))
+    pose = np.array([0.0, 0.0, 0.0])
+    ahead = lambda pts: pts[np.abs(pts[:, 1]) < 0.05]  # noqa: E731
+    assert len(ahead(near.map_blind_spots(pose))) == 0
+    assert len(ahead(far.map_blind_spots(pose))) > 0

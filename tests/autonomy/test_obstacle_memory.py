@@ -10,6 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from autonomy.camera import DepthCamera
 from autonomy.errors import InputError
 from autonomy.navigator import Navigator, NavigatorConfig, in_camera_view
 from autonomy.vectormap import NavEdge, NavGraph, NavNode
@@ -25,12 +26,12 @@ class ReferenceMemory:
     """Step 1-3 of autonomy/obstacle_memory.py with numpy set operations."""
 
     def __init__(self, cfg: NavigatorConfig, radius_m: float) -> None:
-        self.cfg, self.radius_m = cfg, radius_m
+        self.cfg, self.radius_m, self.camera = cfg, radius_m, DepthCamera()
         self.mem, self.mem_t = np.zeros((0, 2)), np.zeros(0)
 
     def _blind(self, bx: np.ndarray, by: np.ndarray) -> np.ndarray:
-        cfg = self.cfg
-        return (bx > -cfg.camera_forward_m) & (np.hypot(bx, by) <= cfg.camera_min_range_m + 0.1) & (np.abs(by) < self.radius_m + 0.2)
+        cam = self.camera
+        return (bx > -cam.forward_m) & (np.hypot(bx, by) <= cam.min_range_m + 0.1) & (np.abs(by) < self.radius_m + 0.2)
 
     def remember(self, pose: np.ndarray, obs: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
         cfg = self.cfg
@@ -38,9 +39,9 @@ class ReferenceMemory:
         xy = pose[:2]
         if len(self.mem):
             rel = self.mem - xy
-            bx = c * rel[:, 0] + s * rel[:, 1] - cfg.camera_forward_m
+            bx = c * rel[:, 0] + s * rel[:, 1] - self.camera.forward_m
             by = -s * rel[:, 0] + c * rel[:, 1]
-            in_view = in_camera_view(bx, by, cfg, fov_fraction=0.9, near_pad_m=0.1, far_pad_m=0.2)
+            in_view = in_camera_view(bx, by, self.camera, fov_fraction=0.9, near_pad_m=0.1, far_pad_m=0.2)
             near = np.hypot(rel[:, 0], rel[:, 1]) <= cfg.memory_radius_m + 0.5
             young = t - self.mem_t <= max(cfg.memory_s, cfg.backoff_memory_s)
             keep = (young | self._blind(bx, by)) & ~in_view & near
@@ -58,7 +59,7 @@ class ReferenceMemory:
         self.mem_t = np.array([cells[k] for k in keys])
         rel = self.mem - xy
         out = np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]]).reshape(-1, 2)
-        recent = (t - self.mem_t <= cfg.memory_s) | self._blind(out[:, 0] - cfg.camera_forward_m, out[:, 1])
+        recent = (t - self.mem_t <= cfg.memory_s) | self._blind(out[:, 0] - self.camera.forward_m, out[:, 1])
         return out, out[recent]
 
 

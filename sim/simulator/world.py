@@ -94,53 +94,11 @@ def build_spec(
     spec.option.timestep = world.timestep_s
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     spec.option.gravity = [0.0, 0.0, -9.81]
-    vis = spec.visual
-    vis.global_.offwidth = max(640, intrinsics.width)
-    vis.global_.offheight = max(480, intrinsics.height)
-    vis.quality.shadowsize = 0
-    # No multisampling: a resolved MSAA depth buffer holds one sub-sample, not the pixel centre.
-    vis.quality.offsamples = 0
-    # One quad per box face: the default subdivision (for smooth lighting) triples the
-    # render time on a CPU rasteriser and changes nothing in depth.
-    vis.quality.numquads = 1
-
-    xmin, ymin, xmax, ymax = vectormap.extent()
-    m = world.floor_margin_m
-    wb = spec.worldbody
-    wb.add_light(name="sun", pos=[(xmin + xmax) / 2, (ymin + ymax) / 2, 30.0], dir=[0, 0, -1], castshadow=False)
-    wb.add_geom(
-        name="floor",
-        type=mujoco.mjtGeom.mjGEOM_PLANE,
-        size=[(xmax - xmin) / 2 + m, (ymax - ymin) / 2 + m, 1.0],
-        pos=[(xmin + xmax) / 2, (ymin + ymax) / 2, 0.0],
-        rgba=[0.75, 0.75, 0.72, 1.0],
-        contype=0,
-        conaffinity=0,
-    )
-    centres, half, quats = _wall_boxes(np.asarray(vectormap.segments), world.wall_thickness_m, world.wall_height_m)
-    box = mujoco.mjtGeom.mjGEOM_BOX
-    wall_rgba = [0.92, 0.9, 0.85, 1.0]
-    for i in range(len(centres)):
-        wb.add_geom(
-            name=f"wall_{i}",
-            type=box,
-            size=half[i],
-            pos=centres[i],
-            quat=quats[i],
-            rgba=wall_rgba,
-            contype=COLL_STATIC,
-            conaffinity=COLL_ROBOT,
-        )
+    _set_render_quality(spec, intrinsics)
+    _add_floor(spec, vectormap, world)
+    _add_walls(spec, vectormap, world)
     if world.ceiling:
-        wb.add_geom(
-            name="ceiling",
-            type=box,
-            size=[(xmax - xmin) / 2 + m, (ymax - ymin) / 2 + m, 0.05],
-            pos=[(xmin + xmax) / 2, (ymin + ymax) / 2, world.wall_height_m + 0.05],
-            rgba=[0.95, 0.95, 0.95, 1.0],
-            contype=0,
-            conaffinity=0,
-        )
+        _add_ceiling(spec, vectormap, world)
     add_furniture(spec, tuple(furniture))
     add_people(spec, tuple(people))
     body = add_robot(spec, robot)
@@ -151,6 +109,72 @@ def build_spec(
         fovy=math.degrees(intrinsics.fov_v_rad),
     )
     return spec
+
+
+def _set_render_quality(spec: mujoco.MjSpec, intrinsics: CameraIntrinsics) -> None:
+    """An offscreen buffer the camera fits in, and only what depth needs."""
+    vis = spec.visual
+    vis.global_.offwidth = max(640, intrinsics.width)
+    vis.global_.offheight = max(480, intrinsics.height)
+    vis.quality.shadowsize = 0
+    # No multisampling: a resolved MSAA depth buffer holds one sub-sample, not the pixel centre.
+    vis.quality.offsamples = 0
+    # One quad per box face: the default subdivision (for smooth lighting) triples the
+    # render time on a CPU rasteriser and changes nothing in depth.
+    vis.quality.numquads = 1
+
+
+def _footprint(vectormap: VectorMap, margin_m: float) -> tuple[float, float, float, float]:
+    """Centre (x, y) and half sizes (x, y) of the map's extent grown by ``margin_m``."""
+    xmin, ymin, xmax, ymax = vectormap.extent()
+    return (xmin + xmax) / 2, (ymin + ymax) / 2, (xmax - xmin) / 2 + margin_m, (ymax - ymin) / 2 + margin_m
+
+
+def _add_floor(spec: mujoco.MjSpec, vectormap: VectorMap, world: WorldConfig) -> None:
+    """A light overhead and the floor plane (which nothing collides with)."""
+    cx, cy, hx, hy = _footprint(vectormap, world.floor_margin_m)
+    wb = spec.worldbody
+    wb.add_light(name="sun", pos=[cx, cy, 30.0], dir=[0, 0, -1], castshadow=False)
+    wb.add_geom(
+        name="floor",
+        type=mujoco.mjtGeom.mjGEOM_PLANE,
+        size=[hx, hy, 1.0],
+        pos=[cx, cy, 0.0],
+        rgba=[0.75, 0.75, 0.72, 1.0],
+        contype=0,
+        conaffinity=0,
+    )
+
+
+def _add_walls(spec: mujoco.MjSpec, vectormap: VectorMap, world: WorldConfig) -> None:
+    """One box ``wall_<i>`` per map segment, which the robot collides with."""
+    centres, half, quats = _wall_boxes(np.asarray(vectormap.segments), world.wall_thickness_m, world.wall_height_m)
+    wall_rgba = [0.92, 0.9, 0.85, 1.0]
+    for i in range(len(centres)):
+        spec.worldbody.add_geom(
+            name=f"wall_{i}",
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            size=half[i],
+            pos=centres[i],
+            quat=quats[i],
+            rgba=wall_rgba,
+            contype=COLL_STATIC,
+            conaffinity=COLL_ROBOT,
+        )
+
+
+def _add_ceiling(spec: mujoco.MjSpec, vectormap: VectorMap, world: WorldConfig) -> None:
+    """A 10 cm slab resting on the walls (which nothing collides with)."""
+    cx, cy, hx, hy = _footprint(vectormap, world.floor_margin_m)
+    spec.worldbody.add_geom(
+        name="ceiling",
+        type=mujoco.mjtGeom.mjGEOM_BOX,
+        size=[hx, hy, 0.05],
+        pos=[cx, cy, world.wall_height_m + 0.05],
+        rgba=[0.95, 0.95, 0.95, 1.0],
+        contype=0,
+        conaffinity=0,
+    )
 
 
 @dataclass

@@ -20,6 +20,7 @@ import numba
 import numpy as np
 
 from autonomy.camera import CameraIntrinsics, CameraMount, pixel_rays
+from autonomy.geometry import segments_cross_nb
 from autonomy.planner import adjacency
 from autonomy.vectormap import NavGraph
 
@@ -27,18 +28,9 @@ from autonomy.vectormap import NavGraph
 @numba.njit(cache=True, inline="always")
 def _blocked(ax, ay, bx, by, walls, idx, n_idx):  # pragma: no cover - numba
     """True when segment a-b properly crosses one of the walls ``walls[idx[:n_idx]]``."""
-    ux, uy = bx - ax, by - ay
     for k in range(n_idx):
         j = idx[k]
-        cx, cy, dx, dy = walls[j, 0], walls[j, 1], walls[j, 2], walls[j, 3]
-        vx, vy = dx - cx, dy - cy
-        d1 = vx * (ay - cy) - vy * (ax - cx)
-        d2 = vx * (by - cy) - vy * (bx - cx)
-        if d1 * d2 >= 0.0:
-            continue
-        d3 = ux * (cy - ay) - uy * (cx - ax)
-        d4 = ux * (dy - ay) - uy * (dx - ax)
-        if d3 * d4 < 0.0:
+        if segments_cross_nb(ax, ay, bx, by, walls[j, 0], walls[j, 1], walls[j, 2], walls[j, 3]):
             return True
     return False
 

@@ -13,6 +13,7 @@ import mujoco
 import numpy as np
 
 from autonomy.errors import InputError
+from autonomy.geometry import point_segment_distance
 from sim.simulator.robot import COLL_PEOPLE, COLL_ROBOT, COLL_STATIC
 
 FURNITURE_KINDS = ("table", "chair", "box", "cabinet")
@@ -152,22 +153,12 @@ def add_people(spec: mujoco.MjSpec, people: tuple[Person, ...]) -> None:
 
 def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
     """Distance from point p to segment a-b (2D): the scalar form of
-    :func:`point_segment_distance` for the people's per-step checks (a few per person
+    :func:`autonomy.geometry.point_segment_distance` for the people's per-step checks (a few per person
     and frame, where building (N, 4) arrays cost more than the arithmetic)."""
     d = b - a
     L2 = float(d @ d)
     t = 0.0 if L2 <= 0 else min(max(float((p - a) @ d) / L2, 0.0), 1.0)
     return float(np.hypot(*(p - a - t * d)))
-
-
-def point_segment_distance(p: np.ndarray, segs: np.ndarray) -> np.ndarray:
-    """Distance from point p (2,) to each segment (N, 4)."""
-    a, b = segs[:, :2], segs[:, 2:]
-    d = b - a
-    L2 = np.einsum("ij,ij->i", d, d)
-    t = np.clip(np.einsum("ij,ij->i", p - a, d) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
-    q = a + t[:, None] * d
-    return np.hypot(p[0] - q[:, 0], p[1] - q[:, 1])
 
 
 _FAN = tuple(math.radians(a) for a in (30, -30, 60, -60, 90, -90, 120, -120, 150, -150, 180))

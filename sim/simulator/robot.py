@@ -16,6 +16,7 @@ import mujoco
 import numpy as np
 
 from autonomy.errors import InputError
+from autonomy.geometry import compose_pose, relative_pose, wrap_angle
 
 #: Collision bits. Robot collides with static world and people; static world and people
 #: do not test each other (both are kinematic), and nothing tests the floor.
@@ -174,7 +175,7 @@ class RobotHandle:
     def pose(self, data: mujoco.MjData) -> np.ndarray:
         """Ground-truth pose (x, y, yaw) with yaw wrapped to (-pi, pi]."""
         p = data.qpos[self.qpos_adr].copy()
-        p[2] = math.atan2(math.sin(p[2]), math.cos(p[2]))
+        p[2] = wrap_angle(p[2])
         return p
 
     def set_pose(self, data: mujoco.MjData, pose: tuple[float, float, float]) -> None:
@@ -217,23 +218,6 @@ class RobotHandle:
         dw_max = cfg.max_angular_accel_rad_s2 * dt
         self.cmd_world[2] += max(-dw_max, min(dw_max, target[2] - self.cmd_world[2]))
         data.ctrl[self.actuator_ids] = self.cmd_world
-
-
-def relative_pose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Pose b expressed in the frame of pose a: the increment (dx, dy, dtheta)."""
-    c, s = math.cos(a[2]), math.sin(a[2])
-    dx, dy = b[0] - a[0], b[1] - a[1]
-    dth = math.atan2(math.sin(b[2] - a[2]), math.cos(b[2] - a[2]))
-    return np.array([c * dx + s * dy, -s * dx + c * dy, dth])
-
-
-def compose_pose(a: np.ndarray, inc: np.ndarray) -> np.ndarray:
-    """Pose a followed by the robot-frame increment inc."""
-    c, s = math.cos(a[2]), math.sin(a[2])
-    th = a[2] + inc[2]
-    return np.array(
-        [a[0] + c * inc[0] - s * inc[1], a[1] + s * inc[0] + c * inc[1], math.atan2(math.sin(th), math.cos(th))]
-    )
 
 
 class Odometry:

@@ -10,7 +10,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from autonomy.errors import InputError
-from sim.simulator.robot import Odometry, OdometryConfig, compose_pose, relative_pose
+from autonomy.geometry import compose_pose, relative_pose
+from sim.simulator.robot import Odometry, OdometryConfig
 
 finite = st.floats(-50, 50, allow_nan=False)
 angle = st.floats(-math.pi, math.pi, allow_nan=False)

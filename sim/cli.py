@@ -34,16 +34,6 @@ def _map_arg(text: str) -> Path:
     raise InputError(f"{text}: map file not found (give a path or a building in sim/assets)")
 
 
-def _graph_for(map_path: Path) -> Path | None:
-    """The navigation graph that sits beside a map file, if any."""
-    name = map_path.name
-    for suffix in (".vectormap.txt", ".vectormap.json", "_vector.txt", ".txt", ".json"):
-        if name.endswith(suffix):
-            cand = map_path.with_name(name[: -len(suffix)] + ".navigation.json")
-            return cand if cand.exists() else None
-    return None
-
-
 def cmd_map_check(args: argparse.Namespace) -> int:
     import numpy as np
 
@@ -190,7 +180,17 @@ def cmd_scenarios(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="depthnav", description="Depth-camera indoor robot autonomy in simulation.")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    _add_map_commands(sub)
+    _add_snapshot_command(sub)
+    _add_run_command(sub)
+    _add_sweep_command(sub)
+    c = sub.add_parser("scenarios", help="list the scenario files")
+    c.add_argument("--dir", help="directory (default: the project's scenarios/)")
+    c.set_defaults(func=cmd_scenarios)
+    return p
 
+
+def _add_map_commands(sub) -> None:
     pm = sub.add_parser("map", help="inspect, convert and draw vector maps")
     msub = pm.add_subparsers(dest="map_command", required=True, parser_class=_Parser)
     c = msub.add_parser("check", help="validate a map; print segments, extent, wall length")
@@ -206,6 +206,8 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--out", required=True, help="output PNG")
     c.set_defaults(func=cmd_map_render)
 
+
+def _add_snapshot_command(sub) -> None:
     c = sub.add_parser("snapshot", help="the Kinect depth frame the robot sees at a pose")
     c.add_argument("map", help="a vector map file or a building name in sim/assets")
     c.add_argument("--pose", required=True, help="X,Y,THETA in metres and radians")
@@ -215,15 +217,24 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--out", required=True, help="output directory")
     c.set_defaults(func=cmd_snapshot)
 
+
+def _add_scenario_overrides(c: argparse.ArgumentParser) -> None:
+    """``--seed`` and ``--set KEY=VALUE``, as ``run`` and ``sweep`` take them."""
+    c.add_argument("--seed", type=int, help="override the scenario's seed")
+    c.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a scenario key (repeatable)")
+
+
+def _add_run_command(sub) -> None:
     c = sub.add_parser("run", help="run a scenario headless and write its report")
     c.add_argument("scenario", help="a scenario TOML file")
     c.add_argument("--out", help="output directory (default runs/<name>)")
-    c.add_argument("--seed", type=int, help="override the scenario's seed")
-    c.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a scenario key (repeatable)")
+    _add_scenario_overrides(c)
     c.add_argument("--rrd", help="write a rerun recording to this file")
     c.add_argument("--spawn", action="store_true", help="open the rerun viewer (needs a display)")
     c.set_defaults(func=cmd_run)
 
+
+def _add_sweep_command(sub) -> None:
     c = sub.add_parser("sweep", help="run many seeded trials of a scenario (process pool or Ray), resumably")
     c.add_argument("scenario", help="a scenario TOML file")
     c.add_argument("--trials", type=int, help="number of trials (localization_comparison: replays per approach; default: the scenario's replays, else 10)")
@@ -232,14 +243,8 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--workers", type=int, help="worker processes / local Ray CPUs (default: one per core)")
     c.add_argument("--out", help="output directory (default runs/<name>-sweep)")
     c.add_argument("--resume", action="store_true", help="finish the sweep in --out, keeping its finished trials")
-    c.add_argument("--seed", type=int, help="override the scenario's seed")
-    c.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a scenario key (repeatable)")
+    _add_scenario_overrides(c)
     c.set_defaults(func=cmd_sweep)
-
-    c = sub.add_parser("scenarios", help="list the scenario files")
-    c.add_argument("--dir", help="directory (default: the project's scenarios/)")
-    c.set_defaults(func=cmd_scenarios)
-    return p
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -32,12 +32,16 @@ from common import entry as _entry  # noqa: E402
 
 
 def bench_env(results: dict[str, Result], quick: bool) -> None:
+    import sim  # noqa: F401  (registers DepthNav-v0)
+
+    results["env_step"] = _bench_env_step(300 if quick else 2000)
+    results["env_async2_step"] = _bench_async2_step(200 if quick else 1000)
+
+
+def _bench_env_step(n: int) -> Result:
+    """``n`` steps of one env in this process, random actions; resets are timed apart."""
     import gymnasium as gym
 
-    import sim  # noqa: F401  (registers DepthNav-v0)
-    from sim.envs.depthnav import DepthNavEnv
-
-    n = 300 if quick else 2000
     env = gym.make("DepthNav-v0")
     env.action_space.seed(0)
     env.reset(seed=0)
@@ -58,12 +62,19 @@ def bench_env(results: dict[str, Result], quick: bool) -> None:
             resets.append((time.perf_counter() - t) * 1e3)
     wall = time.perf_counter() - t_all
     env.close()
-    results["env_step"] = _entry(steps, target=round(1000.0 / 150.0, 2))
     print(
         f"  env_step: {1000.0 / np.median(steps):.0f} steps/s (median step), {n / wall:.0f} steps/s overall "
         f"including {len(resets)} resets (median reset {np.median(resets) if resets else 0.0:.1f} ms)",
         file=sys.stderr,
     )
+    return _entry(steps, target=round(1000.0 / 150.0, 2))
+
+
+def _bench_async2_step(m: int) -> Result:
+    """``m`` steps of an AsyncVectorEnv of two envs in spawned workers."""
+    import gymnasium as gym
+
+    from sim.envs.depthnav import DepthNavEnv
 
     # Spawned workers: a forked child cannot render once this process has used EGL.
     venv = gym.vector.AsyncVectorEnv([functools.partial(DepthNavEnv)] * 2, context="spawn")
@@ -71,7 +82,6 @@ def bench_env(results: dict[str, Result], quick: bool) -> None:
     venv.reset(seed=[0, 1])
     for _ in range(30):
         venv.step(venv.action_space.sample())
-    m = 200 if quick else 1000
     vsteps: list[float] = []
     t_all = time.perf_counter()
     for _ in range(m):
@@ -81,12 +91,12 @@ def bench_env(results: dict[str, Result], quick: bool) -> None:
         vsteps.append((time.perf_counter() - t) * 1e3)
     wall = time.perf_counter() - t_all
     venv.close()
-    results["env_async2_step"] = _entry(vsteps)
     print(
         f"  env_async2_step: {2000.0 / np.median(vsteps):.0f} env steps/s (median vector step), "
         f"{2 * m / wall:.0f} env steps/s overall, 2 workers",
         file=sys.stderr,
     )
+    return _entry(vsteps)
 
 
 if __name__ == "__main__":

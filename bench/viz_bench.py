@@ -1,4 +1,4 @@
-"""Benchmark of rerun logging in the closed loop (issue #8: logging may cost at most 20%).
+"""Benchmark of rerun logging in the closed loop (logging may slow the loop by at most 20%).
 
 - ``closed_loop_frame``: one frame of the demo scenario's closed loop (physics, render,
   Kinect noise, FSPF, CGR, avoidance and navigation) with no recording: the run's wall
@@ -28,7 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from common import Result, entry  # noqa: E402
 
-#: Logging may slow the loop by at most this fraction (issue #8).
+#: Logging may slow the loop by at most this fraction.
 MAX_OVERHEAD = 0.2
 
 

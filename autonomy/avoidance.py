@@ -1,4 +1,4 @@
-"""Obstacle avoidance by open path lengths: seed 000, Section V, Eq. 3-5.
+"""Obstacle avoidance by open path lengths: BV2012, Section V, Eq. 3-5.
 
 For a candidate direction theta with unit vector theta_hat, robot radius r and obstacle
 points P u O down-projected to the floor plane (robot frame, x forward, y left):
@@ -46,7 +46,7 @@ from autonomy.nearfield import NearFieldConfig
 
 @dataclass(frozen=True)
 class AvoidanceConfig:
-    """Obstacle avoidance parameters (seed 000, Section V)."""
+    """Obstacle avoidance parameters (BV2012, Section V)."""
 
     robot_radius_m: float = ROBOT_RADIUS_M
     """r: robot radius (Eq. 3-4)."""

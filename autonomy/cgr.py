@@ -1,4 +1,4 @@
-"""Corrective Gradient Refinement (CGR) localization on a vector map (seed 000, IV-C).
+"""Corrective Gradient Refinement (CGR) localization on a vector map (BV2012, IV-C).
 
 A particle filter over (x, y, theta). Each frame (IV-C, steps 1-4):
 

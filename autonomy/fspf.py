@@ -1,4 +1,4 @@
-"""Fast Sampling Plane Filtering (FSPF): seed 000, Section III, Algorithm 1, Table I.
+"""Fast Sampling Plane Filtering (FSPF): BV2012, Section III, Algorithm 1, Table I.
 
 FSPF samples a depth image instead of processing all of it: a pixel d0 anywhere, two
 more (d1, d2) within eta pixels of it; the plane through their 3D points p0, p1, p2;
@@ -39,7 +39,7 @@ from autonomy.rng import MASK64, randint, seed_u64
 
 @dataclass(frozen=True)
 class FSPFConfig:
-    """FSPF parameters; defaults are Table I of seed 000."""
+    """FSPF parameters; defaults are Table I of BV2012."""
 
     n_max: int = 2000
     """n_max: maximum total number of plane-filtered points."""
@@ -98,7 +98,7 @@ class FSPFResult:
     _proj: dict = field(default_factory=dict, repr=False, compare=False)
 
     def projected(self, max_vertical_normal_angle_rad: float = math.radians(60.0)) -> tuple[np.ndarray, np.ndarray]:
-        """2D points and unit 2D normals in the floor plane (seed 000, IV-B).
+        """2D points and unit 2D normals in the floor plane (BV2012, IV-B).
 
         Points whose normal is within the given angle of vertical (floor, ceiling, table
         tops) are dropped; the rest are down-projected to (x, y) with their normals.

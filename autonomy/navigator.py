@@ -7,7 +7,7 @@ Per frame it:
 1. projects the pose on the planned polyline and puts a carrot ``lookahead_m`` further on;
 2. if the carrot is far off the heading, turns in place first (the Kinect sees only
    +-29 degrees, so the robot must look where it is going);
-3. otherwise asks the obstacle avoidance (seed 000, Eq. 3-5) for the direction theta*
+3. otherwise asks the obstacle avoidance (BV2012, Eq. 3-5) for the direction theta*
    closest to the carrot with the longest open path, and a speed that can stop within it
    (and, ours, no faster than ``corner_speed_mps`` round the plan's corners nor than
    the graph edge's ``max_speed``; map walls in the camera's blind spots count as
@@ -71,8 +71,9 @@ class NavigatorConfig:
     is still too close for the camera to see, up to this long."""
     backoff_memory_s: float = 30.0
     """Remembered obstacles count this long for the back-off's check of the way back,
-    which the camera never sees (the avoidance forgets them after ``memory_s``): in a
-    4 km run a robot backing off from a table for 3 s drove into furniture behind it."""
+    which the camera never sees (the avoidance forgets them after ``memory_s``): a robot
+    backing off for a few seconds would otherwise drive into furniture it passed a while
+    ago and has since forgotten."""
     backoff_check_m: float = 0.4
     """The way back is checked this far against map walls and remembered obstacles."""
     backoff_clearance_m: float = 0.03
@@ -87,22 +88,21 @@ class NavigatorConfig:
     unseen_speed_mps: float = 0.3
     """Speed limit while the chosen direction lies outside the camera's field of view: the
     open length there is known only from memory, so the robot looks (it turns towards the
-    direction) before it drives fast (a person walking into the corridor it was turning
-    into went unseen in the 4 km run); 0 = off (as the paper). Only with ``look_first``
-    off."""
+    direction) before it drives fast (a person walking into the corridor it is turning
+    into is unseen until then); 0 = off (as the paper). Only with ``look_first`` off."""
     look_first: bool = True
     """Translate only in directions the camera looks: while Eq. 5's direction lies outside
     its field of view, turn towards it in place (state "turning"), then drive (ours; the
-    paper's robot drove wherever Eq. 5 pointed). In 4 km run K the robot twice drove at
-    0.3 m/s into a doorway it was turning towards while a person it had never seen stood
-    in it, beside the robot; turned first, the camera (or the near field) sees them.
+    paper's robot drove wherever Eq. 5 pointed). A person standing beside the robot in a
+    doorway it turns towards has never been in view; driving there, even slowly, runs
+    into them, while turned first the camera (or the near field) sees them.
     Off: drive there at ``unseen_speed_mps``."""
     corner_speed_mps: float = 0.4
     """Speed limit round the plan's corners (blind corners): the camera cannot see into
     the corridor the robot turns into, nor beside itself, so it takes corners slowly
-    enough to stop for a person it meets there (ours, as nav2's regulated pure pursuit
-    slows for curvature; 4 of 7 person contacts in a 4 km run were people turning the
-    same corner just ahead of the robot). 0 = off (as the paper)."""
+    enough to stop for a person it meets there, such as one turning the same corner just
+    ahead of it (ours, as nav2's regulated pure pursuit slows for curvature). 0 = off
+    (as the paper)."""
     edge_speed_limits: bool = True
     """Honour the navigation graph's per-edge ``max_speed`` (the map format's field; the
     shipped building's doors say 0.5 m/s) from ``lookahead_m`` before an edge until the
@@ -111,8 +111,7 @@ class NavigatorConfig:
     """Map walls within this distance of the robot and outside the camera's view join the
     obstacles (ours, like nav2's static costmap layer): the camera sees neither beside the
     robot nor closer than 0.8 m, and the memory forgets a wall after ``memory_s``, so a
-    robot swerving round a person scraped the corridor wall beside it in the 4 km run.
-    0 = off."""
+    robot swerving round a person would scrape the corridor wall beside it. 0 = off."""
     map_clearance_m: float = 0.05
     """Map walls are kept this far beyond the robot radius (the avoidance's safety margin
     applies to sensed points; the map's walls are placed through the pose estimate, and
@@ -121,13 +120,10 @@ class NavigatorConfig:
     """At most this speed while a sensed or remembered obstacle lies within
     ``proximity_gap_m`` beyond the avoidance corridor of the chosen direction, less than
     ``proximity_range_m`` ahead (ours, like nav2's cost-regulated speed near obstacles):
-    Eq. 3-5 treat a person walking towards the robot as standing still, and in run 7
-    (4 km) 4 of 12 person contacts were people passed 0.4 m abeam at 0.75 m/s whom the
-    robot met as they stepped or it turned (e.g. a person crossing 1 m ahead while it
-    swerved at 0.75 m/s). 0 = off (as the paper). Session 6 left it off: the demo got a
-    contact with it (a person it overtook slowly, out of view, stepped back into its
-    path); with session 7's people model it had none. On since: 4 km runs 9 and 10
-    reached every waypoint with 8 incidents each (docs/navigation.md)."""
+    Eq. 3-5 treat a person walking towards the robot as standing still, so a person
+    passed 0.4 m abeam at cruise speed is met as soon as they step, or the robot turns,
+    into the other's way (e.g. a person crossing 1 m ahead while the robot swerves).
+    0 = off (as the paper)."""
     proximity_gap_m: float = 0.3
     """... this far beyond the avoidance radius ..."""
     proximity_range_m: float = 1.5
@@ -151,8 +147,9 @@ class NavigatorConfig:
     """... looking this far ahead along a straight stretch of the plan."""
     side_hysteresis: float = 1.0
     """Keep swerving to the side chosen before while a direction there scores at least
-    this fraction of Eq. 5's best (1 = off, as the paper; 0.7 steadied the approach to a
-    standing person but swerved into a person coming round a corner in the 200 m run)."""
+    this fraction of Eq. 5's best (1 = off, as the paper; below 1 it steadies the
+    approach to a standing person but can hold a swerve into a person coming round a
+    corner)."""
     near_wall_tol_m: float = 0.1
     """A near-field sight line passing this close to a map wall (through the pose
     estimate) is taken as that wall, not an unmapped obstacle (``command``)."""
@@ -433,8 +430,8 @@ class Navigator:
         Behind the robot the camera sees nothing, so the way back is checked against the
         map's walls and the remembered obstacles: straight back if that is clear for
         ``backoff_check_m``, else the nearest clear direction within 75 degrees of it,
-        else no translation (the robot re-plans where it stands). Backing straight into a
-        door frame it could not see was most of the wall contacts in the 4 km run (ours).
+        else no translation (the robot re-plans where it stands). Straight back would run
+        into door frames and walls it cannot see (ours).
         """
         cfg = self.cfg
         pts = np.asarray(obstacles, dtype=np.float64).reshape(-1, 2)
@@ -602,9 +599,9 @@ class Navigator:
             # Back off at least backoff_time_s, and on until what blocked the way is in
             # the camera's view again (or max_backoff_s has passed), unless there is no
             # way back. After a stuck recovery's back-off the stuck clock starts again
-            # (it had run on through a long back-off, so the robot went from one
-            # recovery straight into the next, for ever, where it could not back off);
-            # a back-off from a blind block counts as no progress.
+            # (run on through a long back-off, it would send the robot from one recovery
+            # straight into the next, for ever, where it cannot back off); a back-off
+            # from a blind block counts as no progress.
             v = self._backoff_velocity(pose, obstacles)
             if self._stuck_backoff:
                 self._progress_t = t

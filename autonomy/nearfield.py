@@ -1,10 +1,9 @@
 """Obstacles closer than the depth camera's minimum range, from the floor it fails to see.
 
-The Kinect returns nothing closer than 0.8 m, so FSPF (seed 000, Section III) and the
+The Kinect returns nothing closer than 0.8 m, so FSPF (BV2012, Section III) and the
 obstacle avoidance (Section V) are blind to a person standing right in front of the
-robot: in the 4 km trial most contacts were a person within 0.8 m ahead, never sensed,
-whom the robot drove into (docs/navigation.md). Yet the camera does tell that something
-is there: with the mount's pitch the lowest image rows look at the floor 1.0-1.15 m away,
+robot, who is never sensed and whom the robot would drive into. Yet the camera does
+tell that something is there: with the mount's pitch the lowest image rows look at the floor 1.0-1.15 m away,
 well inside the sensor's range, and a body in front hides that floor. Where a flat floor
 is expected at a valid range but the pixel returns nothing (or a depth below the minimum
 range), something occludes that sight line closer than the minimum range (or casts the

@@ -1,4 +1,4 @@
-"""Observation models on scene lines: projected 3D point cloud (seed 000, IV-B) and laser.
+"""Observation models on scene lines: projected 3D point cloud (BV2012, IV-B) and laser.
 
 For each 2D plane-filtered point p_i (robot frame) and a pose x = (t, theta), the point in
 the world is q_i = R(theta) p_i + t. Following Section IV-B:

@@ -1,4 +1,4 @@
-"""Analytic ray casting on a vector map: scene lines and the visibility grid (seed 000, Sec. IV-A).
+"""Analytic ray casting on a vector map: scene lines and the visibility grid (BV2012, Sec. IV-A).
 
 :func:`scene_lines` is Algorithm 2 ("AnalyticRayCast"): from a location x it returns the
 *scene lines* L, the non-intersecting, non-occluded pieces of the map's wall segments
@@ -581,7 +581,7 @@ def scene_lines(
     *,
     max_range_m: float = math.inf,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Analytic ray cast (seed 000, Algorithm 2) from (x, y).
+    """Analytic ray cast (BV2012, Algorithm 2) from (x, y).
 
     Returns ``(lines, source)``: the (M, 4) visible, non-intersecting, non-occluded pieces
     ``x1, y1, x2, y2`` of the map segments (each a sub-segment of, and oriented like, its
@@ -1060,7 +1060,7 @@ def load_or_build(
 
 
 class SceneQuery:
-    """A map plus its visibility grid: scene lines for any location (seed 000, Sec. IV-A).
+    """A map plus its visibility grid: scene lines for any location (BV2012, Sec. IV-A).
 
     Scene lines are clipped to the disk of ``grid.config.max_range_m`` around the
     location; within that disk they equal :func:`scene_lines` over the whole map.

@@ -1,4 +1,4 @@
-"""Simulated laser rangefinder scans from a depth image: the baselines of seed 000, VI-A.
+"""Simulated laser rangefinder scans from a depth image: the baselines of BV2012, VI-A.
 
 The paper compares FSPF-CGR localization with three CGR localizers fed laser scans
 simulated from the same Kinect frame:
@@ -46,12 +46,12 @@ from autonomy.observation import points_from_scan
 from autonomy.rng import randint, seed_u64
 
 APPROACHES = ("fspf", "kr", "ks", "kc")
-"""The four approaches of seed 000, Section VI-A (and Figs. 5-7)."""
+"""The four approaches of BV2012, Section VI-A (and Figs. 5-7)."""
 
 
 @dataclass(frozen=True)
 class ScanConfig:
-    """Simulated laser scans from depth images (seed 000, VI-A)."""
+    """Simulated laser scans from depth images (BV2012, VI-A)."""
 
     angular_range_rad: float = math.pi
     """Simulated angular range of the scan: 180 degrees (VI-A)."""

@@ -1,4 +1,4 @@
-"""Plane-based 3D mapping (seed 003): multi-plane RANSAC, randomized Hough, octree map.
+"""Plane-based 3D mapping (PlaneMap): multi-plane RANSAC, randomized Hough, octree map.
 
 Pipeline for one depth frame (see docs/mapping.md):
 

@@ -2,7 +2,7 @@
 
 A plane is ``n . p = rho`` with a unit normal ``n``. In the frame a plane was detected
 in (centred on the sensor), ``rho >= 0``: the normal points away from the sensor, as in
-the paper's Hessian form (seed 003, Section II-B, Eq. 3-5). Moved to another frame
+the paper's Hessian form (PlaneMap, Section II-B, Eq. 3-5). Moved to another frame
 (:meth:`Plane.transformed`) the normal keeps its direction, so ``rho`` may turn negative.
 
 The paper's spherical parameters (Section II-B1, Eq. 1, Fig. 4): ``theta`` is the angle

@@ -1,4 +1,4 @@
-"""Randomized Hough transform for planes (seed 003, Section II-B1) with a sparse accumulator.
+"""Randomized Hough transform for planes (PlaneMap, Section II-B1) with a sparse accumulator.
 
 The paper's loop, for up to ``max_planes`` planes while enough points remain:
 
@@ -60,7 +60,7 @@ _EMPTY = np.int64(-1)
 
 @dataclass(frozen=True)
 class HoughConfig:
-    """Randomized Hough transform parameters; seed 003, Section II-B1 where it gives them."""
+    """Randomized Hough transform parameters; PlaneMap, Section II-B1 where it gives them."""
 
     rho_step_m: float = 0.01
     """Accumulator rho resolution (1 cm)."""

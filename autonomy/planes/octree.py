@@ -1,4 +1,4 @@
-"""Octree plane map (seed 003, Section II-A).
+"""Octree plane map (PlaneMap, Section II-A).
 
 The root is a cube (40 m edge) split recursively into octants down to leaves of 0.625 m
 (depth 6). A plane is identified by its centre point (the centroid of its inliers) and
@@ -40,7 +40,7 @@ POLICIES = ("overwrite", "merge")
 
 @dataclass(frozen=True)
 class OctreeConfig:
-    """Octree plane map parameters; defaults from seed 003, Section II-A."""
+    """Octree plane map parameters; defaults from PlaneMap, Section II-A."""
 
     root_edge_m: float = 40.0
     """Edge of the root cube (40 m)."""

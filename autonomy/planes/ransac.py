@@ -1,4 +1,4 @@
-"""Multi-plane RANSAC (seed 003, Section II-B2).
+"""Multi-plane RANSAC (PlaneMap, Section II-B2).
 
 For up to ``max_planes`` planes, on the points no earlier plane took:
 
@@ -48,7 +48,7 @@ from autonomy.rng import randbelow, seed_state
 
 @dataclass(frozen=True)
 class RansacConfig:
-    """Multi-plane RANSAC parameters; defaults from seed 003, Section II-B2."""
+    """Multi-plane RANSAC parameters; defaults from PlaneMap, Section II-B2."""
 
     distance_threshold_m: float = 0.01
     """Point-to-plane distance below which a point is an inlier (1 cm)."""

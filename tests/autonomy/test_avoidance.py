@@ -1,4 +1,4 @@
-"""Open path lengths and direction choice (seed 000, Eq. 3-5) against brute-force references."""
+"""Open path lengths and direction choice (BV2012, Eq. 3-5) against brute-force references."""
 
 from __future__ import annotations
 

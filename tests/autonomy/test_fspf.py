@@ -1,4 +1,4 @@
-"""FSPF (seed 000, Algorithm 1) on synthetic depth images with known planes."""
+"""FSPF (BV2012, Algorithm 1) on synthetic depth images with known planes."""
 
 from __future__ import annotations
 

@@ -292,7 +292,7 @@ def _refine_once(segs, pose, pts, trust):
 
 
 def test_refinement_stays_within_its_trust_region() -> None:
-    """The frame that broke a replay: ten laser points, eight on a wall within 30 cm and
+    """A near-degenerate frame: ten laser points, eight on a wall within 30 cm and
     two on a person 0.45 m in front of it. Unbounded Gauss-Newton on the fixed
     correspondences leaps over a metre; the trust region holds it to the gate."""
     wall = np.array([[2.0, 1.26, 3.5, 1.26]])  # robot frame = world frame: pose at the origin

@@ -1,4 +1,4 @@
-"""Analytic ray cast (seed 000, Algorithm 2), visibility grid, ray hits: against brute force."""
+"""Analytic ray cast (BV2012, Algorithm 2), visibility grid, ray hits: against brute force."""
 
 from __future__ import annotations
 

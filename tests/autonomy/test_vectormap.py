@@ -322,8 +322,7 @@ def test_json_zero_length_warning_names_element_and_line():
 def test_a_9000_segment_map_round_trips_in_both_formats(tmp_path):
     """A building-sized map (9,000 segments) saved and loaded as text and as JSON comes
     back the same. Its load speed is `make bench`'s map_load_9000 (target 500 ms), not a
-    timed test: this one failed at 1.01 s against 1.0 on a CI machine busy with two 4 km
-    runs."""
+    timed test: a wall-clock limit fails on a busy machine whatever the code does."""
     vm = _random_map(9000, seed=3)
     for name in ("big.vectormap.txt", "big.vectormap.json"):
         back = load_vectormap(save_vectormap(vm, tmp_path / name))

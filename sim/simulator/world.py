@@ -320,6 +320,11 @@ def compile_world(
     """Compile a spec from :func:`build_spec` (possibly edited, e.g. a camera moved) into a
     :class:`World` with the robot at ``start_pose``."""
     model = spec.compile()
+    # The model's extent scales the GL near and far planes. Compiled, it depends on every
+    # body, parked actors included; taken from the map alone, a building renders the same
+    # depth however many actors its world holds (the env parks spare ones far away).
+    xmin, ymin, xmax, ymax = vectormap.extent()
+    model.stat.extent = max(1.0, float(np.hypot(xmax - xmin, ymax - ymin)))
     # Depth precision: near plane at 5 cm, far plane at 60 m (model.vis.map is relative to extent).
     model.vis.map.znear = 0.05 / model.stat.extent
     model.vis.map.zfar = 60.0 / model.stat.extent

@@ -1,0 +1,189 @@
+"""The env's simulated site: a compiled building reused across episodes (dm_control's ``Physics``).
+
+A :class:`Site` holds the MuJoCo world of one building, its camera and its ray-cast
+query. Between episodes the random furniture is moved and the people re-routed in place,
+so a building is compiled once however many episodes it serves.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from autonomy.errors import InputError
+from autonomy.planner import adjacency
+from autonomy.raycast import SceneQuery, VisibilityGrid, load_or_build
+from autonomy.vectormap import load_navgraph, load_vectormap
+from sim.envs.config import EnvConfig
+from sim.simulator import blueprints
+from sim.simulator.actors import Furniture, PeopleController, Person
+from sim.simulator.blueprints import ASSETS_DIR
+from sim.simulator.building import FURNITURE_KINDS, Building, random_people, replace_furniture
+from sim.simulator.kinect import KinectCamera, KinectConfig
+from sim.simulator.world import World, build_world
+
+#: Where unused furniture and people are parked (outside any building).
+PARK_XY = (-1.0e4, -1.0e4)
+#: A random person starts at least this far beyond both radii from the robot's start.
+START_CLEARANCE_M = 0.5
+
+
+def load_fixed_building(cfg: EnvConfig) -> Building | None:
+    """The fixed building of a config (None when buildings are drawn per episode)."""
+    if cfg.building == "procedural":
+        if cfg.building_seed < 0:
+            return None
+        return procedural_building(cfg, cfg.building_seed)
+    if cfg.vectormap:
+        for key in ("vectormap", "navgraph"):
+            if not Path(getattr(cfg, key)).is_file():
+                raise InputError(f"DepthNav: argument '{key}' expected an existing file, got {getattr(cfg, key)!r}")
+        b = Building(load_vectormap(cfg.vectormap), load_navgraph(cfg.navgraph), map_path=Path(cfg.vectormap))
+    else:
+        stem = cfg.building
+        for suffix in (".vectormap.txt", ".navigation.json", ".zones.json"):
+            stem = stem.removesuffix(suffix)
+        shipped = ASSETS_DIR / f"{stem}.vectormap.txt"
+        path = shipped if "/" not in stem and shipped.is_file() else Path(stem + ".vectormap.txt")
+        if not path.is_file():
+            names = ", ".join(sorted(p.name.removesuffix(".vectormap.txt") for p in ASSETS_DIR.glob("*.vectormap.txt")))
+            raise InputError(
+                f"DepthNav: argument 'building' expected a shipped building ({names}), a blueprint "
+                f"stem path or 'procedural', got {cfg.building!r}"
+            )
+        bp = blueprints.load_blueprint(str(path).removesuffix(".vectormap.txt"))
+        b = Building(bp.vectormap, bp.navgraph, tuple(bp.open_areas), tuple(bp.rooms), path)
+    check_building(cfg, b)
+    return b
+
+
+def procedural_building(cfg: EnvConfig, seed: int) -> Building:
+    bp = blueprints.generate_building(cfg.procedural, int(seed))
+    return Building(bp.vectormap, bp.navgraph, tuple(bp.open_areas), tuple(bp.rooms))
+
+
+def check_building(cfg: EnvConfig, b: Building) -> None:
+    g = b.navgraph
+    if g.n_nodes < 2 or g.n_edges < 1:
+        raise InputError("DepthNav: the building's navigation graph needs at least two connected nodes")
+    ids = {int(i) for i in g.node_ids()}
+    for name in ("start_nodes", "goal_nodes"):
+        for i in getattr(cfg, name):
+            if i not in ids:
+                raise InputError(f"DepthNav: argument '{name}' expected node ids of the navigation graph, got {i}")
+    if cfg.n_furniture and not b.furniture_zones:
+        raise InputError(
+            "DepthNav: argument 'n_furniture' expected 0 for a map without zones (open areas or rooms), "
+            f"got {cfg.n_furniture}"
+        )
+
+
+def _yaw_quat(yaw: float) -> np.ndarray:
+    return np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
+
+
+def _parked_person() -> Person:
+    return Person(route=(PARK_XY, (PARK_XY[0] + 1.0, PARK_XY[1])), speed_mps=0.0)
+
+
+@dataclass
+class Site:
+    """A compiled building: the world, its camera, and what the episodes reuse."""
+
+    building: Building
+    world: World
+    camera: KinectCamera
+    adj: list[list[tuple[int, float]]]
+    walls: np.ndarray
+    furniture: list[Furniture]
+    """Every piece; the first len(cfg.furniture) are fixed, the rest are re-placed."""
+    furniture_bodies: np.ndarray
+    mocap_ids: np.ndarray
+    query: SceneQuery | None
+    people: list[Person]
+    seed: int | None = None
+    canvas: object | None = None
+
+    @classmethod
+    def build(cls, cfg: EnvConfig, kinect: KinectConfig, building: Building, seed: int | None) -> Site:
+        """Compile a building with room for the config's furniture and people."""
+        # Kinds from the building's own seed, not the episode's: a fixed building is
+        # compiled at the first reset only, and every reset must draw the same.
+        rng = np.random.default_rng(0 if seed is None else seed)
+        furniture = list(cfg.furniture) + [
+            Furniture(kind=str(FURNITURE_KINDS[rng.integers(len(FURNITURE_KINDS))]), x=PARK_XY[0] - 10.0 * i, y=PARK_XY[1])
+            for i in range(cfg.n_furniture)
+        ]
+        people = list(cfg.people) + [_parked_person() for _ in range(cfg.n_people)]
+        world = build_world(
+            building.vectormap, world=cfg.world, robot=cfg.robot, intrinsics=kinect.intrinsics, mount=kinect.mount,
+            furniture=tuple(furniture), people=tuple(people),
+        )
+        bodies = np.array(
+            [mujoco.mj_name2id(world.model, mujoco.mjtObj.mjOBJ_BODY, f"furniture_{i}") for i in range(len(furniture))], dtype=np.int64
+        )
+        query = None
+        if cfg.localization.enabled:
+            vm = building.vectormap
+            grid = (
+                load_or_build(vm, building.map_path, cfg.localization.grid)
+                if building.map_path is not None
+                else VisibilityGrid.build(vm, cfg.localization.grid)
+            )
+            query = SceneQuery(vm, grid)
+        return cls(
+            building=building,
+            world=world,
+            camera=KinectCamera(world.model, world.camera_id, kinect),
+            adj=adjacency(building.navgraph),
+            walls=np.ascontiguousarray(building.vectormap.segments, dtype=np.float64).reshape(-1, 4),
+            furniture=furniture,
+            furniture_bodies=bodies,
+            mocap_ids=world.people.mocap_ids.copy(),
+            query=query,
+            people=people,
+            seed=seed,
+        )
+
+    def place_furniture(self, cfg: EnvConfig, rng: np.random.Generator) -> None:
+        """Re-place the random pieces as the scenario runner places them."""
+        fixed = len(cfg.furniture)
+        self.furniture = replace_furniture(self.building, self.furniture, fixed, rng, cfg.robot.radius_m, PARK_XY)
+        model = self.world.model
+        for k in range(fixed, len(self.furniture)):
+            f, bid = self.furniture[k], self.furniture_bodies[k]
+            model.body_pos[bid] = [f.x, f.y, 0.0]
+            model.body_quat[bid] = _yaw_quat(f.yaw)
+
+    def route_people(self, cfg: EnvConfig, rng: np.random.Generator) -> None:
+        """New routes for the random people, drawn as the scenario runner draws them."""
+        routes = list(random_people(self.building.navgraph, cfg.n_people, rng)) if cfg.n_people else []
+        routes += [_parked_person() for _ in range(cfg.n_people - len(routes))]
+        self.people = list(cfg.people) + routes
+        self._restart_people(cfg)
+
+    def _restart_people(self, cfg: EnvConfig) -> None:
+        self.world.people = PeopleController(tuple(self.people), self.mocap_ids, self.walls, robot_radius_m=cfg.robot.radius_m)
+
+    def clear_start(self, cfg: EnvConfig, start_xy: np.ndarray, rng: np.random.Generator) -> None:
+        """Move random people's start offsets until none touches the robot's start."""
+        first = len(cfg.people)
+        for _ in range(20):
+            pos = self.world.people.positions()
+            bad = [
+                i
+                for i in range(first, len(self.people))
+                if math.hypot(*(pos[i, :2] - start_xy)) < cfg.robot.radius_m + self.people[i].radius_m + START_CLEARANCE_M
+            ]
+            if not bad:
+                return
+            for i in bad:
+                self.people[i] = replace(self.people[i], start_offset_m=float(rng.uniform(0.0, 40.0)))
+            self._restart_people(cfg)
+
+    def close(self) -> None:
+        self.camera.close()

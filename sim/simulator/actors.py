@@ -1,7 +1,7 @@
 """Unmapped objects: furniture (static primitive geoms) and people (kinematic walkers).
 
 Neither is in the vector map, so to the localization they are clutter, and to the
-obstacle avoidance they are obstacles: exactly the paper's setting (seed 000, VI).
+obstacle avoidance they are obstacles: exactly the paper's setting (BV2012, VI).
 """
 
 from __future__ import annotations
@@ -165,6 +165,23 @@ _FAN = tuple(math.radians(a) for a in (30, -30, 60, -60, 90, -90, 120, -120, 150
 """Directions (from straight away) a person stepping back from the robot tries last."""
 
 
+def _retreat_steps(away: np.ndarray, d: np.ndarray, right: np.ndarray, step: float) -> list[tuple[float, float]]:
+    """The steps back a person tries, in order, as (along the route, to its right).
+
+    Straight away; else along the route, a full step (with a wall beside, the along-route
+    part of a step straight away alone leaves a person pushed along ahead of the robot);
+    else only sideways, a full step (the route ends or bends right behind them); failing
+    all three, any other way, the nearest to straight away first (``_FAN``): at the end
+    of a door frame the three can all lead towards the frame.
+    """
+    ds, dside = step * float(away @ d), step * float(away @ right)
+    cands = [(ds, dside), (math.copysign(step, ds), 0.0), (0.0, math.copysign(step, dside))]
+    for a in _FAN:
+        u = (math.cos(a) * away[0] - math.sin(a) * away[1], math.sin(a) * away[0] + math.cos(a) * away[1])
+        cands.append((step * (u[0] * d[0] + u[1] * d[1]), step * (u[0] * right[0] + u[1] * right[1])))
+    return cands
+
+
 class PeopleController:
     """Moves the people's mocap bodies along their routes as simulated time passes.
 
@@ -182,24 +199,24 @@ class PeopleController:
     goes, will be within ``anticipate_s``, stays put for that step (a side step that
     keeps clear is still taken) — people see a robot coming round a corner even when
     its camera cannot see them, and do not step into its way (a person stepped aside
-    going round their route's corner swung across a robot driving past there, into
-    its blind zone, in the 4 km run). From a robot on the move (faster than
+    going round their route's corner would swing across a robot driving past there,
+    into its blind zone). From a robot on the move (faster than
     ``moving_mps``) they keep ``pass_gap_m`` rather than ``personal_space_m``: walking
-    past it 5 cm abeam, out of its camera's view, they were in the way of its next turn.
+    past it 5 cm abeam, out of its camera's view, they would be in the way of its next turn.
     Nor do people stand still while a robot drives at them: when the robot closes
     in to within ``retreat_gap_m`` of a person's body and, going on as it goes, would be
     inside their personal space within ``retreat_horizon_s``, the person steps back, away from
     it (out of its way, sideways to its motion, when it drives faster than
     ``retreat_sideways_mps``), at ``retreat_speed_mps`` (slower than the robot's cruise, and
     never into a wall: 5 cm from it, or ``squeeze_m`` where 5 cm leaves no way out).
-    Without that, a person whose route ran through the robot waited right beside it,
-    out of the camera's view, until the robot drove off sideways into them. A person on a
+    Without that, a person whose route runs through the robot would wait right beside it,
+    out of the camera's view, until the robot drives off sideways into them. A person on a
     back-and-forth route held up by the robot (the personal-space rule) for longer than
     ``max_blocked_s`` turns back, as people do when a robot stands in a doorway they
     wanted to pass; people on a looped route wait. Following a robot that backs slowly
     along their route counts as held up until they are ``clear_of_robot_m`` beyond the
-    personal space (such a person tailed the robot 0.15 m beyond it, in the camera's
-    blind zone, until it drove forward into them). A robot that drives into a person still
+    personal space (else such a person would tail the robot just beyond it, in the
+    camera's blind zone, until it drives forward into them). A robot that drives into a person still
     collides, and that is counted.
     """
 
@@ -310,10 +327,9 @@ class PeopleController:
     def _keep_off_walls(self, i: int) -> None:
         """Walking on stepped aside, a person keeps 5 cm off the walls: where the corridor
         narrows (a door frame after the doorway they stepped aside in), their offset
-        shrinks as far as it must. Walking on at the offset they had, people walked
+        shrinks as far as it must. Walking on at the offset they had, people would walk
         through the corridor's wall (people are not stopped by walls, only the robot is),
-        and one waited half inside a door frame's end, where no step back was clear of
-        it, while the robot turned into them (4 km run M)."""
+        or wait half inside a door frame's end, where no step back is clear of it."""
         side = self._side[i]
         if not len(self.walls) or abs(side) < 1e-9:
             return
@@ -332,50 +348,52 @@ class PeopleController:
         dist = float(np.hypot(rel[0], rel[1]))
         if not (dt > 0 and dist > 1e-9 and dist - self.robot_radius_m - p.radius_m < self.retreat_gap_m):
             return False
-        away = rel / dist
-        # Step back when the robot, going on as it goes, would come within the personal
-        # space in the next retreat_horizon_s (a robot standing inside it included). A
-        # robot passing alongside does not count, though the distance shrinks a little as
-        # it draws level: a person overtaking it was held abeam, out of its camera's view.
         v = robot_step / dt
+        if not self._robot_closing_in(i, rel, v):
+            return False
+        away = self._retreat_direction(rel / dist, rel, v)
+        return self._step_back(i, away, robot_xy, dist, dt)
+
+    def _robot_closing_in(self, i: int, rel: np.ndarray, v: np.ndarray) -> bool:
+        """Whether the robot, going on as it goes (velocity ``v``), comes within person
+        ``i``'s personal space in the next ``retreat_horizon_s`` (a robot standing inside
+        it included). A robot passing alongside does not count, though the distance
+        shrinks a little as it draws level: a person overtaking it would be held abeam,
+        out of its camera's view."""
         vv = float(v @ v)
         tc = min(max(float(rel @ v) / vv, 0.0), self.retreat_horizon_s) if vv > 1e-12 else 0.0
         cpa = float(np.hypot(*(rel - v * tc)))
-        if cpa - self.robot_radius_m - p.radius_m >= self.personal_space_m:
-            return False
+        return cpa - self.robot_radius_m - self.people[i].radius_m < self.personal_space_m
+
+    def _retreat_direction(self, away: np.ndarray, rel: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Unit direction of a step back: straight ``away`` from the robot, turned out of
+        its way (sideways to its motion, on the side the person is on) when it drives
+        faster than ``retreat_sideways_mps``; stepping straight back from a robot driving
+        at them, a person is pushed along ahead of it, in its blind zone."""
+        vv = float(v @ v)
         if vv > self.retreat_sideways_mps**2:
-            # A robot driving at them: out of its way, sideways to its motion on the side
-            # they are on (stepping straight back, they were pushed along ahead of it, in
-            # its blind zone, for as long as it drove).
             n = np.array([-v[1], v[0]]) / math.sqrt(vv)
             if float(n @ rel) < 0.0:
                 n = -n
             away = away + 2.0 * n
             away = away / float(np.hypot(away[0], away[1]))
+        return away
+
+    def _step_back(self, i: int, away: np.ndarray, robot_xy: np.ndarray, dist: float, dt: float) -> bool:
+        """Take the first step of ``_retreat_steps`` that keeps 5 cm from the walls and ends
+        farther than ``dist`` from the robot; True if one did. Wedged where none keeps 5 cm
+        (a door frame beside, the robot turning into the door), they squeeze along the
+        wall, ``squeeze_m`` from it: keeping the 5 cm, such a person would stand still
+        while the robot, which cannot see them, drives into them.
+
+        The step moves the body from where it is, and the route position (s, side) by as
+        much; walking on reconciles the two. Placing the body at the new route position
+        instead, a person whose body lags it (walking to the next leg's offset after a
+        corner) could take no step at all: every one would be a jump.
+        """
         _, d = self._route_point(i, self._s[i])
         right = np.array([d[1], -d[0]])
-        step = self.retreat_speed_mps * dt
-        ds, dside = step * float(away @ d), step * float(away @ right)
-        # Straight away; else along the route, a full step (a wall beside: with only the
-        # along-route part of the step, a person beside a wall was pushed along ahead of
-        # the robot at 0.2 m/s); else only sideways, a full step (the route ends or bends
-        # right behind them). Wedged where none of
-        # these keeps 5 cm from the walls (a door frame beside, the robot turning into
-        # the door), they squeeze along the wall, 1 cm from it (``squeeze_m``): keeping
-        # the 5 cm, such a person stood still while the robot, which could not see them,
-        # drove into them (the 4 km run H's one contact).
-        # The step moves the body from where it is, and the route position (s, side) by
-        # as much; walking on reconciles the two. Placing the body at the new route
-        # position instead, a person whose body lagged it (walking to the next leg's
-        # offset after a corner) could take no step at all: every one was a jump.
-        # Failing all three, any other way that takes them farther from the robot, the
-        # nearest to straight away first (``_FAN``): at the end of a door frame the three
-        # all led towards the frame, and a person waiting in the doorway stood while the
-        # robot turned into the door and into them (4 km run K's two incidents).
-        cands = [(ds, dside), (math.copysign(step, ds), 0.0), (0.0, math.copysign(step, dside))]
-        for a in _FAN:
-            u = (math.cos(a) * away[0] - math.sin(a) * away[1], math.sin(a) * away[0] + math.cos(a) * away[1])
-            cands.append((step * (u[0] * d[0] + u[1] * d[1]), step * (u[0] * right[0] + u[1] * right[1])))
+        cands = _retreat_steps(away, d, right, self.retreat_speed_mps * dt)
         here = self._state[i, :2]
         for margin, (cand_s, cand_side) in [(m, c) for m in (0.05, self.squeeze_m) for c in cands]:
             new = here + cand_s * d + cand_side * right
@@ -392,92 +410,135 @@ class PeopleController:
         """Move everyone to time t (reacting to the robot); returns (n, 3) x, y, heading."""
         dt = max(0.0, t - self._t)
         self._t = t
-        robot_step = np.zeros(2)
-        if robot_xy is not None:
-            rxy = np.asarray(robot_xy[:2], dtype=np.float64)
-            if self._robot_prev is not None:
-                robot_step = rxy - self._robot_prev
-            self._robot_prev = rxy.copy()
-        for i, p in enumerate(self.people):
-            if robot_xy is not None and self._retreat(i, rxy, robot_step, dt):
+        rxy, robot_step = self._robot_motion(robot_xy)
+        for i in range(len(self.people)):
+            if rxy is not None and self._retreat(i, rxy, robot_step, dt):
                 continue
-            pos, d = self._route_point(i, self._s[i])
-            before = (self._s[i], self._side[i])
-            target_side, walk, noticed = 0.0, True, False
-            if robot_xy is not None:
-                rel = np.asarray(robot_xy[:2]) - pos
-                ahead = float(rel @ d)
-                across = float(rel[0] * d[1] - rel[1] * d[0])  # > 0: robot to the person's right
-                aside = abs(self._side[i]) > 0.05
-                passing = aside and -self.clear_behind_m < ahead <= 0.0
-                # Once aside, a wider lateral window: at its edge the person stepped in and
-                # out by a step each frame.
-                if (0.0 < ahead < self.notice_m or passing) and abs(across - self._side[i]) < (1.5 if aside else 1.0):
-                    # Stay on the side of the robot they are on (the robot weaves about the
-                    # same centreline), and stay aside until it is clear_behind_m behind.
-                    target_side = self.step_aside_m if self._side[i] - across >= 0 else -self.step_aside_m
-                    walk = ahead > self.pause_m or ahead <= 0.0 or abs(across - self._side[i]) > 0.7 or self._waited[i] > self.max_wait_s
-                    noticed = True
-            # The wait runs while the robot is there, so after max_wait_s they walk on
-            # (reset at the first step, it had them creep past a step every 2 s).
-            self._waited[i] = self._waited[i] + dt if noticed and (not walk or self._waited[i] > 0) else 0.0
-            step = float(np.clip(target_side - self._side[i], -self.side_speed_mps * dt, self.side_speed_mps * dt))
-            if step:
-                right = np.array([d[1], -d[0]])
-                new_side = self._side[i] + step
-                if self._side_is_clear(i, pos + new_side * right) or abs(new_side) < abs(self._side[i]):
-                    self._side[i] = new_side
-            if walk:
-                leg = self._leg(i, self._s[i])
-                self._s[i] += p.speed_mps * dt
-                if self._leg(i, self._s[i]) != leg:
-                    # The route's end: turn round on the spot; stepped aside to the right
-                    # going out is to the left coming back (it was a diagonal walk
-                    # across the corridor to the mirrored side, into a robot there).
-                    self._side[i] = -self._side[i]
-            self._keep_off_walls(i)
-            new = self._place(i)
-            # People walk; they do not jump. Where the route turns while the person is
-            # stepped aside, the offset point of the next leg lies elsewhere (up to twice
-            # the offset away): walk there at walking plus side-stepping speed.
-            gap = new[:2] - self._state[i, :2]
-            reach = (p.speed_mps + self.side_speed_mps) * dt
-            dist = float(np.hypot(gap[0], gap[1]))
-            if dist > reach:
-                new[:2] = self._state[i, :2] + gap * (reach / dist)
-            if robot_xy is not None:
-                # More room from a robot on the move: passing it 5 cm abeam, overtakers
-                # were out of its view when it turned (run F of the 4 km trial).
-                moving = dt > 0 and float(np.hypot(*robot_step)) > self.moving_mps * dt
-                keep = self.robot_radius_m + p.radius_m + (max(self.personal_space_m, self.pass_gap_m) if moving else self.personal_space_m)
-                ahead_xy = rxy + robot_step * (self.anticipate_s / dt) if dt > 0 else rxy
-                d_new = _segment_distance(new[:2], rxy, ahead_xy)
-                d_old = _segment_distance(self._state[i, :2], rxy, ahead_xy)
-                if d_new < keep and d_new < d_old:
-                    # Not the step; the walk alone (stepped aside as before: overtaking
-                    # the robot) or the side step alone, if that keeps clear of it.
-                    walked, side = self._s[i], self._side[i]
-                    for cand in ((walked, before[1]), (before[0], side)):
-                        if cand == before or cand == (walked, side):
-                            continue
-                        self._s[i], self._side[i] = cand
-                        alt = self._place(i)
-                        if float(np.hypot(*(alt[:2] - self._state[i, :2]))) <= reach and _segment_distance(alt[:2], rxy, ahead_xy) >= min(keep, d_old):
-                            self._state[i] = alt
-                            break
-                    else:
-                        self._s[i], self._side[i] = before
-                        self._blocked[i] += dt
-                    if self._blocked[i] > self.max_blocked_s:
-                        self._turn_back(i)
-                        self._blocked[i] = 0.0
-                    continue
-                if d_new > keep + self.clear_of_robot_m:
-                    self._blocked[i] = 0.0
-            else:
-                self._blocked[i] = 0.0
-            self._state[i] = new
+            self._move(i, rxy, robot_step, dt)
         return self._state.copy()
+
+    def _robot_motion(self, robot_xy: np.ndarray | None) -> tuple[np.ndarray | None, np.ndarray]:
+        """The robot's position (None if not given) and its step since the last call."""
+        robot_step = np.zeros(2)
+        if robot_xy is None:
+            return None, robot_step
+        rxy = np.asarray(robot_xy[:2], dtype=np.float64)
+        if self._robot_prev is not None:
+            robot_step = rxy - self._robot_prev
+        self._robot_prev = rxy.copy()
+        return rxy, robot_step
+
+    def _move(self, i: int, rxy: np.ndarray | None, robot_step: np.ndarray, dt: float) -> None:
+        """Person ``i``'s step: make way for the robot, walk on, keep off the walls, and
+        take no step towards the robot's way."""
+        p = self.people[i]
+        pos, d = self._route_point(i, self._s[i])
+        before = (self._s[i], self._side[i])
+        target_side, walk = self._make_way(i, pos, d, rxy, dt)
+        self._step_sideways(i, pos, d, target_side, dt)
+        if walk:
+            self._walk_on(i, dt)
+        self._keep_off_walls(i)
+        # People walk; they do not jump. Where the route turns while the person is
+        # stepped aside, the offset point of the next leg lies elsewhere (up to twice
+        # the offset away): walk there at walking plus side-stepping speed.
+        reach = (p.speed_mps + self.side_speed_mps) * dt
+        new = self._place(i)
+        gap = new[:2] - self._state[i, :2]
+        dist = float(np.hypot(gap[0], gap[1]))
+        if dist > reach:
+            new[:2] = self._state[i, :2] + gap * (reach / dist)
+        if rxy is None:
+            self._blocked[i] = 0.0
+        elif not self._keeps_clear(i, new, before, rxy, robot_step, dt, reach):
+            return
+        self._state[i] = new
+
+    def _make_way(self, i: int, pos: np.ndarray, d: np.ndarray, rxy: np.ndarray | None, dt: float) -> tuple[float, bool]:
+        """The side offset person ``i`` heads for and whether they walk on: with the robot
+        ahead within ``notice_m`` they step aside and wait while it is within ``pause_m``
+        (at most ``max_wait_s``), staying aside until it is ``clear_behind_m`` behind."""
+        target_side, walk, noticed = 0.0, True, False
+        if rxy is not None:
+            rel = rxy - pos
+            ahead = float(rel @ d)
+            across = float(rel[0] * d[1] - rel[1] * d[0])  # > 0: robot to the person's right
+            aside = abs(self._side[i]) > 0.05
+            passing = aside and -self.clear_behind_m < ahead <= 0.0
+            # Once aside, a wider lateral window: at its edge the person stepped in and
+            # out by a step each frame.
+            if (0.0 < ahead < self.notice_m or passing) and abs(across - self._side[i]) < (1.5 if aside else 1.0):
+                # Stay on the side of the robot they are on (the robot weaves about the
+                # same centreline), and stay aside until it is clear_behind_m behind.
+                target_side = self.step_aside_m if self._side[i] - across >= 0 else -self.step_aside_m
+                walk = ahead > self.pause_m or ahead <= 0.0 or abs(across - self._side[i]) > 0.7 or self._waited[i] > self.max_wait_s
+                noticed = True
+        # The wait runs while the robot is there, so after max_wait_s they walk on
+        # (reset at the first step, it had them creep past a step every 2 s).
+        self._waited[i] = self._waited[i] + dt if noticed and (not walk or self._waited[i] > 0) else 0.0
+        return target_side, walk
+
+    def _step_sideways(self, i: int, pos: np.ndarray, d: np.ndarray, target_side: float, dt: float) -> None:
+        """Move the side offset towards ``target_side`` at ``side_speed_mps``, unless that
+        takes the person nearer than 5 cm to a wall (moving back towards the route always goes)."""
+        step = float(np.clip(target_side - self._side[i], -self.side_speed_mps * dt, self.side_speed_mps * dt))
+        if step:
+            right = np.array([d[1], -d[0]])
+            new_side = self._side[i] + step
+            if self._side_is_clear(i, pos + new_side * right) or abs(new_side) < abs(self._side[i]):
+                self._side[i] = new_side
+
+    def _walk_on(self, i: int, dt: float) -> None:
+        """Walk along the route; at the end of a back-and-forth route, turn round on the
+        spot: stepped aside to the right going out is to the left coming back (keeping
+        the right hand, it would be a diagonal walk across the corridor, into a robot there)."""
+        leg = self._leg(i, self._s[i])
+        self._s[i] += self.people[i].speed_mps * dt
+        if self._leg(i, self._s[i]) != leg:
+            self._side[i] = -self._side[i]
+
+    def _keeps_clear(
+        self, i: int, new: np.ndarray, before: tuple[float, float], rxy: np.ndarray, robot_step: np.ndarray, dt: float, reach: float
+    ) -> bool:
+        """Whether person ``i`` may step to ``new``: not closer than the personal space to
+        the robot's way for the next ``anticipate_s`` (``pass_gap_m`` from a robot on the
+        move: passing it 5 cm abeam, an overtaker is out of its view when it turns),
+        unless it takes them no closer. If not, they take a part of the step that keeps
+        clear (``_part_step``) or stay put; False then, the step handled."""
+        p = self.people[i]
+        moving = dt > 0 and float(np.hypot(*robot_step)) > self.moving_mps * dt
+        keep = self.robot_radius_m + p.radius_m + (max(self.personal_space_m, self.pass_gap_m) if moving else self.personal_space_m)
+        ahead_xy = rxy + robot_step * (self.anticipate_s / dt) if dt > 0 else rxy
+        d_new = _segment_distance(new[:2], rxy, ahead_xy)
+        d_old = _segment_distance(self._state[i, :2], rxy, ahead_xy)
+        if d_new < keep and d_new < d_old:
+            self._part_step(i, before, rxy, ahead_xy, min(keep, d_old), reach, dt)
+            return False
+        if d_new > keep + self.clear_of_robot_m:
+            self._blocked[i] = 0.0
+        return True
+
+    def _part_step(
+        self, i: int, before: tuple[float, float], rxy: np.ndarray, ahead_xy: np.ndarray, min_gap: float, reach: float, dt: float
+    ) -> None:
+        """The walk alone (stepped aside as before: overtaking the robot) or the side step
+        alone, whichever keeps ``min_gap`` from the robot's way; else stay put, held up
+        (turning back after ``max_blocked_s``)."""
+        walked, side = self._s[i], self._side[i]
+        for cand in ((walked, before[1]), (before[0], side)):
+            if cand == before or cand == (walked, side):
+                continue
+            self._s[i], self._side[i] = cand
+            alt = self._place(i)
+            if float(np.hypot(*(alt[:2] - self._state[i, :2]))) <= reach and _segment_distance(alt[:2], rxy, ahead_xy) >= min_gap:
+                self._state[i] = alt
+                break
+        else:
+            self._s[i], self._side[i] = before
+            self._blocked[i] += dt
+        if self._blocked[i] > self.max_blocked_s:
+            self._turn_back(i)
+            self._blocked[i] = 0.0
 
     def positions(self) -> np.ndarray:
         """(n, 3) x, y, heading of each person as of the last :meth:`update`."""

@@ -50,7 +50,7 @@ from sim.simulator.step import SimFrame
 from sim.simulator.world import WorldConfig
 
 #: Bump when the recorder or the file layout changes meaning (invalidates cached logs).
-LOG_VERSION = 1
+LOG_VERSION = 2
 
 
 @dataclass(frozen=True)

@@ -35,9 +35,10 @@ from typing import Any
 
 import numpy as np
 
+from autonomy.camera import DepthCamera
 from autonomy.cgr import CGRConfig, CGRLocalizer
 from autonomy.errors import InputError
-from autonomy.fspf import FSPFConfig, fspf, project_to_floor
+from autonomy.fspf import FSPFConfig, project_to_floor
 from autonomy.observation import ObservationConfig
 from autonomy.raycast import SceneQuery, VisibilityGridConfig, load_or_build
 from autonomy.scans import (
@@ -48,6 +49,7 @@ from autonomy.scans import (
     sampling_scan,
     scan_points,
 )
+from autonomy.stack import LocalizationConfig, RobotStack, StackConfig
 from sim.config import to_dict
 from sim.experiments.drives import DriveLog, RecordingConfig, ensure_log, load_log
 from sim.experiments.kinds import Experiment
@@ -253,6 +255,11 @@ def replay(ctx: Context, cfg: LocComparisonConfig, approach: str, seed: int) -> 
     loc = CGRLocalizer(lambda x, y: q.scene_lines(x, y)[0], cgr_cfg, obs_cfg, np.random.default_rng(s_cgr))
     loc.reset(log.poses[0])
     intr, mount, scfg, fcfg = log.intrinsics, log.mount, cfg.scans, cfg.fspf
+    # FSPF as the robot stack runs it (sensing only: the replay's filter is ``loc``).
+    sensing = RobotStack(
+        q.vm, None, StackConfig(DepthCamera(intr, mount), fcfg, LocalizationConfig(enabled=False), navigate=False),
+        rng=np.random.default_rng(0),
+    )
     errors = np.zeros(n)
     est = np.zeros((n, 3))
     est[0] = loc.estimate().pose
@@ -266,7 +273,9 @@ def replay(ctx: Context, cfg: LocComparisonConfig, approach: str, seed: int) -> 
         t0 = time.thread_time()
         if approach in ("fspf", "mcl"):
             np.multiply(log.depth_mm[k], np.float32(0.001), out=depth_m, casting="unsafe")
-            res = fspf(depth_m, intr, fcfg, seed=sense_base + k, mount=mount)
+            res = sensing.perceive(depth_m, seed=sense_base + k).planes
+            # The lasers' height band applies to FSPF's points too: the approaches differ
+            # in how they sample the depth image, not in what they may see.
             p3, n3 = drop_floor(res.points, res.normals, scfg)
             pts, nrm = project_to_floor(p3, n3, fcfg.max_vertical_normal_angle_rad)
         elif approach == "ks":

@@ -26,9 +26,9 @@ sys.path.insert(0, str(ROOT))
 
 from autonomy.fspf import FSPFConfig, fspf  # noqa: E402
 from autonomy.vectormap import load_vectormap, save_vectormap  # noqa: E402
-from sim.experiments.runner import random_people  # noqa: E402
 from sim.simulator import blueprints  # noqa: E402
 from sim.simulator.actors import Furniture  # noqa: E402
+from sim.simulator.building import random_people  # noqa: E402
 from sim.simulator.kinect import KinectCamera, KinectConfig  # noqa: E402
 from sim.simulator.kinect_noise import apply_kinect_noise  # noqa: E402
 from sim.simulator.world import build_world  # noqa: E402
@@ -162,50 +162,42 @@ def bench_sim(results: dict[str, Result], quick: bool) -> None:
     results["fspf_frame"] = entry(timeit(one_fspf, n, warmup=3), target=1.0, paper=5.4)
 
     # The robot-side stack on the same frames (target 3 ms; the paper ran FSPF and
-    # localization in 16.3% of one core at 30 Hz, 5.4 ms a frame).
-    from autonomy.cgr import CGRLocalizer
+    # localization in 16.3% of one core at 30 Hz, 5.4 ms a frame): RobotStack.step, as the
+    # closed loop runs it, with the true odometry increments; back at the first frame the
+    # filter restarts at its pose.
+    from autonomy.geometry import relative_pose
     from autonomy.raycast import SceneQuery, VisibilityGrid, VisibilityGridConfig
-
-    vm = blueprints.load_blueprint(ROOT / "sim" / "assets" / "corridor_loop").vectormap
-    query = SceneQuery(vm, VisibilityGrid.build(vm, VisibilityGridConfig(cell_m=0.5, max_range_m=6.0)))
-    loc = CGRLocalizer(lambda x, y: query.scene_lines(x, y)[0], rng=np.random.default_rng(0))
-    loc.reset(poses[0])
-    from autonomy.avoidance import AvoidanceConfig, obstacle_points
-    from autonomy.navigator import Navigator
-    from sim.simulator.robot import relative_pose
+    from autonomy.stack import LocalizationConfig, RobotStack, StackConfig
+    from sim.simulator.robot import Odometry, OdometryConfig
+    from sim.simulator.step import SimStep
 
     bp = blueprints.load_blueprint(ROOT / "sim" / "assets" / "corridor_loop")
-    nav = Navigator(bp.navgraph, walls=np.asarray(vm.segments))
-    start = world.robot.pose(world.data)
-    nav.set_goal(int(bp.navgraph.nodes[-1].id), start)
-    acfg = AvoidanceConfig()
-    from autonomy.nearfield import NearField
+    vm = bp.vectormap
+    scene = SceneQuery(vm, VisibilityGrid.build(vm, VisibilityGridConfig(cell_m=0.5, max_range_m=6.0)))
+    stack = RobotStack(vm, bp.navgraph, StackConfig(camera=cfg.depth_camera()), rng=np.random.default_rng(0), scene=scene)
+    stack.reset(poses[0])
+    stack.set_goal(int(bp.navgraph.nodes[-1].id), 0.0)
 
-    near_field = NearField(cfg.intrinsics, cfg.mount, cfg.noise.min_range_m, acfg.robot_radius_m, acfg.near_field)
-
-    def stack() -> None:
-        # The frames in the order they were taken, with the true odometry increments (as
-        # the loop tracks); back at the first frame the filter restarts at its pose.
+    def stack_frame() -> None:
         k = next(it)
         j = k % len(frames)
-        res = fspf(frames[j], cfg.intrinsics, fcfg, seed=k, mount=cfg.mount)
-        p2, n2 = res.projected()
         if j == 0:
-            loc.reset(poses[0])
-        else:
-            loc.predict(relative_pose(poses[j - 1], poses[j]))
-        loc.update(p2, n2)
-        obstacles = obstacle_points(np.vstack([res.points, res.outliers]), acfg)
+            stack.relocalize(poses[0])
+        inc = np.zeros(3) if j == 0 else relative_pose(poses[j - 1], poses[j])
         # Time advances at 30 Hz as in the loop (remembered obstacles expire after memory_s).
-        nav.command(loc.estimate().pose, obstacles, k / 30.0, near_field.sight_lines(frames[j]))
+        stack.step(frames[j], inc, k / 30.0)
 
     # The whole robot-side stack of a frame: FSPF + CGR + near field + avoidance + navigation.
-    results["stack_frame"] = entry(timeit(stack, n, warmup=3), target=3.0, paper=5.4)
+    results["stack_frame"] = entry(timeit(stack_frame, n, warmup=3), target=3.0, paper=5.4)
+
+    sim = SimStep(world, cam, Odometry(OdometryConfig(), np.random.default_rng(0), world.robot.pose(world.data)), 0)
+    # FSPF only: physics + render + noise + FSPF, as demo_frame has always measured.
+    fspf_only = StackConfig(camera=cfg.depth_camera(), localization=LocalizationConfig(enabled=False), navigate=False)
+    sensing = RobotStack(vm, None, fspf_only, rng=np.random.default_rng(0))
 
     def closed_frame() -> None:
-        physics_frame()
-        d = cam.capture(world.data, next(seeds))
-        fspf(d, cfg.intrinsics, fcfg, seed=next(seeds), mount=cfg.mount)
+        frame = sim.step(np.array([0.5, 0.0, 0.3]))
+        sensing.perceive(frame.depth)
 
     # Real-time factor >= 2 at 30 Hz: physics + render + noise + FSPF <= 16.7 ms a frame.
     results["demo_frame"] = entry(timeit(closed_frame, n, warmup=3), target=round(1000 / 30 / 2, 2))

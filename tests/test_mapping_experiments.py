@@ -1,4 +1,4 @@
-"""Seed 003's experiments as scenario kinds, run at reduced size; the rigs they use."""
+"""PlaneMap's experiments as scenario kinds, run at reduced size; the rigs they use."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Plane detection (seed 003, II-B): fits, clouds, boundaries, RANSAC, randomized Hough.
+"""Plane detection (PlaneMap, II-B): fits, clouds, boundaries, RANSAC, randomized Hough.
 
 References are independent: numpy's SVD for the least-squares fit, the camera module's
 back-projection for clouds, a brute-force hull check, a dense grid for the sparse

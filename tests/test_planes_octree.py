@@ -1,4 +1,4 @@
-"""Octree plane map (seed 003, II-A): placement, policies, growth, queries, exports."""
+"""Octree plane map (PlaneMap, II-A): placement, policies, growth, queries, exports."""
 
 from __future__ import annotations
 

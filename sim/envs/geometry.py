@@ -5,7 +5,7 @@
   the shortest ``|p - n_i| + D_i`` over the nodes (and the goal itself) that the robot
   sees within a radius. "Sees" is a straight line that crosses no wall. Where nothing
   is visible (a robot pressed into a corner), the nearest node is used regardless.
-- A Kinect-Complete (KC) style laser scan (seed 000, VI-A): every valid pixel of the
+- A Kinect-Complete (KC) style laser scan (BV2012, VI-A): every valid pixel of the
   depth image back-projected to the robot frame, points within a height band
   down-projected to the floor, and the nearest one per azimuth bin over the camera's
   horizontal field of view, measured from the camera's floor position.

@@ -1,4 +1,4 @@
-"""Scene building blocks: the cuboid, wall and corridor rigs of seed 003's experiments.
+"""Scene building blocks: the cuboid, wall and corridor rigs of PlaneMap's experiments.
 
 Import ``sim`` (not ``mujoco``) first: the package sets the headless GL backend.
 """

@@ -1,6 +1,6 @@
 """Experiment III rig: a rectangular corridor loop and a robot whose camera looks right.
 
-Seed 003, III-C: the robot drives a corridor loop counter-clockwise, starting at its
+PlaneMap, III-C: the robot drives a corridor loop counter-clockwise, starting at its
 lower right, with the Kinect turned -90 degrees about the robot's z axis (looking to the
 right side, where the walls are), level, so the floor stays out of view. Corridor parts
 in the paper are 10-16 m long.

@@ -1,4 +1,4 @@
-"""Experiment I rig: a cuboid on the floor seen by a camera held by an arm (seed 003, III-A).
+"""Experiment I rig: a cuboid on the floor seen by a camera held by an arm (PlaneMap, III-A).
 
 The paper's Kinect sat on the flange of a KUKA arm and looked down at the cuboid; the
 four views of Table I differ in the base axis A1 and the flange axis A6 (A2 = 90,
@@ -46,7 +46,7 @@ class ArmView:
     """Flange axis A6 (roll about the optical axis)."""
 
 
-#: Table I of seed 003 (A2 = 90, A3 = -90, A4 = 0 in every view).
+#: PlaneMap Table I (A2 = 90, A3 = -90, A4 = 0 in every view).
 TABLE_I_VIEWS = (
     ArmView(1.59, -50.0, 0.0),
     ArmView(1.59, -50.0, 20.0),

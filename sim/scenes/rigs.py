@@ -1,4 +1,4 @@
-"""Small MuJoCo rigs with a free-standing depth camera (seed 003, Experiments I and II).
+"""Small MuJoCo rigs with a free-standing depth camera (PlaneMap, Experiments I and II).
 
 A rig is a static scene (floor, boxes) plus a camera fixed in the world at a given
 optical-frame pose, compiled with the same visual settings as :mod:`sim.simulator.world` so

@@ -1,4 +1,4 @@
-"""Experiment II rig: the camera facing a flat wall at a measured distance (seed 003, III-B).
+"""Experiment II rig: the camera facing a flat wall at a measured distance (PlaneMap, III-B).
 
 The paper's Kinect stood on a table, its front 106 cm and then 156 cm from a flat wall.
 Here the optical centre is ``distance_m`` from the wall, ``camera_height_m`` above the

@@ -375,7 +375,7 @@ class Recorder:
 
     # -- plane maps (mapping experiments) ------------------------------------------------
     def log_plane_map(self, tree, name: str, leaves: bool = True, normals: bool = True) -> None:
-        """An octree plane map (seed 001, Section II): patches, occupied leaves, normals.
+        """An octree plane map (PlaneMap, Section II): patches, occupied leaves, normals.
 
         ``tree`` is an :class:`autonomy.planes.PlaneOctree` (its ``patches()`` and
         ``leaf_boxes()``); logged at the current time, so a map growing over a run can be

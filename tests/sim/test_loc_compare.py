@@ -1,4 +1,4 @@
-"""The localization comparison (seed 000, VI-A): config, trials, and a short 10 x 4 run."""
+"""The localization comparison (BV2012, VI-A): config, trials, and a short 10 x 4 run."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The paper's long-run trial (seed 000, VI-B), shortened to 200 m for CI: the whole
+"""The paper's long-run trial (BV2012, VI-B), shortened to 200 m for CI: the whole
 stack in the loop on the corridor building with people and furniture."""
 
 from __future__ import annotations

@@ -151,8 +151,7 @@ def test_something_standing_in_the_blind_zone_at_the_start(tmp_path: Path, near_
     off: closer than the camera's 0.8 m minimum range, so FSPF never samples it. The near
     field (the floor the camera fails to see) stops the robot, which backs off until the
     camera sees the box; without it the robot drives straight into it. (A person there
-    steps out of the way of the robot setting off, since session 9, with or without the
-    near field.)"""
+    steps out of the way of the robot setting off, with or without the near field.)"""
     last = corridor_files(tmp_path)
     scn = load_scenario(
         _scenario(

@@ -24,8 +24,8 @@ def _walk(people: tuple[Person, ...], robot_path, steps: int) -> np.ndarray:
 def test_a_person_stepped_aside_does_not_jump_where_the_route_turns() -> None:
     """An L-shaped route with the robot standing near its corner: the person steps aside
     and is still aside at the corner, where the offset point of the next leg lies
-    elsewhere; the person walks there instead of teleporting (a jump put a person right
-    in front of the robot in the 4 km run)."""
+    elsewhere; the person walks there instead of teleporting (a jump can put a person
+    right in front of the robot)."""
     p = Person(route=((0.0, 0.0), (6.0, 0.0), (6.0, -6.0)), speed_mps=0.75)
     robot = lambda k: np.array([7.0, 0.3])  # noqa: E731 - just past the corner, ahead
     pos = _walk((p,), robot, 360)
@@ -95,8 +95,8 @@ def test_a_person_does_not_step_back_into_a_wall_or_from_a_robot_standing_still(
 
 def test_a_person_touched_by_a_standing_robot_steps_out_of_its_personal_space() -> None:
     """The robot stopped (turning in place) with a person touching its front: the person
-    steps back until the personal space is restored, then stands (in the 4 km run a
-    person pinned like this was touched for 10 s while the robot turned and backed off)."""
+    steps back until the personal space is restored, then stands (else a person pinned
+    like this stays touching the robot while it turns and backs off)."""
     person = Person(route=((0.0, 0.0), (0.01, 0.0)), speed_mps=0.0)
     pc = PeopleController((person,), np.zeros(1, dtype=int))
     robot = np.array([0.0, -(pc.robot_radius_m + person.radius_m)])
@@ -109,9 +109,8 @@ def test_a_person_touched_by_a_standing_robot_steps_out_of_its_personal_space() 
 
 def test_a_person_overtakes_a_robot_instead_of_walking_abeam_of_it() -> None:
     """A faster person walking up behind the robot on the same line steps aside and
-    passes it, and is ahead (where the camera sees) a few seconds later. The step back
-    from a robot closing in once held such a person abeam of the robot, just out of its
-    camera's view, until the robot turned into them at a junction (4 km run, ours)."""
+    passes it, and is ahead (where the camera sees) a few seconds later, not held abeam
+    of it, just out of its camera's view, where its next turn drives into them."""
     person = Person(route=((-3.0, 0.0), (40.0, 0.0)), speed_mps=1.3)
     robot = lambda k: np.array([0.75 * k * DT, 0.02 * np.sin(0.5 * k * DT)])  # noqa: E731 - 0.75 m/s, weaving by 2 cm
     pos = _walk((person,), robot, 600)
@@ -126,9 +125,8 @@ def test_a_person_overtakes_a_robot_instead_of_walking_abeam_of_it() -> None:
 def test_a_person_who_cannot_step_back_along_their_route_steps_sideways() -> None:
     """A person facing away from a robot backing slowly at them along their route (a
     recovery back-off), with a wall right behind them across the route: stepping back
-    along the route is impossible, so they step sideways and are never touched. Before,
-    they stood still and the robot drove into them (the 200 m run's one contact, at the
-    end of a person's route)."""
+    along the route is impossible, so they step sideways and are never touched rather
+    than stand still where the robot drives into them."""
     person = Person(route=((0.0, 0.0), (5.0, 0.0)), speed_mps=0.0, start_offset_m=8.0)  # at x = 2, facing -x
     walls = np.array([[1.72, -0.3, 1.72, 0.3]])
     pc = PeopleController((person,), np.zeros(1, dtype=int), walls)
@@ -145,8 +143,8 @@ def test_a_person_stepped_aside_turns_round_on_the_spot_at_the_route_end() -> No
     """A person passes a robot standing near the end of their back-and-forth route,
     stepped aside to their left, and turns round at the end: they stay on the same side
     of the corridor (now their right) instead of walking diagonally across to the
-    mirrored offset, which in the 4 km run led a person into a robot standing there
-    and held both in a 400 s deadlock."""
+    mirrored offset, which can lead them into a robot standing there and hold both in
+    a deadlock."""
     p = Person(route=((0.0, 0.0), (3.0, 0.0)), speed_mps=1.0)
     robot = lambda k: np.array([2.6, -0.5])  # noqa: E731 - standing, right of the route's end
     pos = _walk((p,), robot, 150)[:, 0]
@@ -161,7 +159,7 @@ def test_a_person_stepped_aside_turns_round_on_the_spot_at_the_route_end() -> No
 def test_a_person_held_up_by_a_robot_in_a_narrow_corridor_turns_back() -> None:
     """A robot standing in the middle of a 1.2 m corridor blocks a person's route: the
     person waits (personal space) and after ``max_blocked_s`` turns back, instead of
-    standing in front of the robot for ever (a deadlock at a doorway in the 4 km run).
+    standing in front of the robot for ever (a deadlock, as in a doorway).
     """
     walls = np.array([[-1.0, -0.6, 12.0, -0.6], [-1.0, 0.6, 12.0, 0.6]])
     p = Person(route=((0.0, 0.0), (10.0, 0.0)), speed_mps=1.0)
@@ -186,8 +184,8 @@ def test_a_person_tailing_a_slowly_backing_robot_in_a_narrow_corridor_turns_back
     """A robot backs at 0.15 m/s along a 1.2 m corridor, the way a faster person walks:
     the person comes up behind it, cannot pass, and is held up at the personal space
     (each step waits for the robot to make room); after ``max_blocked_s`` they turn back
-    rather than tail it in the camera's blind zone (4 km run: the robot then drove forward
-    into the person it could not see)."""
+    rather than tail it in the camera's blind zone, where the robot, driving forward
+    again, hits the person it cannot see."""
     walls = np.array([[-1.0, -0.6, 30.0, -0.6], [-1.0, 0.6, 30.0, 0.6]])
     p = Person(route=((0.0, 0.0), (25.0, 0.0)), speed_mps=1.0)
     pc = PeopleController((p,), np.zeros(1, dtype=int), walls)
@@ -209,8 +207,7 @@ def test_a_person_does_not_step_into_the_path_of_a_moving_robot() -> None:
     """A person walking across the corridor towards the line a robot drives along waits
     at its edge until the robot has passed: never within a metre ahead of it, in its
     path (the camera's blind zone). Keeping clear of where the robot is, not where it
-    will be, let them cross 0.7 m in front of it (a person whose route turned the
-    corner swung across a passing robot's path in the 4 km run)."""
+    will be, would let them cross 0.7 m in front of it."""
     robot = lambda k: np.array([-4.0 + 0.5 * k * DT, 0.0])  # noqa: E731 - 0.5 m/s along y = 0
     for offset in (0.375, 0.5, 0.75, 1.0, 1.25, 1.5):
         person = Person(route=((0.0, -3.0), (0.0, 3.0)), speed_mps=1.0, start_offset_m=offset)
@@ -223,7 +220,7 @@ def test_a_person_does_not_step_into_the_path_of_a_moving_robot() -> None:
 
 def test_a_person_a_robot_drives_at_steps_out_of_its_way() -> None:
     """A person standing on a robot's line steps sideways out of its path, not back along
-    it (stepping straight back, they were pushed along ahead of it, out of its view)."""
+    it (stepping straight back, they would be pushed along ahead of it, out of its view)."""
     person = Person(route=((2.0, -3.0), (2.0, 3.0)), speed_mps=0.0, start_offset_m=3.0)
     robot = lambda k: np.array([0.3 * k * DT, 0.0])  # noqa: E731 - 0.3 m/s at them
     pos = _walk((person,), robot, 400)
@@ -232,9 +229,9 @@ def test_a_person_a_robot_drives_at_steps_out_of_its_way() -> None:
 
 def test_a_person_passes_a_moving_robot_with_room_to_spare() -> None:
     """Overtaking a robot on the move, a person keeps pass_gap_m from it, not just the
-    personal space (passing 5 cm abeam, out of the camera's view, they were in the way
-    of the robot's next turn in the 4 km run); from a robot standing still the personal
-    space is enough."""
+    personal space (passing 5 cm abeam, out of the camera's view, they would be in the
+    way of the robot's next turn); from a robot standing still the personal space is
+    enough."""
     person = Person(route=((-3.0, 0.0), (40.0, 0.0)), speed_mps=1.3)
     robot = lambda k: np.array([0.4 * k * DT, 0.0])  # noqa: E731 - 0.4 m/s along the route
     pos = _walk((person,), robot, 600)
@@ -247,8 +244,8 @@ def test_a_person_passes_a_moving_robot_with_room_to_spare() -> None:
 def test_a_person_wedged_at_a_door_frame_squeezes_along_the_wall_out_of_the_robots_way() -> None:
     """A person standing 26 cm from a door frame's end (within the 5 cm wall margin of
     every step away) while a robot turns towards the door, into them: they squeeze along
-    the wall, 1 cm from it, and are never touched. Keeping the 5 cm, they stood still and
-    the robot, which could not see them, drove into them (4 km run H's one contact)."""
+    the wall, 1 cm from it, and are never touched. Keeping the 5 cm, they would stand
+    still while the robot, which cannot see them, drives into them."""
     walls = np.array([[0.0, -1.0, 0.0, 0.0], [0.0, 0.93, 0.0, 1.8]])  # a door from y = 0 to 0.93
     person = Person(route=((0.258, -3.0), (0.258, 3.0)), speed_mps=0.0, start_offset_m=3.038)
     pc = PeopleController((person,), np.zeros(1, dtype=int), walls)
@@ -293,9 +290,9 @@ def test_a_person_whose_body_lags_their_route_still_steps_out_of_the_robots_way(
 ) -> None:
     """Round a route's corner stepped aside, a person's body walks to the next leg's
     offset (it lags their route position). A robot driving at them then (at most 0.4
-    m/s, open floor) never touches them. Before, every step back was measured from the
-    route position, so it was a jump and not taken: they stood while a backing robot
-    drove into them, four times in 18 s (4 km run G)."""
+    m/s, open floor) never touches them. Were every step back measured from the route
+    position, it would be a jump and not taken: they would stand while a backing robot
+    drives into them."""
     person = Person(route=((0.0, 3.0), (0.0, 0.0), (-3.0, 0.0)), speed_mps=1.0 if walking else 0.0, start_offset_m=offset)
     pc = PeopleController((person,), np.zeros(1, dtype=int))
     pc._side[0] = side  # white box: stepped aside, the body off its route position
@@ -311,8 +308,8 @@ def test_a_person_whose_body_lags_their_route_still_steps_out_of_the_robots_way(
 def test_a_person_beside_a_wall_gets_out_of_the_way_of_a_robot_driving_along_it(side: float, lateral: float, speed: float, forward: bool) -> None:
     """In a 2 m corridor a robot drives along at up to 0.4 m/s on a line where a person
     stands: the person gets out of its way (sideways, or along the corridor at the full
-    0.5 m/s where the wall is beside them), never touched. Before, beside the wall they
-    took only the along-route part of their step back, 0.2 m/s, and the robot caught up."""
+    0.5 m/s where the wall is beside them), never touched. Taking only the along-route
+    part of their step back beside the wall, 0.2 m/s, the robot would catch them up."""
     walls = np.array([[-6.0, -1.0, 6.0, -1.0], [-6.0, 1.0, 6.0, 1.0]])
     person = Person(route=((-5.0, 0.0), (5.0, 0.0)), speed_mps=0.0, start_offset_m=5.0)
     pc = PeopleController((person,), np.zeros(1, dtype=int), walls)
@@ -327,15 +324,15 @@ def test_a_person_waiting_in_a_doorway_gets_out_of_the_way_of_a_robot_turning_in
     """A person stepped aside into a doorway, 27 cm from the end of its frame, and a
     robot turns into the door: every one of the three preferred steps back leads towards
     the frame, so they step the way that is open (into the door, ahead of the robot),
-    never touched. Before, they stood and the robot, which could not see them beside it,
-    drove into them (4 km run K's two incidents)."""
+    never touched rather than stand where the robot, which cannot see them beside it,
+    drives into them."""
     walls = np.array([[0.0, -2.0, 0.0, 0.0], [0.0, 0.96, 0.0, 3.0], [2.0, -2.0, 2.0, 3.0]])  # door at x = 0, y 0-0.96
     person = Person(route=((1.0, -2.0), (1.0, 3.0)), speed_mps=0.0, start_offset_m=2.235)
     pc = PeopleController((person,), np.zeros(1, dtype=int), walls)
     pc._side[0] = -0.859  # white box: stepped aside to the left, into the doorway
     pc._state[0] = pc._place(0)
-    # The robot's track in run K (relative to the frame's end): north, then curving left
-    # into the door, at 0.4 m/s.
+    # A robot's track turning into the door (relative to the frame's end): north, then
+    # curving left into the door, at 0.4 m/s.
     track = np.array([[1.0, -0.35], [0.95, 0.0], [0.85, 0.15], [0.58, 0.28], [-0.4, 0.5]])
     cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(track, axis=0).T))])
     touch = pc.robot_radius_m + person.radius_m
@@ -349,9 +346,9 @@ def test_a_person_waiting_in_a_doorway_gets_out_of_the_way_of_a_robot_turning_in
 
 def test_a_person_walking_on_stepped_aside_keeps_off_the_walls_where_the_corridor_narrows() -> None:
     """Stepped aside 0.95 m in an open area, a person walks on into a 2 m corridor: their
-    offset shrinks so that they keep 5 cm off its wall. Before, they walked on at 0.95 m,
-    through the wall (people are not stopped by walls), and one waited half inside a door
-    frame's end, where no step back was clear of it (4 km run M's incident)."""
+    offset shrinks so that they keep 5 cm off its wall. At 0.95 m they would walk through
+    the wall (people are not stopped by walls), or wait half inside a door frame's end,
+    where no step back is clear of it."""
     walls = np.array([[3.0, -1.0, 12.0, -1.0], [3.0, 1.0, 12.0, 1.0]])
     person = Person(route=((0.0, 0.0), (12.0, 0.0)), speed_mps=1.0, start_offset_m=1.0)
     pc = PeopleController((person,), np.zeros(1, dtype=int), walls)

@@ -59,3 +59,33 @@ def test_stairs_are_excluded_unless_allowed() -> None:
     g = _graph(xy, [(0, 1), (0, 2), (2, 1)], stairs={0})
     assert astar(g, 10, 11) == [10, 12, 11]
     assert astar(g, 10, 11, exclude_stairs=False) == [10, 11]
+
+
+def test_dijkstra_matches_brute_force_relaxation_from_several_sources() -> None:
+    import numpy as np
+
+    from autonomy.planner import dijkstra
+
+    rng = np.random.default_rng(4)
+    n = 30
+    adj: list[list[tuple[int, float]]] = [[] for _ in range(n)]
+    for _ in range(60):
+        a, b = (int(v) for v in rng.integers(0, n, 2))
+        if a != b:
+            w = float(rng.uniform(0.1, 5.0))
+            adj[a].append((b, w))
+            adj[b].append((a, w))
+    sources = {0: 0.0, 7: 1.5}
+    dist, parent = dijkstra(adj, sources)
+    # Bellman-Ford as the reference.
+    ref = np.full(n, np.inf)
+    for s, d in sources.items():
+        ref[s] = min(ref[s], d)
+    for _ in range(n):
+        for u in range(n):
+            for v, w in adj[u]:
+                ref[v] = min(ref[v], ref[u] + w)
+    np.testing.assert_allclose(dist, ref)
+    for v in range(n):
+        if np.isfinite(dist[v]) and parent[v] >= 0:
+            assert any(x == v and np.isclose(dist[parent[v]] + w, dist[v]) for x, w in adj[parent[v]])

@@ -85,7 +85,6 @@ def cmd_snapshot(args: argparse.Namespace) -> int:
 
     from autonomy.vectormap import load_vectormap
     from sim.simulator.kinect import KinectCamera, KinectConfig
-    from sim.simulator.kinect_noise import apply_kinect_noise
     from sim.simulator.world import build_world
 
     pose = _parse_pose(args.pose)
@@ -98,8 +97,7 @@ def cmd_snapshot(args: argparse.Namespace) -> int:
     cfg = KinectConfig(backend=args.backend, render_far_m=math.inf if args.no_noise else 0.0)
     world = build_world(vm, intrinsics=cfg.intrinsics, mount=cfg.mount, start_pose=pose)
     cam = KinectCamera(world.model, world.camera_id, cfg)
-    clean = cam.render_clean(world.data).copy()
-    depth = clean if args.no_noise else apply_kinect_noise(clean, cfg.intrinsics, cfg.noise, args.seed)
+    depth = cam.render_clean(world.data).copy() if args.no_noise else cam.capture(world.data, args.seed)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     np.save(out / "depth.npy", depth.astype(np.float32))

@@ -215,7 +215,8 @@ def load_scenario(path: str | Path, overrides: list[str] | None = None) -> Scena
     # The near field depends on the camera, its mount and the sensor's range: check the
     # combination now (a few ms), not when the run starts.
     try:
-        NearField(scn.kinect.intrinsics, scn.kinect.mount, scn.kinect.noise.min_range_m, scn.avoidance.robot_radius_m, scn.avoidance.near_field)
+        cam = scn.kinect.depth_camera()
+        NearField(cam.intrinsics, cam.mount, cam.min_range_m, scn.avoidance.robot_radius_m, scn.avoidance.near_field)
     except InputError as err:
         raise InputError(f"{src}: {err}") from None
     return scn

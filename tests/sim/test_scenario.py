@@ -112,3 +112,14 @@ def test_override_parser_never_crashes(text: str) -> None:
 
 def test_shipped_scenarios_dir_exists() -> None:
     assert (SCENARIOS_DIR / "demo.toml").is_file()
+
+
+def test_the_robot_radius_has_one_source() -> None:
+    """The stack avoids with the simulated body's radius; setting it twice is an error."""
+
+    scn = load_scenario(SCENARIOS_DIR / "demo.toml", ["robot.radius_m=0.25"])
+    assert scn.avoidance.robot_radius_m == 0.25 and scn.stack_config().avoidance.robot_radius_m == 0.25
+    with pytest.raises(InputError, match=r"avoidance\.robot_radius_m.*robot\.radius_m"):
+        load_scenario(SCENARIOS_DIR / "demo.toml", ["avoidance.robot_radius_m=0.25"])
+    cam = load_scenario(SCENARIOS_DIR / "demo.toml", ["kinect.noise.max_range_m=3.5"]).stack_config().camera
+    assert cam.max_range_m == 3.5 and cam.fov_h_rad == scn.kinect.intrinsics.fov_h_rad

@@ -107,6 +107,12 @@ class KinectNoiseConfig:
     """Threads for the kernels (capped at the CPU count); the output does not depend on it."""
 
     def __post_init__(self) -> None:
+        self._check_types()
+        self._check_ranges()
+
+    def _check_types(self) -> None:
+        """Bools are bools, ``subpixel`` and ``threads`` positive ints, the rest finite
+        numbers (``max_range_m`` may be inf)."""
         for fd in fields(self):
             val = getattr(self, fd.name)
             if fd.type in ("bool", bool):
@@ -125,6 +131,7 @@ class KinectNoiseConfig:
                 if math.isnan(val) or (math.isinf(val) and fd.name != "max_range_m"):
                     raise InputError(f"KinectNoiseConfig.{fd.name}: must be finite, got {val!r}")
 
+    def _check_ranges(self) -> None:
         def need(ok: bool, name: str, what: str) -> None:
             if not ok:
                 raise InputError(f"KinectNoiseConfig.{name}: {what}, got {getattr(self, name)!r}")

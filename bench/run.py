@@ -145,7 +145,7 @@ def bench_sim(results: dict[str, Result], quick: bool) -> None:
 
     results["sim_step_frame"] = entry(timeit(physics_frame, n, warmup=3))
 
-    # FSPF on real noisy frames of the corridor world (seed 000 Table I parameters).
+    # FSPF on real noisy frames of the corridor world (BV2012 Table I parameters).
     # Paper: FSPF + localization took 16.3% of one core at 30 Hz, 5.4 ms a frame.
     frames, poses = [], []
     for k in range(20):

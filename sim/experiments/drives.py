@@ -1,6 +1,6 @@
 """Recorded drives: depth frames, odometry and ground truth, recorded once, replayed many times.
 
-Seed 000, VI-A: "We recorded a log with odometry and data from the Kinect sensor ...
+BV2012, VI-A: "We recorded a log with odometry and data from the Kinect sensor ...
 This log was replayed offline for the different localization approaches". A
 :class:`RecordingConfig` names a building, a route, unmapped furniture and people; the
 recorder drives the robot along the route in the simulator (the navigator on the true
@@ -55,7 +55,7 @@ LOG_VERSION = 2
 
 @dataclass(frozen=True)
 class RecordingConfig:
-    """The drive that is recorded once: building, route, actors, sensor (seed 000, VI-A)."""
+    """The drive that is recorded once: building, route, actors, sensor (BV2012, VI-A)."""
 
     map: str = "corridor_loop"
     """A building shipped in sim/assets."""

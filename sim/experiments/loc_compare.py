@@ -1,4 +1,4 @@
-"""The ``localization_comparison`` experiment kind: seed 000, VI-A and Figs. 5-7.
+"""The ``localization_comparison`` experiment kind: BV2012, VI-A and Figs. 5-7.
 
 One drive (:mod:`sim.experiments.drives`) is recorded once; each trial replays it offline with one
 approach and one seed: per frame, the observation is made from the stored depth frame
@@ -59,7 +59,7 @@ from sim.simulator.robot import OdometryConfig
 #: as an ablation.
 APPROACHES = ("fspf", "kr", "ks", "kc", "mcl")
 
-#: Seed 000, VI-A: failure rates and CPU loads of the four approaches.
+#: BV2012, VI-A: failure rates and CPU loads of the four approaches.
 PAPER = {
     "fspf": {"failure_rate": 0.02, "cpu_load": 0.163},
     "kr": {"failure_rate": 0.82, "cpu_load": 0.0001},
@@ -408,7 +408,7 @@ def summarize(cfg: LocComparisonConfig, results: list[dict], out_dir: Path) -> d
         "metrics": metrics,
         "approaches": per,
         "paper": PAPER,
-        "paper_notes": "seed 000, VI-A: failure 2% / 82% / 62% / 61% and CPU 16.3% / 0.01% / 3.6% / 56.6% for FSPF / KR / KS / KC; the paper's CPU load counts processing the depth images (FSPF or scan simulation), single threaded on a Core i7 950",
+        "paper_notes": "BV2012, VI-A: failure 2% / 82% / 62% / 61% and CPU 16.3% / 0.01% / 3.6% / 56.6% for FSPF / KR / KS / KC; the paper's CPU load counts processing the depth images (FSPF or scan simulation), single threaded on a Core i7 950",
         "log": {
             "path": str(log.path),
             "frames": log.n_frames,

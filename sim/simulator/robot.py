@@ -72,7 +72,7 @@ class RobotConfig:
 
 @dataclass(frozen=True)
 class OdometryConfig:
-    """Odometry noise: multiplicative Gaussian on each frame's increments (seed 000, VI-A)."""
+    """Odometry noise: multiplicative Gaussian on each frame's increments (BV2012, VI-A)."""
 
     translation_noise: float = 0.2
     """Std of the relative error on each translation increment (0.2 = the paper's 20%)."""

@@ -20,9 +20,15 @@ import numpy as np
 from autonomy.camera import ROBOT_FROM_OPTICAL_LEVEL, CameraIntrinsics, CameraMount
 from autonomy.errors import InputError
 from autonomy.vectormap import VectorMap
-from sim.scenes.rigs import optical_quat
 from sim.simulator.robot import RobotConfig
-from sim.simulator.world import KINECT_CAMERA, World, WorldConfig, build_spec, compile_world
+from sim.simulator.world import (
+    KINECT_CAMERA,
+    World,
+    WorldConfig,
+    build_spec,
+    compile_world,
+    optical_quat,
+)
 
 
 @dataclass(frozen=True)

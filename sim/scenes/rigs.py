@@ -15,10 +15,10 @@ import numpy as np
 
 from autonomy.camera import CameraIntrinsics
 from sim.simulator.kinect import KinectCamera, KinectConfig
-from sim.simulator.world import MJCAM_FROM_OPTICAL
+from sim.simulator.world import KINECT_CAMERA, optical_quat, set_depth_rendering
 
-#: Name of the rig's depth camera.
-RIG_CAMERA = "kinect"
+#: Name of the rig's depth camera (the name every world gives its Kinect).
+RIG_CAMERA = KINECT_CAMERA
 
 
 @dataclass
@@ -41,21 +41,8 @@ def new_spec(name: str, intr: CameraIntrinsics) -> mujoco.MjSpec:
     """An empty spec with the depth-rendering settings of :func:`sim.simulator.world.build_spec`."""
     spec = mujoco.MjSpec()
     spec.modelname = name
-    vis = spec.visual
-    vis.global_.offwidth = max(640, intr.width)
-    vis.global_.offheight = max(480, intr.height)
-    vis.quality.shadowsize = 0
-    vis.quality.offsamples = 0
-    vis.quality.numquads = 1
+    set_depth_rendering(spec, intr)
     return spec
-
-
-def optical_quat(world_from_optical_rot: np.ndarray) -> np.ndarray:
-    """wxyz quaternion of the MuJoCo camera whose optical frame has this rotation."""
-    mat = np.asarray(world_from_optical_rot, dtype=np.float64) @ MJCAM_FROM_OPTICAL
-    q = np.zeros(4)
-    mujoco.mju_mat2Quat(q, mat.reshape(-1))
-    return q
 
 
 def add_camera(spec: mujoco.MjSpec, world_from_optical: np.ndarray, intr: CameraIntrinsics) -> None:

@@ -70,12 +70,18 @@ def _wall_boxes(segments: np.ndarray, thickness: float, height: float) -> tuple[
     return centres, half, quats
 
 
-def camera_quat(mount: CameraMount) -> np.ndarray:
-    """wxyz orientation of the MuJoCo camera in the robot body for a mount."""
-    mat = mount.rotation() @ MJCAM_FROM_OPTICAL
+def optical_quat(rot_from_optical: np.ndarray) -> np.ndarray:
+    """wxyz quaternion of the MuJoCo camera whose optical frame has this rotation (in its
+    parent: the world, or the robot body)."""
+    mat = np.asarray(rot_from_optical, dtype=np.float64) @ MJCAM_FROM_OPTICAL
     q = np.zeros(4)
     mujoco.mju_mat2Quat(q, mat.reshape(-1))
     return q
+
+
+def camera_quat(mount: CameraMount) -> np.ndarray:
+    """wxyz orientation of the MuJoCo camera in the robot body for a mount."""
+    return optical_quat(mount.rotation())
 
 
 def build_spec(
@@ -94,7 +100,7 @@ def build_spec(
     spec.option.timestep = world.timestep_s
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     spec.option.gravity = [0.0, 0.0, -9.81]
-    _set_render_quality(spec, intrinsics)
+    set_depth_rendering(spec, intrinsics)
     _add_floor(spec, vectormap, world)
     _add_walls(spec, vectormap, world)
     if world.ceiling:
@@ -111,8 +117,9 @@ def build_spec(
     return spec
 
 
-def _set_render_quality(spec: mujoco.MjSpec, intrinsics: CameraIntrinsics) -> None:
-    """An offscreen buffer the camera fits in, and only what depth needs."""
+def set_depth_rendering(spec: mujoco.MjSpec, intrinsics: CameraIntrinsics) -> None:
+    """An offscreen buffer the camera fits in, and only what depth needs (every spec a
+    Kinect renders, buildings and rigs alike)."""
     vis = spec.visual
     vis.global_.offwidth = max(640, intrinsics.width)
     vis.global_.offheight = max(480, intrinsics.height)

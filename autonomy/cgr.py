@@ -28,6 +28,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -120,6 +121,21 @@ class UpdateStats:
     shared: int = 0
     dropped_points: int = 0
     """Points the association check dropped (their line changed at the refined pose)."""
+
+
+class _Frame(NamedTuple):
+    """One observation as the refinement reads it."""
+
+    pts: np.ndarray
+    """(n, 2) points, robot frame."""
+    nrm: np.ndarray
+    """(n, 2) their normals (zeros for the laser model)."""
+    use_n: bool
+    """Whether the normals are used (point-cloud model)."""
+    cos_max: float
+    """cos(theta_max): the normal-agreement test."""
+    gate: float
+    """Correspondence gate for this frame (:meth:`CGRLocalizer.gate`)."""
 
 
 def _wrap(a: np.ndarray | float) -> np.ndarray | float:
@@ -224,34 +240,40 @@ class CGRLocalizer:
 
     def update(self, points: np.ndarray, normals: np.ndarray | None) -> UpdateStats:
         """Steps 2-4 for a 2D observation (robot frame); ``normals`` None = laser model."""
-        cfg, obs = self.cfg, self.obs
         pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
         use_n = normals is not None
         nrm = np.ascontiguousarray(normals if use_n else np.zeros_like(pts), dtype=np.float64).reshape(-1, 2)
         stats = UpdateStats(points=len(pts))
         self.before_refinement = self.particles.copy()
         self.last = stats
-        if len(pts) < obs.min_points:
+        if len(pts) < self.obs.min_points:
             return stats
-        n = cfg.n_particles
         est = self.estimate()
-        shared_pose = est.pose
-        lines = np.ascontiguousarray(self.scene_lines(float(shared_pose[0]), float(shared_pose[1])), dtype=np.float64).reshape(-1, 4)
+        lines = np.ascontiguousarray(self.scene_lines(float(est.pose[0]), float(est.pose[1])), dtype=np.float64).reshape(-1, 4)
         if len(lines) == 0:
             return stats
-        cos_max = math.cos(obs.theta_max_rad)
-        k = obs.inv_two_f_sigma2
-        idx_shared = np.empty(len(pts), dtype=np.int64)
-        gate = self.gate(est, pts)
-        kept = correspond(lines, shared_pose, pts, nrm, use_n, cos_max, gate, idx_shared)
+        frame = _Frame(pts, nrm, use_n, math.cos(self.obs.theta_max_rad), self.gate(est, pts))
+        refined, lnp0, lnpr = self._refine(frame, est.pose, lines, stats)
+        lnp = self._accept(refined, lnp0, lnpr, stats)
+        self._resample(lnp, stats)
+        return stats
+
+    def _refine(
+        self, fr: _Frame, shared_pose: np.ndarray, lines: np.ndarray, stats: UpdateStats
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Step 2: every particle refined; returns the refined poses and the observation
+        log-likelihoods at the first-stage and refined poses.
+
+        Particles near the proposal mean share its correspondences, hence one moment
+        matrix; the others get their own scene lines and correspondences."""
+        cfg, n = self.cfg, self.cfg.n_particles
+        idx_shared = np.empty(len(fr.pts), dtype=np.int64)
+        kept = correspond(lines, shared_pose, fr.pts, fr.nrm, fr.use_n, fr.cos_max, fr.gate, idx_shared)
         frames_shared = line_frames(lines, shared_pose[0], shared_pose[1])
         stats.used_points = int(kept)
         lnp0 = np.empty(n)
         lnpr = np.empty(n)
         refined = np.empty_like(self.particles)
-        iters = cfg.refinements
-        # Particles near the proposal mean share its correspondences, hence one moment
-        # matrix; the others get their own scene lines and correspondences.
         d_xy = np.hypot(self.particles[:, 0] - shared_pose[0], self.particles[:, 1] - shared_pose[1])
         d_th = np.abs(_wrap(self.particles[:, 2] - shared_pose[2]))
         share = (d_xy <= cfg.share_radius_m) & (d_th <= cfg.share_angle_rad)
@@ -260,60 +282,99 @@ class CGRLocalizer:
         if share.any():
             sel = np.flatnonzero(share)
             first = np.ascontiguousarray(self.particles[sel])
-            o_p, o0, o1 = np.empty((len(sel), 3)), np.empty(len(sel)), np.empty(len(sel))
-            used = moments(frames_shared, idx_shared, pts, m)
-            refine_all_m(m, used, first, k, iters, cfg.step_fraction, obs.min_points, o_p, o0, o1, cfg.trust_region_m)
-            if iters > 0 and used >= obs.min_points and cfg.consistent_fraction > 0:
-                # Association check (ours): re-find the correspondences where the
-                # refinement led. A box's face beside a pillar, matched to the pillar's
-                # extended line, slides onto that line but off its segment: those points
-                # lose their line there. If too many do, drop them and refine again.
-                # Skipped when the refinement moved the points less than their noise
-                # (sigma): the correspondences there are the same.
-                at = np.array([o_p[:, 0].mean(), o_p[:, 1].mean(), circular_mean(o_p[:, 2])])
-                lever = math.sqrt((m[0, 0] + m[1, 1]) / used)  # RMS range of the used points
-                moved = math.hypot(at[0] - shared_pose[0], at[1] - shared_pose[1]) + lever * abs(float(_wrap(at[2] - shared_pose[2])))
-                if moved > obs.sigma_m:
-                    idx_at = np.empty(len(pts), dtype=np.int64)
-                    correspond(lines, at, pts, nrm, use_n, cos_max, obs.max_distance_m, idx_at)
-                    same = (idx_shared >= 0) & (idx_at == idx_shared)
-                    if same.sum() < cfg.consistent_fraction * used:
-                        stats.dropped_points = int(used - same.sum())
-                        idx_shared[~same] = -1
-                        used = moments(frames_shared, idx_shared, pts, m)
-                        refine_all_m(m, used, first, k, iters, cfg.step_fraction, obs.min_points, o_p, o0, o1, cfg.trust_region_m)
-                        stats.used_points = int(used)
-            refined[sel], lnp0[sel], lnpr[sel] = o_p, o0, o1
+            refined[sel], lnp0[sel], lnpr[sel] = self._refine_shared(fr, shared_pose, lines, frames_shared, idx_shared, first, m, stats)
         for i in np.flatnonzero(~share):
-            p = self.particles[i]
-            own = np.ascontiguousarray(self.scene_lines(float(p[0]), float(p[1])), dtype=np.float64).reshape(-1, 4)
-            idx = np.full(len(pts), -1, dtype=np.int64)
-            frames = np.zeros((0, 3))
-            if len(own):
-                correspond(own, p, pts, nrm, use_n, cos_max, gate, idx)
-                frames = line_frames(own, p[0], p[1])
-            used = moments(frames, idx, pts, m)
-            o_p, o0, o1 = np.empty((1, 3)), np.empty(1), np.empty(1)
-            refine_all_m(m, used, p[None, :].copy(), k, iters, cfg.step_fraction, obs.min_points, o_p, o0, o1, cfg.trust_region_m)
-            refined[i], lnp0[i], lnpr[i] = o_p[0], o0[0], o1[0]
-        # Step 3: acceptance test between the refined and first-stage samples.
+            refined[i], lnp0[i], lnpr[i] = self._refine_own(fr, self.particles[i], m)
+        return refined, lnp0, lnpr
+
+    def _refine_shared(
+        self,
+        fr: _Frame,
+        shared_pose: np.ndarray,
+        lines: np.ndarray,
+        frames: np.ndarray,
+        idx: np.ndarray,
+        first: np.ndarray,
+        m: np.ndarray,
+        stats: UpdateStats,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Step 2 for the particles ``first`` that share the proposal mean's
+        correspondences ``idx`` (changed in place by the association check)."""
+        cfg, obs = self.cfg, self.obs
+        k, iters = obs.inv_two_f_sigma2, cfg.refinements
+        o_p, o0, o1 = np.empty((len(first), 3)), np.empty(len(first)), np.empty(len(first))
+        used = moments(frames, idx, fr.pts, m)
+        refine_all_m(m, used, first, k, iters, cfg.step_fraction, obs.min_points, o_p, o0, o1, cfg.trust_region_m)
+        if iters > 0 and used >= obs.min_points and cfg.consistent_fraction > 0:
+            same = self._kept_associations(fr, shared_pose, lines, idx, o_p, m, used)
+            if same is not None and same.sum() < cfg.consistent_fraction * used:
+                stats.dropped_points = int(used - same.sum())
+                idx[~same] = -1
+                used = moments(frames, idx, fr.pts, m)
+                refine_all_m(m, used, first, k, iters, cfg.step_fraction, obs.min_points, o_p, o0, o1, cfg.trust_region_m)
+                stats.used_points = int(used)
+        return o_p, o0, o1
+
+    def _kept_associations(
+        self, fr: _Frame, shared_pose: np.ndarray, lines: np.ndarray, idx: np.ndarray, refined: np.ndarray, m: np.ndarray, used: int
+    ) -> np.ndarray | None:
+        """Association check (ours): which points keep their line at the refined mean.
+
+        Correspondences are found again where the refinement led. A box's face beside a
+        pillar, matched to the pillar's extended line, slides onto that line but off its
+        segment: those points lose their line there. None (no check) when the
+        refinement moved the points less than their noise (sigma): the correspondences
+        there are the same."""
+        obs = self.obs
+        at = np.array([refined[:, 0].mean(), refined[:, 1].mean(), circular_mean(refined[:, 2])])
+        lever = math.sqrt((m[0, 0] + m[1, 1]) / used)  # RMS range of the used points
+        moved = math.hypot(at[0] - shared_pose[0], at[1] - shared_pose[1]) + lever * abs(float(_wrap(at[2] - shared_pose[2])))
+        if moved <= obs.sigma_m:
+            return None
+        idx_at = np.empty(len(fr.pts), dtype=np.int64)
+        correspond(lines, at, fr.pts, fr.nrm, fr.use_n, fr.cos_max, obs.max_distance_m, idx_at)
+        return (idx >= 0) & (idx_at == idx)
+
+    def _refine_own(self, fr: _Frame, p: np.ndarray, m: np.ndarray) -> tuple[np.ndarray, float, float]:
+        """Step 2 for a particle away from the proposal mean: its own scene lines and
+        correspondences."""
+        cfg, obs = self.cfg, self.obs
+        own = np.ascontiguousarray(self.scene_lines(float(p[0]), float(p[1])), dtype=np.float64).reshape(-1, 4)
+        idx = np.full(len(fr.pts), -1, dtype=np.int64)
+        frames = np.zeros((0, 3))
+        if len(own):
+            correspond(own, p, fr.pts, fr.nrm, fr.use_n, fr.cos_max, fr.gate, idx)
+            frames = line_frames(own, p[0], p[1])
+        used = moments(frames, idx, fr.pts, m)
+        o_p, o0, o1 = np.empty((1, 3)), np.empty(1), np.empty(1)
+        refine_all_m(m, used, p[None, :].copy(), obs.inv_two_f_sigma2, cfg.refinements, cfg.step_fraction, obs.min_points, o_p, o0, o1, cfg.trust_region_m)
+        return o_p[0], o0[0], o1[0]
+
+    def _accept(self, refined: np.ndarray, lnp0: np.ndarray, lnpr: np.ndarray, stats: UpdateStats) -> np.ndarray:
+        """Step 3: the acceptance test between each refined sample and its first-stage
+        version; returns the log-likelihood of the sample kept."""
+        n = self.cfg.n_particles
         u = self.rng.uniform(size=n)
         with np.errstate(invalid="ignore", over="ignore"):
             accept = np.isfinite(lnpr) & ((lnpr >= lnp0) | (np.log(np.maximum(u, 1e-300)) < lnpr - lnp0))
         self.particles[accept] = refined[accept]
         self.particles[:, 2] = _wrap(self.particles[:, 2])
-        lnp = np.where(accept, lnpr, lnp0)
-        stats.accepted_refinements = int(accept.sum()) if cfg.refinements > 0 else 0
-        # Step 4: importance weights and low-variance resampling.
+        stats.accepted_refinements = int(accept.sum()) if self.cfg.refinements > 0 else 0
+        return np.where(accept, lnpr, lnp0)
+
+    def _resample(self, lnp: np.ndarray, stats: UpdateStats) -> None:
+        """Step 4: importance weights and low-variance resampling (uniform weights, and
+        no resampling, when no sample has a finite likelihood)."""
+        n = self.cfg.n_particles
         finite = np.isfinite(lnp)
         if not finite.any():
             self.weights = np.full(n, 1.0 / n)
-            return stats
+            return
         w = np.where(finite, np.exp(lnp - lnp[finite].max()), 0.0)
         total = w.sum()
         if not (total > 0 and math.isfinite(total)):
             self.weights = np.full(n, 1.0 / n)
-            return stats
+            return
         self.weights = w / total
         self.after_refinement = self.particles.copy()
         self.refined_weights = self.weights.copy()
@@ -321,7 +382,6 @@ class CGRLocalizer:
         idx = low_variance_resample(self.weights, self.rng)
         self.particles = self.particles[idx]
         self.weights = np.full(n, 1.0 / n)
-        return stats
 
     def step(self, increment: np.ndarray, points: np.ndarray, normals: np.ndarray | None) -> Estimate:
         """One frame: predict with the odometry increment, update with the observation."""

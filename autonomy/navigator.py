@@ -461,31 +461,48 @@ class Navigator:
         that side has one; the first choice is the side of the clear offset nearest the
         robot (on a tie the right).
         """
-        cfg = self.cfg
-        if cfg.lane_shift_m <= 0 or len(self.path) < 2:
-            self._lane = 0.0
-            return 0.0
-        reach = cfg.lane_check_m
+        shift = 0.0
+        frame = self._lane_frame(s) if self.cfg.lane_shift_m > 0 and len(self.path) >= 2 else None
+        if frame is not None:
+            lats = self._lane_laterals(pose, obstacles, frame)
+            # Most frames end here: the plan's own line is clear.
+            if any(bool(np.any(np.abs(lat) < gap)) for lat, gap in lats):
+                shift = self._pick_lane(pose, frame, lats)
+        self._lane = float(np.sign(shift))
+        return shift
+
+    def _lane_frame(self, s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float] | None:
+        """The plan's frame for :meth:`lane_offset` at arc length ``s``: its point, unit
+        tangent and left normal there, and how far ahead the stretch is checked
+        (``lane_check_m``, up to the next corner and the plan's end); None when that is
+        shorter than the avoidance radius or the plan has no direction there."""
+        reach = self.cfg.lane_check_m
         ahead = self._corners - s
         ahead = ahead[ahead > 0.0]
         if len(ahead):
             reach = min(reach, float(ahead.min()))
         reach = min(reach, float(self._cum[-1]) - s)
-        r = self.avoid.radius_m
-        if reach < r:
-            self._lane = 0.0
-            return 0.0
+        if reach < self.avoid.radius_m:
+            return None
         p0 = self._point_at(s)
         u = self._point_at(s + min(reach, 0.5)) - p0 if reach > 1e-6 else np.zeros(2)
         nu = math.hypot(u[0], u[1])
         if nu < 1e-9:
-            self._lane = 0.0
-            return 0.0
+            return None
         u = u / nu
-        n = np.array([-u[1], u[0]])
+        return p0, u, np.array([-u[1], u[0]]), reach
+
+    def _lane_laterals(
+        self, pose: np.ndarray, obstacles: np.ndarray, frame: tuple[np.ndarray, np.ndarray, np.ndarray, float]
+    ) -> list[tuple[np.ndarray, float]]:
+        """Lateral offsets (plan frame) of the obstacles and of the map's walls on the
+        stretch ahead (from the avoidance radius behind its start to ``reach``), each with
+        the gap it needs: the avoidance radius for sensed points, the robot radius plus
+        ``map_clearance_m`` for walls."""
+        cfg, r = self.cfg, self.avoid.radius_m
+        p0, u, n, reach = frame
         c, sn = math.cos(float(pose[2])), math.sin(float(pose[2]))
         rel0 = np.asarray(pose[:2], dtype=np.float64) - p0
-
         # Plan-frame axes of robot-frame points (sensed) and of world-axes offsets (walls).
         ua, na = (c * u[0] + sn * u[1], -sn * u[0] + c * u[1]), (c * n[0] + sn * n[1], -sn * n[0] + c * n[1])
         a0, l0 = float(rel0 @ u), float(rel0 @ n)
@@ -500,9 +517,16 @@ class Navigator:
                 a = pts[:, 0] * au[0] + pts[:, 1] * au[1] + a0
                 lat = pts[:, 0] * nu_[0] + pts[:, 1] * nu_[1] + l0
                 lats.append((lat[(a > -r) & (a < reach)], gap))
-        if not any(bool(np.any(np.abs(lat) < gap)) for lat, gap in lats):
-            self._lane = 0.0  # the plan's own line is clear (most frames)
-            return 0.0
+        return lats
+
+    def _pick_lane(
+        self, pose: np.ndarray, frame: tuple[np.ndarray, np.ndarray, np.ndarray, float], lats: list[tuple[np.ndarray, float]]
+    ) -> float:
+        """The clear offset nearest the plan, on the side chosen before while that side
+        has one (0 when none is clear); the first choice is the side of the clear offset
+        nearest the robot."""
+        cfg = self.cfg
+        p0, _, n, _ = frame
         k = int(math.floor(cfg.lane_shift_m / _LANE_STEP_M + 1e-9))
         offsets = _LANE_STEP_M * np.arange(-k, k + 1)
         clear = np.ones(len(offsets), dtype=bool)
@@ -511,19 +535,17 @@ class Navigator:
             if len(lat):
                 clear &= ~(np.abs(lat[:, None] - offsets[None, :]) < gap).any(axis=0)
         if not clear.any():
-            self._lane = 0.0
             return 0.0
         side = self._lane
         if side == 0.0:
             # First choice: the clear offset nearest the robot (a tie: the right, since
             # people step to their right, the robot's left, out of its way).
-            lat = float(rel0 @ n)
+            lat = float((np.asarray(pose[:2], dtype=np.float64) - p0) @ n)
             cost = np.where(clear, np.abs(offsets - lat) + 1e-9 * (offsets > 0), np.inf)
             side = 1.0 if offsets[int(np.argmin(cost))] > 0 else -1.0
         same = clear & (np.sign(offsets) == side)
         pick = same if same.any() else clear
         j = int(np.flatnonzero(pick)[np.argmin(np.abs(offsets[pick]))])
-        self._lane = float(np.sign(offsets[j]))
         return float(offsets[j])
 
     def _keep_side(self, res: AvoidanceResult, desired: float) -> AvoidanceResult:
@@ -595,61 +617,114 @@ class Navigator:
         to_goal = float(np.hypot(*(goal_xy - xy)))
         if to_goal < cfg.arrival_radius_m:
             return NavCommand(np.zeros(3), "arrived", carrot=goal_xy)
-        if t < self._backoff_until or (t - self._backoff_started < cfg.max_backoff_s and self._blind_blocked(obstacles)):
-            # Back off at least backoff_time_s, and on until what blocked the way is in
-            # the camera's view again (or max_backoff_s has passed), unless there is no
-            # way back. After a stuck recovery's back-off the stuck clock starts again
-            # (run on through a long back-off, it would send the robot from one recovery
-            # straight into the next, for ever, where it cannot back off); a back-off
-            # from a blind block counts as no progress.
-            v = self._backoff_velocity(pose, obstacles)
-            if self._stuck_backoff:
-                self._progress_t = t
-            if t < self._backoff_until or v.any():
-                return NavCommand(v, "recovering")
-            self._backoff_started = -np.inf
+        backing = self._continue_backoff(pose, obstacles, t)
+        if backing is not None:
+            return backing
         s = self._project(xy)
-        if s > self._best_s + cfg.stuck_progress_m:
-            self._best_s = s
-            self._progress_t = t
-        elif t - self._progress_t > cfg.stuck_time_s:
-            # Recovery: back off, then re-plan from wherever the robot then is.
-            self.recoveries += 1
-            self._backoff_until = t + cfg.backoff_time_s
-            self._backoff_started = t
-            self._stuck_backoff = True
-            self.replans += 1
-            self.set_goal(self.goal, pose, t + cfg.backoff_time_s)
-            return NavCommand(self._backoff_velocity(pose, obstacles), "recovering")
-        carrot = self._point_at(s + cfg.lookahead_m)
-        shift = self.lane_offset(pose, obstacles if located is None else located, s)
-        if shift:
-            t0 = self._point_at(s + cfg.lookahead_m + 0.05) - self._point_at(s + cfg.lookahead_m - 0.05)
-            t0 = t0 / max(1e-9, math.hypot(t0[0], t0[1]))
-            carrot = carrot + shift * np.array([-t0[1], t0[0]])
+        if self._stuck(s, t):
+            return self._start_recovery(pose, obstacles, t)
+        carrot = self._carrot(pose, s, obstacles if located is None else located)
         d = carrot - xy
         desired = wrap_angle(math.atan2(d[1], d[0]) - float(pose[2]))
         turn = float(np.clip(cfg.heading_gain * desired, -cfg.max_turn_rate_rad_s, cfg.max_turn_rate_rad_s))
         if abs(desired) > cfg.turn_in_place_rad:
             return NavCommand(np.array([0.0, 0.0, turn]), "turning", carrot=carrot, desired_rad=desired)
+        res = self._choose_direction(pose, obstacles, desired)
+        if res.blocked:
+            return self._when_blocked(pose, obstacles, t, carrot, desired, turn, res)
+        speed = min(cfg.cruise_speed_mps, res.safe_speed_mps, 0.8 * to_goal + 0.05, self.corner_speed_limit(s), self.edge_speed_limit(s))
+        return self._drive(obstacles, carrot, desired, speed, res)
+
+    def _continue_backoff(self, pose: np.ndarray, obstacles: np.ndarray, t: float) -> NavCommand | None:
+        """The back-off's command while it goes on; None once it is over.
+
+        Back off at least backoff_time_s, and on until what blocked the way is in the
+        camera's view again (or max_backoff_s has passed), unless there is no way back.
+        After a stuck recovery's back-off the stuck clock starts again (run on through a
+        long back-off, it would send the robot from one recovery straight into the next,
+        for ever, where it cannot back off); a back-off from a blind block counts as no
+        progress."""
+        cfg = self.cfg
+        if not (t < self._backoff_until or (t - self._backoff_started < cfg.max_backoff_s and self._blind_blocked(obstacles))):
+            return None
+        v = self._backoff_velocity(pose, obstacles)
+        if self._stuck_backoff:
+            self._progress_t = t
+        if t < self._backoff_until or v.any():
+            return NavCommand(v, "recovering")
+        self._backoff_started = -np.inf
+        return None
+
+    def _stuck(self, s: float, t: float) -> bool:
+        """Record progress along the plan (arc length ``s``); True when there has been
+        none for ``stuck_time_s``."""
+        cfg = self.cfg
+        if s > self._best_s + cfg.stuck_progress_m:
+            self._best_s = s
+            self._progress_t = t
+            return False
+        return t - self._progress_t > cfg.stuck_time_s
+
+    def _start_recovery(self, pose: np.ndarray, obstacles: np.ndarray, t: float) -> NavCommand:
+        """Recovery: back off, then re-plan from wherever the robot then is."""
+        cfg = self.cfg
+        self.recoveries += 1
+        self._backoff_until = t + cfg.backoff_time_s
+        self._backoff_started = t
+        self._stuck_backoff = True
+        self.replans += 1
+        assert self.goal is not None
+        self.set_goal(self.goal, pose, t + cfg.backoff_time_s)
+        return NavCommand(self._backoff_velocity(pose, obstacles), "recovering")
+
+    def _carrot(self, pose: np.ndarray, s: float, located: np.ndarray) -> np.ndarray:
+        """The carrot: ``lookahead_m`` ahead of arc length ``s`` on the plan, shifted
+        sideways round the ``located`` obstacles by :meth:`lane_offset`."""
+        la = self.cfg.lookahead_m
+        carrot = self._point_at(s + la)
+        shift = self.lane_offset(pose, located, s)
+        if shift:
+            t0 = self._point_at(s + la + 0.05) - self._point_at(s + la - 0.05)
+            t0 = t0 / max(1e-9, math.hypot(t0[0], t0[1]))
+            carrot = carrot + shift * np.array([-t0[1], t0[0]])
+        return carrot
+
+    def _choose_direction(self, pose: np.ndarray, obstacles: np.ndarray, desired: float) -> AvoidanceResult:
+        """Eq. 3-5 on the obstacles and the map's walls in the camera's blind spots,
+        with hysteresis on the side (:meth:`_keep_side`)."""
         static = self.map_blind_spots(pose)
         res = choose_direction(
-            np.asarray(obstacles, dtype=np.float64).reshape(-1, 2), desired, self.avoid, static, self.avoid.robot_radius_m + cfg.map_clearance_m
+            np.asarray(obstacles, dtype=np.float64).reshape(-1, 2),
+            desired,
+            self.avoid,
+            static,
+            self.avoid.robot_radius_m + self.cfg.map_clearance_m,
         )
-        res = self._keep_side(res, desired)
-        speed = min(cfg.cruise_speed_mps, res.safe_speed_mps, 0.8 * to_goal + 0.05, self.corner_speed_limit(s), self.edge_speed_limit(s))
+        return self._keep_side(res, desired)
+
+    def _when_blocked(
+        self, pose: np.ndarray, obstacles: np.ndarray, t: float, carrot: np.ndarray, desired: float, turn: float, res: AvoidanceResult
+    ) -> NavCommand:
+        """No direction is open: back off if what blocks is too close for the camera to
+        see, else wait turning towards the carrot."""
         fan = (res.angles, res.lengths)
-        if res.blocked:
-            back = self._backoff_velocity(pose, obstacles) if self._blind_blocked(obstacles) else np.zeros(3)
-            if back.any():
-                # What blocks is too close for the camera to see: back off until it can
-                # look again (a person may have moved on; else it is seen and avoided).
-                self._backoff_until = t + cfg.backoff_time_s
-                self._backoff_started = t
-                self._stuck_backoff = False
-                return NavCommand(back, "recovering", carrot, desired, res.theta_star, res.open_length_m, fan)
-            # Wait (turning towards the carrot): people step aside; stuck detection recovers.
-            return NavCommand(np.array([0.0, 0.0, turn]), "blocked", carrot, desired, res.theta_star, res.open_length_m, fan)
+        back = self._backoff_velocity(pose, obstacles) if self._blind_blocked(obstacles) else np.zeros(3)
+        if back.any():
+            # What blocks is too close for the camera to see: back off until it can
+            # look again (a person may have moved on; else it is seen and avoided).
+            self._backoff_until = t + self.cfg.backoff_time_s
+            self._backoff_started = t
+            self._stuck_backoff = False
+            return NavCommand(back, "recovering", carrot, desired, res.theta_star, res.open_length_m, fan)
+        # Wait (turning towards the carrot): people step aside; stuck detection recovers.
+        return NavCommand(np.array([0.0, 0.0, turn]), "blocked", carrot, desired, res.theta_star, res.open_length_m, fan)
+
+    def _drive(self, obstacles: np.ndarray, carrot: np.ndarray, desired: float, speed: float, res: AvoidanceResult) -> NavCommand:
+        """Drive along theta* at ``speed``, turning towards it (look where the robot goes);
+        only turn while theta* lies outside the camera's view (``look_first``), and slow
+        down near obstacles (``proximity_speed_mps``)."""
+        cfg = self.cfg
+        fan = (res.angles, res.lengths)
         th = res.theta_star
         omega = float(np.clip(cfg.heading_gain * th, -cfg.max_turn_rate_rad_s, cfg.max_turn_rate_rad_s))
         if abs(th) > 0.5 * self.camera.fov_h_rad:
@@ -659,10 +734,8 @@ class Navigator:
                 speed = min(speed, cfg.unseen_speed_mps)
         if cfg.proximity_speed_mps > 0 and self.obstacle_near_path(obstacles, th):
             speed = min(speed, cfg.proximity_speed_mps)
-        # Look where the robot goes: turn towards the chosen direction.
         v = np.array([speed * math.cos(th), speed * math.sin(th), omega])
         return NavCommand(v, "driving", carrot, desired, th, res.open_length_m, fan)
-
 
 WALL_STEP_M = 0.03
 """Spacing of the points that stand in for the map's walls (``Navigator.map_points``)."""

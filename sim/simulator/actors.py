@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from autonomy.constants import ROBOT_RADIUS_M
 from autonomy.errors import InputError
 from autonomy.geometry import point_segment_distance
 from sim.simulator.robot import COLL_PEOPLE, COLL_ROBOT, COLL_STATIC
@@ -239,7 +240,7 @@ class PeopleController:
     clear_of_robot_m = 0.3
 
     def __init__(
-        self, people: tuple[Person, ...], mocap_ids: np.ndarray, walls: np.ndarray | None = None, robot_radius_m: float = 0.3
+        self, people: tuple[Person, ...], mocap_ids: np.ndarray, walls: np.ndarray | None = None, robot_radius_m: float = ROBOT_RADIUS_M
     ) -> None:
         self.people = people
         self.robot_radius_m = float(robot_radius_m)
@@ -270,7 +271,7 @@ class PeopleController:
 
     @classmethod
     def from_model(
-        cls, model: mujoco.MjModel, people: tuple[Person, ...], walls: np.ndarray | None = None, robot_radius_m: float = 0.3
+        cls, model: mujoco.MjModel, people: tuple[Person, ...], walls: np.ndarray | None = None, robot_radius_m: float = ROBOT_RADIUS_M
     ) -> PeopleController:
         ids = []
         for i in range(len(people)):

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from autonomy.constants import ROBOT_RADIUS_M
 from autonomy.errors import InputError
 from autonomy.geometry import compose_pose, relative_pose, wrap_angle
 
@@ -32,7 +33,7 @@ ROBOT_GEOM_GROUP = 3
 class RobotConfig:
     """A CoBot-like omnidirectional base."""
 
-    radius_m: float = 0.3
+    radius_m: float = ROBOT_RADIUS_M
     """Collision radius of the base."""
     height_m: float = 1.0
     """Height of the collision cylinder."""

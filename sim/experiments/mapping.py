@@ -36,6 +36,7 @@ import numpy as np
 
 from autonomy.camera import CameraIntrinsics
 from autonomy.errors import InputError, require_int, require_positive
+from autonomy.geometry import point_segment_distance, wrap_angle
 from autonomy.planes import (
     HoughConfig,
     OctreeConfig,
@@ -574,23 +575,16 @@ class LoopDriver:
         _, heading = self.point(self.s + 0.3)
         d = target - pose[:2]
         v = d / max(float(np.hypot(*d)), 1e-9) * self.speed
-        err = math.atan2(math.sin(heading - pose[2]), math.cos(heading - pose[2]))
+        err = wrap_angle(heading - pose[2])
         w = max(-1.0, min(1.0, 2.0 * err))
         c, s = math.cos(pose[2]), math.sin(pose[2])
         return np.array([c * v[0] + s * v[1], -s * v[0] + c * v[1], w])
 
 
-def _segment_distance(p: np.ndarray, segs: np.ndarray) -> float:
-    a, b = segs[:, :2], segs[:, 2:]
-    ab = b - a
-    t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-12), 0.0, 1.0)
-    return float(np.min(np.hypot(*(a + t[:, None] * ab - p).T)))
-
-
 def map_wall_error(tree: PlaneOctree, segs: np.ndarray) -> float:
     """Median distance (m) of the map's wall planes (normal within 30 degrees of horizontal) to the nearest true wall."""
     d = [
-        _segment_distance(np.asarray(p.centroid[:2]), segs)
+        float(np.min(point_segment_distance(np.asarray(p.centroid[:2]), segs)))
         for p in tree.planes()
         if abs(p.normal[2]) < math.sin(math.radians(30.0))
     ]
@@ -748,14 +742,13 @@ class _CorridorRun:
         their walls' error) and details."""
         cfg, other = self.cfg, self.other
         truth_a, est_a = np.array(self.truth), np.array(self.est)
-        dh = truth_a[-1, 2] - est_a[-1, 2]
         segs = np.asarray(self.world.vectormap.segments)
         metrics: dict[str, float] = {
             "frames_mapped": self.mapped,
             "distance_m": self.distance,
             "duration_s": self.frame * _FRAME_DT_S,
             "odometry_end_error_m": float(np.hypot(*(truth_a[-1, :2] - est_a[-1, :2]))),
-            "odometry_end_heading_error_deg": math.degrees(abs(math.atan2(math.sin(dh), math.cos(dh)))),
+            "odometry_end_heading_error_deg": math.degrees(abs(wrap_angle(truth_a[-1, 2] - est_a[-1, 2]))),
             "render_ms": _median(self.render_ms),
         }
         details: dict[str, Any] = {"policies": [cfg.octree.policy, other], "maps": {}}

@@ -63,8 +63,6 @@ from sim.simulator.robot import OdometryConfig, RobotConfig
 
 REPORT_VERSION = 1
 ALGORITHMS = ("ransac", "hough")
-_FRAME_DT_S = 1.0 / 30.0
-"""The Kinect's frame period: the corridor run steps the world one frame at a time."""
 
 #: PlaneMap's figures, under our metric names.
 PAPER: dict[str, dict[str, float]] = {
@@ -664,8 +662,11 @@ class _CorridorRun:
         self.maps = {
             (alg, pol): PlaneOctree(dataclasses.replace(cfg.octree, policy=pol)) for alg in ALGORITHMS for pol in self.policies
         }
-        self.n_sub = max(1, round(_FRAME_DT_S / self.world.config.timestep_s))
-        self.every = max(1, round(30.0 / cfg.map_rate_hz))
+        rate_hz = self.cam.cfg.rate_hz
+        self.frame_dt = 1.0 / rate_hz
+        """The world is stepped one camera frame at a time."""
+        self.n_sub = max(1, round(self.frame_dt / self.world.config.timestep_s))
+        self.every = max(1, round(rate_hz / cfg.map_rate_hz))
         self.acc = SparseAccumulator(cfg.detectors.hough)
         self.stats: dict[str, dict[str, list[float]]] = {
             a: {"first": [], "per_plane": [], "frame": [], "planes": []} for a in ALGORITHMS
@@ -675,7 +676,7 @@ class _CorridorRun:
         self.distance = 0.0
         self.frame = 0
         self.mapped = 0
-        self.max_frames = int(4.0 * self.driver.goal_m / max(cfg.speed_mps, 1e-3) * 30) + 300
+        self.max_frames = int(4.0 * self.driver.goal_m / max(cfg.speed_mps, 1e-3) * rate_hz) + 300
 
     def run(self, bar, rec) -> None:
         """Drive the loop (at most ``max_frames``), mapping every ``every``-th frame."""
@@ -686,7 +687,7 @@ class _CorridorRun:
             if bar is not None:
                 bar.update(1)
             if rec is not None:
-                rec.set_time(self.frame, self.frame * _FRAME_DT_S)
+                rec.set_time(self.frame, self.frame * self.frame_dt)
                 rec.log_pose(self.frame, new)
                 rec.log_estimate(self.frame, self.odom.pose)
             if self.frame % self.every:
@@ -704,7 +705,7 @@ class _CorridorRun:
         cmd = self.driver.command(pose)
         if cmd is None:
             return None
-        world.robot.command(world.data, cmd, _FRAME_DT_S)
+        world.robot.command(world.data, cmd, self.frame_dt)
         world.step_frame(self.n_sub)
         new = world.robot.pose(world.data)
         self.odom.update(new)
@@ -746,7 +747,7 @@ class _CorridorRun:
         metrics: dict[str, float] = {
             "frames_mapped": self.mapped,
             "distance_m": self.distance,
-            "duration_s": self.frame * _FRAME_DT_S,
+            "duration_s": self.frame * self.frame_dt,
             "odometry_end_error_m": float(np.hypot(*(truth_a[-1, :2] - est_a[-1, :2]))),
             "odometry_end_heading_error_deg": math.degrees(abs(wrap_angle(truth_a[-1, 2] - est_a[-1, 2]))),
             "render_ms": _median(self.render_ms),
@@ -839,7 +840,9 @@ def _run(kind: str, cfg: Any, out_dir: str | Path, seed: int | None, rrd, spawn:
     if rrd or spawn:
         from sim.viz.recording import Recorder
 
-        rec = Recorder(rrd, spawn=spawn, every=max(1, round(30.0 / getattr(cfg, "map_rate_hz", 30.0))), recording_id=f"{cfg.name}-{seed}")
+        rate_hz = cfg.sensor.kinect().rate_hz
+        every = max(1, round(rate_hz / getattr(cfg, "map_rate_hz", rate_hz)))
+        rec = Recorder(rrd, spawn=spawn, every=every, recording_id=f"{cfg.name}-{seed}")
     try:
         metrics, details, interrupted, files = _measure(kind, cfg, seed, progress, out, rec)
     finally:

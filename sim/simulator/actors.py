@@ -86,46 +86,49 @@ def _yaw_quat(yaw: float) -> list[float]:
     return [math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]
 
 
+_WOOD_RGBA = [0.55, 0.4, 0.25, 1.0]
+_BOX = mujoco.mjtGeom.mjGEOM_BOX
+
+
 def add_furniture(spec: mujoco.MjSpec, items: tuple[Furniture, ...]) -> None:
     """Add each piece as a static body of primitive geoms named ``furniture_<i>``."""
     kw = dict(contype=COLL_STATIC, conaffinity=COLL_ROBOT, group=1)
     for i, f in enumerate(items):
         lx, ly, h = f.dims
         b = spec.worldbody.add_body(name=f"furniture_{i}", pos=[f.x, f.y, 0.0], quat=_yaw_quat(f.yaw))
-        wood = [0.55, 0.4, 0.25, 1.0]
-        box = mujoco.mjtGeom.mjGEOM_BOX
         if f.kind == "table":
-            top = 0.03
-            b.add_geom(type=box, size=[lx / 2, ly / 2, top / 2], pos=[0, 0, h - top / 2], rgba=wood, **kw)
-            leg = 0.025
-            for sx in (-1, 1):
-                for sy in (-1, 1):
-                    b.add_geom(
-                        type=box,
-                        size=[leg, leg, (h - top) / 2],
-                        pos=[sx * (lx / 2 - 2 * leg), sy * (ly / 2 - 2 * leg), (h - top) / 2],
-                        rgba=wood,
-                        **kw,
-                    )
+            _add_table(b, lx, ly, h, kw)
         elif f.kind == "chair":
-            seat_h = 0.45
-            b.add_geom(type=box, size=[lx / 2, ly / 2, 0.025], pos=[0, 0, seat_h], rgba=wood, **kw)
-            b.add_geom(
-                type=box, size=[0.02, ly / 2, (h - seat_h) / 2], pos=[-lx / 2 + 0.02, 0, (h + seat_h) / 2], rgba=wood, **kw
-            )
-            leg = 0.02
-            for sx in (-1, 1):
-                for sy in (-1, 1):
-                    b.add_geom(
-                        type=box,
-                        size=[leg, leg, seat_h / 2],
-                        pos=[sx * (lx / 2 - leg), sy * (ly / 2 - leg), seat_h / 2],
-                        rgba=wood,
-                        **kw,
-                    )
+            _add_chair(b, lx, ly, h, kw)
         else:
             color = [0.6, 0.5, 0.35, 1.0] if f.kind == "box" else [0.5, 0.5, 0.55, 1.0]
-            b.add_geom(type=box, size=[lx / 2, ly / 2, h / 2], pos=[0, 0, h / 2], rgba=color, **kw)
+            b.add_geom(type=_BOX, size=[lx / 2, ly / 2, h / 2], pos=[0, 0, h / 2], rgba=color, **kw)
+
+
+def _add_legs(b, leg: float, x: float, y: float, half_h: float, kw: dict) -> None:
+    """Four square legs ``2 leg`` wide, centred at (+-x, +-y), ``2 half_h`` tall from the floor."""
+    for sx in (-1, 1):
+        for sy in (-1, 1):
+            b.add_geom(type=_BOX, size=[leg, leg, half_h], pos=[sx * x, sy * y, half_h], rgba=_WOOD_RGBA, **kw)
+
+
+def _add_table(b, lx: float, ly: float, h: float, kw: dict) -> None:
+    """A 3 cm top at height ``h`` on four legs set in from its corners."""
+    top = 0.03
+    b.add_geom(type=_BOX, size=[lx / 2, ly / 2, top / 2], pos=[0, 0, h - top / 2], rgba=_WOOD_RGBA, **kw)
+    leg = 0.025
+    _add_legs(b, leg, lx / 2 - 2 * leg, ly / 2 - 2 * leg, (h - top) / 2, kw)
+
+
+def _add_chair(b, lx: float, ly: float, h: float, kw: dict) -> None:
+    """A seat at 0.45 m, a back up to ``h`` along its -x edge, and four legs at its corners."""
+    seat_h = 0.45
+    b.add_geom(type=_BOX, size=[lx / 2, ly / 2, 0.025], pos=[0, 0, seat_h], rgba=_WOOD_RGBA, **kw)
+    b.add_geom(
+        type=_BOX, size=[0.02, ly / 2, (h - seat_h) / 2], pos=[-lx / 2 + 0.02, 0, (h + seat_h) / 2], rgba=_WOOD_RGBA, **kw
+    )
+    leg = 0.02
+    _add_legs(b, leg, lx / 2 - leg, ly / 2 - leg, seat_h / 2, kw)
 
 
 def add_people(spec: mujoco.MjSpec, people: tuple[Person, ...]) -> None:

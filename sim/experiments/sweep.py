@@ -169,17 +169,21 @@ class _Appender:
 # --------------------------------------------------------------------------- engines
 
 
+def _deliver(result: Callable[[], dict], spec: dict, on_done, on_error) -> None:
+    """Hand a trial's record to ``on_done``, or what it raised to ``on_error``: a failing
+    trial must not lose the others (Ctrl-C is not caught)."""
+    try:
+        rec = result()
+    except Exception as exc:  # noqa: BLE001 - any trial error, e.g. a RayTaskError wrapping it
+        on_error(spec, exc)
+        return
+    on_done(rec)
+
+
 def _run_local(source, kind, module, specs, workers, on_done, on_error) -> None:
     if workers <= 1:
         for s in specs:
-            try:
-                rec = execute_trial(source, kind, module, s)
-            except KeyboardInterrupt:
-                raise
-            except Exception as exc:  # noqa: BLE001 - a failing trial must not lose the others
-                on_error(s, exc)
-                continue
-            on_done(rec)
+            _deliver(lambda s=s: execute_trial(source, kind, module, s), s, on_done, on_error)
         return
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -188,12 +192,7 @@ def _run_local(source, kind, module, specs, workers, on_done, on_error) -> None:
     try:
         futs = {pool.submit(execute_trial, source, kind, module, s): s for s in specs}
         for fut in as_completed(futs):
-            try:
-                rec = fut.result()
-            except Exception as exc:  # noqa: BLE001
-                on_error(futs[fut], exc)
-                continue
-            on_done(rec)
+            _deliver(fut.result, futs[fut], on_done, on_error)
     except KeyboardInterrupt:
         procs = list(getattr(pool, "_processes", {}).values())
         pool.shutdown(wait=False, cancel_futures=True)
@@ -212,27 +211,32 @@ def _import_ray():
     return ray
 
 
+def _init_ray(ray, address: str | None, workers: int) -> None:
+    """Connect to the cluster at ``address``, or start a local Ray with ``workers`` CPUs."""
+    if address:
+        try:
+            ray.init(address=address, log_to_driver=False)
+        except (ConnectionError, ValueError, RuntimeError) as exc:
+            raise InputError(f"--address {address}: cannot connect to a Ray cluster ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
+        return
+    # Local workers must import this project (and anything on our path) as we do.
+    old = os.environ.get("PYTHONPATH")
+    paths = [p for p in sys.path if p and Path(p).is_dir()]
+    os.environ["PYTHONPATH"] = os.pathsep.join(dict.fromkeys([os.getcwd(), *paths]))
+    try:
+        ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False, configure_logging=False)
+    finally:
+        if old is None:
+            os.environ.pop("PYTHONPATH", None)
+        else:
+            os.environ["PYTHONPATH"] = old
+
+
 def _run_ray(source, kind, module, specs, workers, address, on_done, on_error) -> None:
     ray = _import_ray()
     started = False
     if not ray.is_initialized():
-        if address:
-            try:
-                ray.init(address=address, log_to_driver=False)
-            except (ConnectionError, ValueError, RuntimeError) as exc:
-                raise InputError(f"--address {address}: cannot connect to a Ray cluster ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
-        else:
-            # Local workers must import this project (and anything on our path) as we do.
-            old = os.environ.get("PYTHONPATH")
-            paths = [p for p in sys.path if p and Path(p).is_dir()]
-            os.environ["PYTHONPATH"] = os.pathsep.join(dict.fromkeys([os.getcwd(), *paths]))
-            try:
-                ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False, configure_logging=False)
-            finally:
-                if old is None:
-                    os.environ.pop("PYTHONPATH", None)
-                else:
-                    os.environ["PYTHONPATH"] = old
+        _init_ray(ray, address, workers)
         started = True
     remote = ray.remote(num_cpus=1, max_retries=RAY_MAX_RETRIES)(execute_trial)
     refs = {}
@@ -243,12 +247,7 @@ def _run_ray(source, kind, module, specs, workers, address, on_done, on_error) -
         while pending:
             ready, pending = ray.wait(pending, num_returns=1)
             for r in ready:
-                try:
-                    rec = ray.get(r)
-                except Exception as exc:  # noqa: BLE001 - RayTaskError wraps the trial's exception
-                    on_error(refs[r], exc)
-                    continue
-                on_done(rec)
+                _deliver(lambda r=r: ray.get(r), refs[r], on_done, on_error)
     except KeyboardInterrupt:
         for r in refs:
             try:

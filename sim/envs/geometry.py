@@ -13,7 +13,6 @@
 
 from __future__ import annotations
 
-import heapq
 import math
 
 import numba
@@ -21,7 +20,7 @@ import numpy as np
 
 from autonomy.camera import CameraIntrinsics, CameraMount, pixel_rays
 from autonomy.geometry import segments_cross_nb
-from autonomy.planner import adjacency
+from autonomy.planner import adjacency, dijkstra
 from autonomy.vectormap import NavGraph
 
 
@@ -106,22 +105,9 @@ class GeodesicField:
         d0 = np.hypot(xy[:, 0] - self.goal[0], xy[:, 1] - self.goal[1]) if n else np.zeros(0)
         if n and not vis.any():
             vis[int(np.argmin(d0))] = True
-        dist = np.full(n, np.inf)
-        parent = np.full(n, -1, dtype=np.int64)  # -1: next stop is the goal itself
-        heap = [(float(d0[i]), int(i)) for i in np.flatnonzero(vis)]
-        for d, i in heap:
-            dist[i] = d
-        heapq.heapify(heap)
-        while heap:
-            d, u = heapq.heappop(heap)
-            if d > dist[u]:
-                continue
-            for v, w in adj[u]:
-                nd = d + w
-                if nd < dist[v]:
-                    dist[v] = nd
-                    parent[v] = u
-                    heapq.heappush(heap, (nd, v))
+        # From every node that sees the goal, starting at its straight-line distance;
+        # parent -1: the next stop is the goal itself.
+        dist, parent = dijkstra(adj, {int(i): float(d0[i]) for i in np.flatnonzero(vis)})
         self.node_dist = dist
         self.parent = parent
         self.points = np.ascontiguousarray(np.vstack([xy.reshape(-1, 2), self.goal[None, :]]))

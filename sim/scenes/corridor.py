@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from autonomy.camera import ROBOT_FROM_OPTICAL_LEVEL, CameraIntrinsics, CameraMount
-from autonomy.errors import InputError
+from autonomy.errors import InputError, require_positive
 from autonomy.vectormap import VectorMap
 from sim.simulator.robot import RobotConfig
 from sim.simulator.world import (
@@ -53,9 +53,7 @@ class CorridorScene:
     """Camera yaw about the robot's z axis (-90: looking right; the paper)."""
 
     def __post_init__(self) -> None:
-        for name in ("length_m", "width_m", "corridor_width_m", "door_width_m", "door_depth_m", "camera_height_m"):
-            if not getattr(self, name) > 0:
-                raise InputError(f"scene.{name}: expected a positive number, got {getattr(self, name)!r}")
+        require_positive(self, "scene.", "length_m", "width_m", "corridor_width_m", "door_width_m", "door_depth_m", "camera_height_m")
         if self.door_spacing_m < 0:
             raise InputError(f"scene.door_spacing_m: expected a number >= 0, got {self.door_spacing_m!r}")
         if min(self.length_m, self.width_m) <= 2 * self.corridor_width_m + 0.5:

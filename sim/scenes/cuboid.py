@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from autonomy.camera import CameraIntrinsics
-from autonomy.errors import InputError
+from autonomy.errors import InputError, require_positive
 from sim.scenes.rigs import (
     Rig,
     add_box,
@@ -73,9 +73,7 @@ class CuboidScene:
     def __post_init__(self) -> None:
         if len(self.cuboid_size_m) != 3 or not all(v > 0 for v in self.cuboid_size_m):
             raise InputError(f"scene.cuboid_size_m: expected three positive numbers, got {self.cuboid_size_m!r}")
-        for name in ("reach_m", "wrist_height_m"):
-            if not getattr(self, name) > 0:
-                raise InputError(f"scene.{name}: expected a positive number, got {getattr(self, name)!r}")
+        require_positive(self, "scene.", "reach_m", "wrist_height_m")
         if not self.reference_view.a5_deg < 0:
             raise InputError("scene.reference_view.a5_deg: the camera must look down (a5_deg < 0)")
         if self.wrist_height_m <= self.cuboid_size_m[2] / 2:

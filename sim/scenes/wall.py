@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from autonomy.camera import CameraIntrinsics
-from autonomy.errors import InputError
+from autonomy.errors import InputError, require_positive
 from sim.scenes.rigs import (
     Rig,
     add_box,
@@ -40,9 +40,7 @@ class WallScene:
     """Wall thickness (behind its front face)."""
 
     def __post_init__(self) -> None:
-        for name in ("camera_height_m", "wall_width_m", "wall_height_m", "wall_thickness_m"):
-            if not getattr(self, name) > 0:
-                raise InputError(f"scene.{name}: expected a positive number, got {getattr(self, name)!r}")
+        require_positive(self, "scene.", "camera_height_m", "wall_width_m", "wall_height_m", "wall_thickness_m")
 
 
 def wall_camera_pose(distance_m: float, scene: WallScene) -> np.ndarray:

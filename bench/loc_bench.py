@@ -41,7 +41,7 @@ def _frames(n: int) -> tuple[list[np.ndarray], list[np.ndarray], object, object]
     from sim.simulator.kinect import KinectCamera, KinectConfig
     from sim.simulator.world import build_world
 
-    bp = blueprints.load_blueprint(ROOT / "sim" / "assets" / "corridor_loop")
+    bp = blueprints.load_blueprint(blueprints.ASSETS_DIR / "corridor_loop")
     cfg = KinectConfig()
     world = build_world(bp.vectormap, intrinsics=cfg.intrinsics, mount=cfg.mount, start_pose=(10.0, 6.3, 0.0))
     cam = KinectCamera(world.model, world.camera_id, cfg)
@@ -90,10 +90,11 @@ def _bench_replay_frames(results: dict, frames: list[np.ndarray], poses: list[np
     from autonomy.cgr import CGRLocalizer
     from autonomy.raycast import SceneQuery, VisibilityGridConfig, load_or_build
     from autonomy.scans import ScanConfig, complete_scan, raster_scan
+    from sim.simulator.blueprints import ASSETS_DIR
 
     intr, mount, scfg = kcfg.intrinsics, kcfg.mount, ScanConfig()
     vm = bp.vectormap
-    query = SceneQuery(vm, load_or_build(vm, ROOT / "sim" / "assets" / "corridor_loop.vectormap.txt", VisibilityGridConfig(cell_m=0.5, max_range_m=6.0)))
+    query = SceneQuery(vm, load_or_build(vm, ASSETS_DIR / "corridor_loop.vectormap.txt", VisibilityGridConfig(cell_m=0.5, max_range_m=6.0)))
     cached = {a: [fn(f, intr, mount, scfg) for f in frames] for a, fn in (("kr", raster_scan), ("kc", complete_scan))}
     for approach in ("fspf", "kr", "ks", "kc"):
         loc = CGRLocalizer(lambda x, y: query.scene_lines(x, y)[0], rng=np.random.default_rng(0))

@@ -2,10 +2,6 @@
 
 from __future__ import annotations
 
-import re
-import shutil
-import subprocess
-import sys
 from collections import Counter
 from pathlib import Path
 
@@ -13,11 +9,7 @@ import pytest
 
 from sim.experiments.runner import run_scenario
 from sim.scenario import SCENARIOS_DIR, load_scenario
-
-
-def _rerun_cli() -> str | None:
-    exe = Path(sys.executable).parent / "rerun"
-    return str(exe) if exe.exists() else shutil.which("rerun")
+from tests.helpers import rerun_cli, rrd_chunks
 
 
 @pytest.fixture(scope="module")
@@ -32,14 +24,9 @@ def recording(tmp_path_factory) -> Path:
     return out / "run.rrd"
 
 
-@pytest.mark.skipif(_rerun_cli() is None, reason="rerun CLI not installed")
+@pytest.mark.skipif(rerun_cli() is None, reason="rerun CLI not installed")
 def test_recording_verifies_and_holds_expected_entities(recording: Path) -> None:
-    cli = _rerun_cli()
-    v = subprocess.run([cli, "rrd", "verify", str(recording)], capture_output=True, text=True, timeout=120)
-    assert v.returncode == 0, v.stderr
-    p = subprocess.run([cli, "rrd", "print", str(recording)], capture_output=True, text=True, timeout=120)
-    assert p.returncode == 0, p.stderr
-    chunks = re.findall(r" - (/world[^ ]*) - data columns: \[([^\]]*)\]", p.stdout)
+    chunks = rrd_chunks(recording)
     counts = Counter(path for path, _ in chunks)
     columns = {path: cols for path, cols in chunks}
     for static in ("/world/map/walls", "/world/map/lines", "/world/map/navgraph/nodes", "/world/map/navgraph/edges", "/world/furniture", "/world/waypoints"):

@@ -41,6 +41,7 @@ import numpy as np
 
 from autonomy.constants import KINECT_MAX_RANGE_M, ROBOT_RADIUS_M
 from autonomy.errors import InputError
+from autonomy.geometry import wrap_angle
 from autonomy.nearfield import NearFieldConfig
 
 
@@ -176,11 +177,6 @@ def open_path_lengths(points2d: np.ndarray, angles: np.ndarray, radius: float, m
     ys = np.ascontiguousarray(pts[:, 1])
     _open_path_lengths_kernel(xs, ys, ang, float(radius), float(max_range), out)
     return out
-
-
-def wrap_angle(a: float) -> float:
-    """Angle wrapped to [-pi, pi)."""
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def candidate_angles(desired_rad: float, cfg: AvoidanceConfig) -> np.ndarray:

@@ -33,6 +33,7 @@ from typing import NamedTuple
 import numpy as np
 
 from autonomy.errors import InputError, require_int, require_non_negative, require_positive
+from autonomy.geometry import wrap_angles
 from autonomy.observation import ObservationConfig, correspond, line_frames, moments, refine_all_m
 
 SceneLinesFn = Callable[[float, float], np.ndarray]
@@ -138,10 +139,6 @@ class _Frame(NamedTuple):
     """Correspondence gate for this frame (:meth:`CGRLocalizer.gate`)."""
 
 
-def _wrap(a: np.ndarray | float) -> np.ndarray | float:
-    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
-
-
 def circular_mean(theta: np.ndarray, w: np.ndarray | None = None) -> float:
     w = np.ones(len(theta)) if w is None else w
     return float(math.atan2(np.sum(w * np.sin(theta)), np.sum(w * np.cos(theta))))
@@ -187,7 +184,7 @@ class CGRLocalizer:
         n = self.cfg.n_particles
         p = np.empty((n, 3))
         p[:, :2] = np.asarray(pose[:2], dtype=np.float64) + sxy * self.rng.standard_normal((n, 2))
-        p[:, 2] = _wrap(float(pose[2]) + sth * self.rng.standard_normal(n))
+        p[:, 2] = wrap_angles(float(pose[2]) + sth * self.rng.standard_normal(n))
         self.particles = p
         self.weights = np.full(n, 1.0 / n)
         self.before_refinement = p.copy()
@@ -236,7 +233,7 @@ class CGRLocalizer:
         c, s = np.cos(th), np.sin(th)
         self.particles[:, 0] += c * ix - s * iy
         self.particles[:, 1] += s * ix + c * iy
-        self.particles[:, 2] = _wrap(th + it)
+        self.particles[:, 2] = wrap_angles(th + it)
 
     def update(self, points: np.ndarray, normals: np.ndarray | None) -> UpdateStats:
         """Steps 2-4 for a 2D observation (robot frame); ``normals`` None = laser model."""
@@ -275,7 +272,7 @@ class CGRLocalizer:
         lnpr = np.empty(n)
         refined = np.empty_like(self.particles)
         d_xy = np.hypot(self.particles[:, 0] - shared_pose[0], self.particles[:, 1] - shared_pose[1])
-        d_th = np.abs(_wrap(self.particles[:, 2] - shared_pose[2]))
+        d_th = np.abs(wrap_angles(self.particles[:, 2] - shared_pose[2]))
         share = (d_xy <= cfg.share_radius_m) & (d_th <= cfg.share_angle_rad)
         stats.shared = int(share.sum())
         m = np.empty((5, 5))
@@ -328,7 +325,7 @@ class CGRLocalizer:
         obs = self.obs
         at = np.array([refined[:, 0].mean(), refined[:, 1].mean(), circular_mean(refined[:, 2])])
         lever = math.sqrt((m[0, 0] + m[1, 1]) / used)  # RMS range of the used points
-        moved = math.hypot(at[0] - shared_pose[0], at[1] - shared_pose[1]) + lever * abs(float(_wrap(at[2] - shared_pose[2])))
+        moved = math.hypot(at[0] - shared_pose[0], at[1] - shared_pose[1]) + lever * abs(float(wrap_angles(at[2] - shared_pose[2])))
         if moved <= obs.sigma_m:
             return None
         idx_at = np.empty(len(fr.pts), dtype=np.int64)
@@ -358,7 +355,7 @@ class CGRLocalizer:
         with np.errstate(invalid="ignore", over="ignore"):
             accept = np.isfinite(lnpr) & ((lnpr >= lnp0) | (np.log(np.maximum(u, 1e-300)) < lnpr - lnp0))
         self.particles[accept] = refined[accept]
-        self.particles[:, 2] = _wrap(self.particles[:, 2])
+        self.particles[:, 2] = wrap_angles(self.particles[:, 2])
         stats.accepted_refinements = int(accept.sum()) if self.cfg.refinements > 0 else 0
         return np.where(accept, lnpr, lnp0)
 

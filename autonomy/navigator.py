@@ -32,7 +32,7 @@ import numpy as np
 from autonomy.avoidance import AvoidanceConfig, AvoidanceResult, choose_direction
 from autonomy.camera import KINECT_V1, DepthCamera
 from autonomy.errors import InputError, require_non_negative, require_positive
-from autonomy.geometry import crosses_any, point_segment_projection, wrap_angle
+from autonomy.geometry import crosses_any, point_segment_projection, wrap_angle, wrap_angles
 from autonomy.nearfield import line_points
 from autonomy.obstacle_memory import update_memory
 from autonomy.planner import astar, path_points
@@ -283,7 +283,7 @@ class Navigator:
         if len(self.path) > 2:
             d = np.diff(self.path, axis=0)
             heading = np.arctan2(d[:, 1], d[:, 0])
-            turn = np.abs(np.angle(np.exp(1j * np.diff(heading))))
+            turn = np.abs(wrap_angles(np.diff(heading)))
             self._corners = self._cum[1:-1][turn > self.cfg.corner_angle_rad]
         self.goal = goal_id
         self._best_s = 0.0

@@ -24,6 +24,7 @@ from gymnasium import spaces
 
 from autonomy.camera import CameraIntrinsics
 from autonomy.errors import InputError
+from autonomy.geometry import wrap_angle
 from autonomy.stack import RobotStack
 from sim.envs.config import EnvConfig
 from sim.envs.geometry import GeodesicField, KCScanner
@@ -309,7 +310,7 @@ class DepthNavEnv(gym.Env):
             start = start_opt
         if goal_opt is not None:
             goal, goal_node = goal_opt, nearest_node(site, goal_opt)
-        start[2] = math.atan2(math.sin(start[2]), math.cos(start[2]))
+        start[2] = wrap_angle(start[2])
         site.clear_start(cfg, start[:2], seeds.actors)
         site.world.reset(tuple(start))
         self.goal = goal

@@ -17,6 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
+from autonomy.constants import ROBOT_RADIUS_M
+
 __all__ = ["FlightRecorder", "render_incidents", "starts_incident"]
 
 
@@ -104,7 +106,7 @@ def render_incidents(
     incidents: list[dict],
     walls: np.ndarray,
     out_png: str | os.PathLike[str],
-    robot_radius_m: float = 0.3,
+    robot_radius_m: float = ROBOT_RADIUS_M,
     person_radius_m: float = 0.22,
     dpi: int = 110,
 ) -> Path | None:

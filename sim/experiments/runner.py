@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from autonomy.geometry import wrap_angle
 from autonomy.navigator import NavCommand, in_camera_view
 from autonomy.planner import path_points
 from autonomy.stack import RobotStack
@@ -324,7 +325,7 @@ def check_localization(run: Run, frame: SimFrame) -> None:
     est = stack.pose
     err = float(np.hypot(*(est[:2] - frame.pose[:2])))
     run.loc_errors.append(err)
-    run.heading_errors.append(abs(math.atan2(math.sin(est[2] - frame.pose[2]), math.cos(est[2] - frame.pose[2]))))
+    run.heading_errors.append(abs(wrap_angle(est[2] - frame.pose[2])))
     run.estimates.append(est.copy())
     if err > run.scn.localization.reset_error_m:
         run.resets += 1

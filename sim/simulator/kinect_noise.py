@@ -49,6 +49,7 @@ import numba
 import numpy as np
 
 from autonomy.camera import CameraIntrinsics
+from autonomy.constants import KINECT_MAX_RANGE_M, KINECT_MIN_RANGE_M
 from autonomy.errors import InputError
 
 #: Incidence angles are clamped below this in the closed forms (both blow up at pi/2).
@@ -85,9 +86,9 @@ class KinectNoiseConfig:
     """Projector-camera baseline b used for disparity (m)."""
     subpixel: int = 8
     """Disparity steps per pixel (Kinect v1: 1/8 px)."""
-    min_range_m: float = 0.8
+    min_range_m: float = KINECT_MIN_RANGE_M
     """Measured depths below this become 0."""
-    max_range_m: float = 4.0
+    max_range_m: float = KINECT_MAX_RANGE_M
     """Measured depths above this become 0 (may be inf)."""
     shadows: bool = True
     """Zero the pixels the IR projector cannot see."""

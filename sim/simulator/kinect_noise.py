@@ -49,7 +49,7 @@ import numba
 import numpy as np
 
 from autonomy.camera import CameraIntrinsics
-from autonomy.constants import KINECT_MAX_RANGE_M, KINECT_MIN_RANGE_M
+from autonomy.constants import KINECT_FOCAL_PX, KINECT_MAX_RANGE_M, KINECT_MIN_RANGE_M
 from autonomy.errors import InputError
 
 #: Incidence angles are clamped below this in the closed forms (both blow up at pi/2).
@@ -80,7 +80,7 @@ class KinectNoiseConfig:
     """Coefficient of theta / (pi/2 - theta) in sigma_L (0.035 px)."""
     quantize: bool = True
     """Quantise the disparity d = f b / z to 1/subpixel px."""
-    focal_px: float = 580.0
+    focal_px: float = KINECT_FOCAL_PX
     """Focal length f of the IR camera used for disparity (px)."""
     baseline_m: float = 0.075
     """Projector-camera baseline b used for disparity (m)."""

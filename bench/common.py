@@ -23,7 +23,7 @@ def timeit(fn: Callable[[], object], repeat: int, warmup: int = 1) -> list[float
 
 
 def entry(samples: list[float], target: float | None = None, paper: float | None = None) -> Result:
-    """One result row: median/min/max ms beside the issue's target and the paper's figure."""
+    """One result row: median/min/max ms beside the project's target and the paper's figure."""
     return {
         "median_ms": round(float(np.median(samples)), 4),
         "min_ms": round(float(np.min(samples)), 4),

@@ -28,6 +28,7 @@ from autonomy.fspf import FSPFConfig, fspf  # noqa: E402
 from autonomy.vectormap import load_vectormap, save_vectormap  # noqa: E402
 from sim.simulator import blueprints  # noqa: E402
 from sim.simulator.actors import Furniture  # noqa: E402
+from sim.simulator.blueprints import ASSETS_DIR  # noqa: E402
 from sim.simulator.building import random_people  # noqa: E402
 from sim.simulator.kinect import KinectCamera, KinectConfig  # noqa: E402
 from sim.simulator.kinect_noise import apply_kinect_noise  # noqa: E402
@@ -109,7 +110,7 @@ def bench_localization(results: dict[str, Result], quick: bool) -> None:
 
 
 def _corridor_world():
-    bp = blueprints.load_blueprint(ROOT / "sim" / "assets" / "corridor_loop")
+    bp = blueprints.load_blueprint(ASSETS_DIR / "corridor_loop")
     rng = np.random.default_rng(0)
     people = random_people(bp.navgraph, 4, rng)
     cx = [(a[0] + a[2]) / 2 for a in bp.open_areas] or [0.0]
@@ -171,7 +172,7 @@ def bench_sim(results: dict[str, Result], quick: bool) -> None:
     from sim.simulator.robot import Odometry, OdometryConfig
     from sim.simulator.step import SimStep
 
-    bp = blueprints.load_blueprint(ROOT / "sim" / "assets" / "corridor_loop")
+    bp = blueprints.load_blueprint(ASSETS_DIR / "corridor_loop")
     vm = bp.vectormap
     scene = SceneQuery(vm, VisibilityGrid.build(vm, VisibilityGridConfig(cell_m=0.5, max_range_m=6.0)))
     stack = RobotStack(vm, bp.navgraph, StackConfig(camera=cfg.depth_camera()), rng=np.random.default_rng(0), scene=scene)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from autonomy.avoidance import AvoidanceConfig
@@ -23,7 +23,7 @@ from sim.config import apply_overrides, from_dict, read_toml
 from sim.simulator.actors import Furniture, Person
 from sim.simulator.blueprints import ASSETS_DIR
 from sim.simulator.kinect import KinectConfig
-from sim.simulator.robot import OdometryConfig, RobotConfig
+from sim.simulator.robot import OdometryConfig, RobotConfig, avoidance_for_body
 from sim.simulator.world import WorldConfig
 
 #: Scenario files shipped with the project (the repo's scenarios/ folder).
@@ -172,8 +172,7 @@ class Scenario:
 
     def __post_init__(self) -> None:
         # The stack avoids with the body the simulator drives: one radius, robot.radius_m.
-        if self.avoidance.robot_radius_m != self.robot.radius_m:
-            object.__setattr__(self, "avoidance", replace(self.avoidance, robot_radius_m=self.robot.radius_m))
+        object.__setattr__(self, "avoidance", avoidance_for_body(self.avoidance, self.robot, "scenario"))
 
     def stack_config(self) -> StackConfig:
         """The robot stack's configuration: the camera as the Kinect model defines it (one

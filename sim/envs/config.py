@@ -25,7 +25,7 @@ from sim.scenario import LocalizationConfig, load_scenario
 from sim.simulator import blueprints
 from sim.simulator.actors import Furniture, Person
 from sim.simulator.kinect import KinectConfig
-from sim.simulator.robot import OdometryConfig, RobotConfig
+from sim.simulator.robot import OdometryConfig, RobotConfig, avoidance_for_body
 from sim.simulator.world import WorldConfig
 
 
@@ -149,8 +149,7 @@ class EnvConfig:
     def __post_init__(self) -> None:
         _check_types(self)
         # The stack avoids with the body the simulator drives: one radius, robot.radius_m.
-        if self.avoidance.robot_radius_m != self.robot.radius_m:
-            object.__setattr__(self, "avoidance", replace(self.avoidance, robot_radius_m=self.robot.radius_m))
+        object.__setattr__(self, "avoidance", avoidance_for_body(self.avoidance, self.robot, "DepthNav"))
 
         def need(ok: bool, name: str, what: str) -> None:
             if not ok:

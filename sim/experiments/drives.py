@@ -31,7 +31,7 @@ import sys
 import time
 import zipfile
 from contextlib import contextmanager
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -45,7 +45,7 @@ from autonomy.navigator import NavigatorConfig
 from sim.config import to_dict
 from sim.simulator.actors import Furniture, Person
 from sim.simulator.kinect import KinectConfig
-from sim.simulator.robot import RobotConfig
+from sim.simulator.robot import RobotConfig, avoidance_for_body
 from sim.simulator.step import SimFrame
 from sim.simulator.world import WorldConfig
 
@@ -93,8 +93,7 @@ class RecordingConfig:
         if not self.waypoint_timeout_s > 0:
             raise InputError("recording.waypoint_timeout_s: expected a positive number")
         # The recording robot avoids with the body the simulator drives.
-        if self.avoidance.robot_radius_m != self.robot.radius_m:
-            object.__setattr__(self, "avoidance", replace(self.avoidance, robot_radius_m=self.robot.radius_m))
+        object.__setattr__(self, "avoidance", avoidance_for_body(self.avoidance, self.robot, "recording"))
 
     def key(self) -> str:
         """Hash of everything that changes the recorded log."""

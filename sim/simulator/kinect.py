@@ -67,7 +67,12 @@ class KinectConfig:
     def depth_camera(self) -> DepthCamera:
         """The camera as the robot-side stack knows it: the same intrinsics, mount and
         valid range (the noise model's), so the two cannot disagree."""
-        return DepthCamera(self.intrinsics, self.mount, float(self.noise.min_range_m), float(self.noise.max_range_m))
+        lo, hi = float(self.noise.min_range_m), float(self.noise.max_range_m)
+        if not lo > 0:
+            # The noise model alone may return depth down to 0 m; a robot needs to know
+            # what it cannot see (the near field reasons from that blind range).
+            raise InputError(f"kinect.noise.min_range_m: expected a positive minimum range for the robot stack, got {lo!r}")
+        return DepthCamera(self.intrinsics, self.mount, lo, hi)
 
     def far_m(self) -> float:
         """The render's far clipping distance in metres (inf = the model's own)."""

@@ -10,11 +10,12 @@ furniture and people are real MuJoCo contacts, so collisions can be counted.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import mujoco
 import numpy as np
 
+from autonomy.avoidance import AvoidanceConfig
 from autonomy.constants import ROBOT_RADIUS_M
 from autonomy.errors import InputError
 from autonomy.geometry import compose_pose, relative_pose, wrap_angle
@@ -87,6 +88,21 @@ class OdometryConfig:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise InputError(f"odometry.{name}: expected a number >= 0, got {v!r}")
+
+
+def avoidance_for_body(avoidance: AvoidanceConfig, robot: RobotConfig, where: str) -> AvoidanceConfig:
+    """The robot stack's avoidance with the simulated body's radius: ``robot.radius_m`` is
+    the one source. An avoidance radius left at its default takes the body's; one set to
+    anything else than the body's is a mistake, reported naming ``where``."""
+    r = avoidance.robot_radius_m
+    if r == robot.radius_m:
+        return avoidance
+    if r != ROBOT_RADIUS_M:
+        raise InputError(
+            f"{where}: avoidance.robot_radius_m ({r!r}) differs from robot.radius_m ({robot.radius_m!r}); "
+            "set robot.radius_m only (the stack avoids with the simulated body's radius)"
+        )
+    return replace(avoidance, robot_radius_m=robot.radius_m)
 
 
 def add_robot(spec: mujoco.MjSpec, cfg: RobotConfig) -> mujoco.MjsBody:

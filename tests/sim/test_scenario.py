@@ -123,3 +123,18 @@ def test_the_robot_radius_has_one_source() -> None:
         load_scenario(SCENARIOS_DIR / "demo.toml", ["avoidance.robot_radius_m=0.25"])
     cam = load_scenario(SCENARIOS_DIR / "demo.toml", ["kinect.noise.max_range_m=3.5"]).stack_config().camera
     assert cam.max_range_m == 3.5 and cam.fov_h_rad == scn.kinect.intrinsics.fov_h_rad
+    with pytest.raises(InputError, match=r"^\S+demo\.toml: kinect\.noise\.min_range_m: expected a positive"):
+        load_scenario(SCENARIOS_DIR / "demo.toml", ["kinect.noise.min_range_m=0"])
+
+
+def test_an_avoidance_radius_other_than_the_body_is_refused_everywhere() -> None:
+    from autonomy.avoidance import AvoidanceConfig
+    from sim.envs.config import EnvConfig
+    from sim.simulator.robot import RobotConfig, avoidance_for_body
+
+    small = AvoidanceConfig(robot_radius_m=0.2)
+    with pytest.raises(InputError, match=r"^DepthNav: avoidance\.robot_radius_m \(0\.2\) differs from robot\.radius_m \(0\.3\)"):
+        EnvConfig(avoidance=small)
+    assert EnvConfig(avoidance=small, robot=RobotConfig(radius_m=0.2)).avoidance.robot_radius_m == 0.2
+    # Left at its default, the avoidance takes the body's radius.
+    assert avoidance_for_body(AvoidanceConfig(), RobotConfig(radius_m=0.4), "x").robot_radius_m == 0.4

@@ -167,9 +167,12 @@ class DepthNavEnv(gym.Env):
     (furniture and people, start and goal, odometry noise, Kinect noise seeds, FSPF seeds,
     CGR) come from :class:`sim.simulator.step.EpisodeSeeds`, of the reset's seed or, without
     one, of a seed drawn from ``self.np_random``. ``reset(seed=s)`` then the same actions
-    give the same observations, bit for bit, and the same frames as a scenario run with
-    seed ``s`` from the same start (the runner draws its streams the same way). A seeded
-    reset also restarts the procedural building schedule.
+    give the same observations, bit for bit. With ``stack_policy`` and the same start and
+    goal (reset options), stepping with ``info["stack_action"]`` retraces a scenario run of
+    seed ``s`` frame for frame (the runner draws its streams the same way), as long as
+    neither has random furniture: the env keeps each random piece's kind for its building
+    and draws only where it stands. A seeded reset also restarts the procedural building
+    schedule.
 
     ## Rendering
 

@@ -29,7 +29,7 @@ import numpy as np
 
 from autonomy.avoidance import AvoidanceConfig, obstacle_points
 from autonomy.camera import DepthCamera
-from autonomy.cgr import CGRConfig, CGRLocalizer, Estimate
+from autonomy.cgr import CGRConfig, CGRLocalizer
 from autonomy.errors import InputError
 from autonomy.fspf import FSPFConfig, FSPFResult, fspf
 from autonomy.geometry import compose_pose
@@ -134,7 +134,6 @@ class RobotStack:
         self.cfg = cfg
         self.vectormap = vectormap
         self.fspf_seed = int(fspf_seed)
-        self._fspf_cfg = cfg.fspf
         cam = cfg.camera
         self.scene: SceneQuery | None = None
         self.localizer: CGRLocalizer | None = None
@@ -155,7 +154,6 @@ class RobotStack:
         self.pose = np.zeros(3)
         self.spread = (0.0, 0.0)
         self.perception: Perception | None = None
-        self.last_command: NavCommand | None = None
         self.timings_s: dict[str, float] = {}
 
     # -- belief ------------------------------------------------------------------------
@@ -164,7 +162,6 @@ class RobotStack:
         self.relocalize(pose)
         self.frame = 0
         self.perception = None
-        self.last_command = None
 
     def relocalize(self, pose: np.ndarray) -> None:
         """Re-initialise the belief around ``pose`` (an operator's reset, or a
@@ -178,12 +175,11 @@ class RobotStack:
             est = self.localizer.estimate()
             self.spread = (est.std_xy_m, est.std_theta_rad)
 
-    def _read_estimate(self) -> Estimate:
+    def _read_estimate(self) -> None:
         assert self.localizer is not None
         est = self.localizer.estimate()
         self.pose = est.pose.copy()
         self.spread = (est.std_xy_m, est.std_theta_rad)
-        return est
 
     # -- the three steps of a frame ----------------------------------------------------
     def perceive(self, depth: np.ndarray, seed: int | None = None) -> Perception:
@@ -193,8 +189,8 @@ class RobotStack:
         cam, cfg = self.cfg.camera, self.cfg
         s = (self.fspf_seed + self.frame) % FSPF_SEED_MODULUS if seed is None else int(seed)
         t0 = time.perf_counter()
-        planes = fspf(depth, cam.intrinsics, self._fspf_cfg, seed=s, mount=cam.mount)
-        p2d, n2d = planes.projected(self._fspf_cfg.max_vertical_normal_angle_rad)
+        planes = fspf(depth, cam.intrinsics, cfg.fspf, seed=s, mount=cam.mount)
+        p2d, n2d = planes.projected(cfg.fspf.max_vertical_normal_angle_rad)
         t1 = time.perf_counter()
         if self.navigator is not None:
             obstacles = obstacle_points(np.vstack([planes.points, planes.outliers]), cfg.avoidance)
@@ -215,6 +211,8 @@ class RobotStack:
         t0 = time.perf_counter()
         if increment is not None:
             inc = np.asarray(increment, dtype=np.float64)
+            if inc.shape != (3,):
+                raise InputError(f"robot stack: odometry increment expected (dx, dy, dtheta), got shape {inc.shape}")
             if self.localizer is None:
                 if np.all(np.isfinite(inc)):
                     self.pose = compose_pose(self.pose, inc)
@@ -237,7 +235,6 @@ class RobotStack:
         t0 = time.perf_counter()
         cmd = self.navigator.command(self.pose if pose is None else pose, obstacles, t, near)
         self.timings_s["navigation"] = time.perf_counter() - t0
-        self.last_command = cmd
         return cmd
 
     def step(
@@ -247,13 +244,7 @@ class RobotStack:
         per = self.perceive(depth)
         self.localize(increment)
         cmd = self.decide(t, pose) if self.navigator is not None else None
-        return self.output(per, cmd)
-
-    def output(self, per: Perception | None = None, cmd: NavCommand | None = None) -> StackOutput:
-        """The current frame's :class:`StackOutput`."""
-        per = self.perception if per is None else per
-        assert per is not None, "perceive() before output()"
-        return StackOutput(cmd if cmd is not None else self.last_command, self.pose.copy(), self.spread, per, dict(self.timings_s))
+        return StackOutput(cmd, self.pose.copy(), self.spread, per, dict(self.timings_s))
 
     # -- goals ---------------------------------------------------------------------------
     def set_goal(self, node_id: int, t: float, pose: np.ndarray | None = None) -> float:

@@ -132,3 +132,10 @@ def test_correspondences_associate_wall_points_with_the_wall() -> None:
     hit = idx[idx >= 0]
     assert len(hit) > 0.8 * len(idx)
     assert np.allclose(lines[np.unique(hit)][:, [0, 2]], WALL_X)
+
+
+def test_a_malformed_odometry_increment_is_a_one_line_error() -> None:
+    stack = make_stack()
+    stack.perceive(wall_depth())
+    with pytest.raises(InputError, match=r"odometry increment expected \(dx, dy, dtheta\), got shape \(2,\)"):
+        stack.localize(np.zeros(2))

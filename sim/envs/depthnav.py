@@ -390,7 +390,7 @@ class DepthNavEnv(gym.Env):
         depth = frame.depth
         if not math.isfinite(cfg.kinect.noise.max_range_m):
             depth = np.where(depth <= self.depth_max_m, depth, np.float32(0.0))
-        self._depth = depth.copy()
+        self._depth = depth  # a new array every frame; observations hand out copies
         self._increment = np.zeros(3) if frame.increment is None else frame.increment
         self._pose = frame.pose
         self._stack_command = None

@@ -52,8 +52,8 @@ class SimFrame:
     t: float
     """Simulated time of the frame (s)."""
     depth: np.ndarray
-    """The Kinect frame: float32 planar depth in metres, 0 = invalid (a buffer the next
-    step overwrites: copy to keep)."""
+    """The Kinect frame: float32 planar depth in metres, 0 = invalid (a new array every
+    frame)."""
     increment: np.ndarray | None
     """Noisy odometry increment (dx, dy, dtheta) since the previous frame, robot frame;
     None for the first frame."""

@@ -39,6 +39,9 @@ from autonomy.observation import ObservationConfig, correspond
 from autonomy.raycast import SceneQuery, VisibilityGridConfig, load_or_build
 from autonomy.vectormap import NavGraph, VectorMap
 
+#: The visibility grid the stack localizes with: 0.5 m cells, scene lines to 6 m (the
+#: Kinect sees 4 m; the margin keeps lines a refined particle may reach).
+LOCALIZATION_GRID = VisibilityGridConfig(cell_m=0.5, max_range_m=6.0)
 #: Seeds of the FSPF sampling stream stay below this (the kernel's xorshift seed range).
 FSPF_SEED_MODULUS = 2**31
 
@@ -53,7 +56,7 @@ class LocalizationConfig:
     """Particle filter parameters."""
     observation: ObservationConfig = field(default_factory=ObservationConfig)
     """Point-cloud observation model parameters (Eq. 1-2)."""
-    grid: VisibilityGridConfig = field(default_factory=lambda: VisibilityGridConfig(cell_m=0.5, max_range_m=6.0))
+    grid: VisibilityGridConfig = LOCALIZATION_GRID
     """Visibility grid for the analytic ray cast (Algorithm 2)."""
 
 

@@ -88,13 +88,14 @@ def _bench_scan_kinds(results: dict, frames: list[np.ndarray], kcfg, rep: int) -
 def _bench_replay_frames(results: dict, frames: list[np.ndarray], poses: list[np.ndarray], bp, kcfg, rep: int) -> None:
     """One replay frame per approach: its points, then CGR predict, update and estimate."""
     from autonomy.cgr import CGRLocalizer
-    from autonomy.raycast import SceneQuery, VisibilityGridConfig, load_or_build
+    from autonomy.raycast import SceneQuery, load_or_build
     from autonomy.scans import ScanConfig, complete_scan, raster_scan
+    from autonomy.stack import LOCALIZATION_GRID
     from sim.simulator.blueprints import ASSETS_DIR
 
     intr, mount, scfg = kcfg.intrinsics, kcfg.mount, ScanConfig()
     vm = bp.vectormap
-    query = SceneQuery(vm, load_or_build(vm, ASSETS_DIR / "corridor_loop.vectormap.txt", VisibilityGridConfig(cell_m=0.5, max_range_m=6.0)))
+    query = SceneQuery(vm, load_or_build(vm, ASSETS_DIR / "corridor_loop.vectormap.txt", LOCALIZATION_GRID))
     cached = {a: [fn(f, intr, mount, scfg) for f in frames] for a, fn in (("kr", raster_scan), ("kc", complete_scan))}
     for approach in ("fspf", "kr", "ks", "kc"):
         loc = CGRLocalizer(lambda x, y: query.scene_lines(x, y)[0], rng=np.random.default_rng(0))

@@ -65,12 +65,13 @@ def bench_localization(results: dict[str, Result], quick: bool) -> None:
     """Scene lines and CGR on the 100 x 100 m generated map (10,499 segments)."""
     from autonomy.cgr import CGRConfig, CGRLocalizer
     from autonomy.observation import ObservationConfig
-    from autonomy.raycast import SceneQuery, VisibilityGrid, VisibilityGridConfig, rays_hit
+    from autonomy.raycast import SceneQuery, VisibilityGrid, rays_hit
+    from autonomy.stack import LOCALIZATION_GRID
 
     bp = blueprints.generate_building(blueprints.BuildingConfig.large(), 0)
     vm = bp.vectormap
     t = time.perf_counter()
-    grid = VisibilityGrid.build(vm, VisibilityGridConfig(cell_m=0.5, max_range_m=6.0))
+    grid = VisibilityGrid.build(vm, LOCALIZATION_GRID)
     print(f"  visibility grid: {(time.perf_counter() - t) * 1e3:.0f} ms to build", file=sys.stderr)
     query = SceneQuery(vm, grid)
     nodes = bp.navgraph.node_xy()
@@ -167,14 +168,14 @@ def bench_sim(results: dict[str, Result], quick: bool) -> None:
     # closed loop runs it, with the true odometry increments; back at the first frame the
     # filter restarts at its pose.
     from autonomy.geometry import relative_pose
-    from autonomy.raycast import SceneQuery, VisibilityGrid, VisibilityGridConfig
-    from autonomy.stack import LocalizationConfig, RobotStack, StackConfig
+    from autonomy.raycast import SceneQuery, VisibilityGrid
+    from autonomy.stack import LOCALIZATION_GRID, LocalizationConfig, RobotStack, StackConfig
     from sim.simulator.robot import Odometry, OdometryConfig
     from sim.simulator.step import SimStep
 
     bp = blueprints.load_blueprint(ASSETS_DIR / "corridor_loop")
     vm = bp.vectormap
-    scene = SceneQuery(vm, VisibilityGrid.build(vm, VisibilityGridConfig(cell_m=0.5, max_range_m=6.0)))
+    scene = SceneQuery(vm, VisibilityGrid.build(vm, LOCALIZATION_GRID))
     stack = RobotStack(vm, bp.navgraph, StackConfig(camera=cfg.depth_camera()), rng=np.random.default_rng(0), scene=scene)
     stack.reset(poses[0])
     stack.set_goal(int(bp.navgraph.nodes[-1].id), 0.0)

@@ -49,7 +49,7 @@ from autonomy.scans import (
     sampling_scan,
     scan_points,
 )
-from autonomy.stack import LocalizationConfig, RobotStack, StackConfig
+from autonomy.stack import LOCALIZATION_GRID, LocalizationConfig, RobotStack, StackConfig
 from sim.config import to_dict
 from sim.experiments.drives import DriveLog, RecordingConfig, ensure_log, load_log
 from sim.experiments.kinds import Experiment
@@ -113,7 +113,7 @@ class LocComparisonConfig:
     """Point-cloud observation model (FSPF, MCL)."""
     laser_observation: ObservationConfig = field(default_factory=ObservationConfig)
     """Laser observation model (KR, KS, KC)."""
-    grid: VisibilityGridConfig = field(default_factory=lambda: VisibilityGridConfig(cell_m=0.5, max_range_m=6.0))
+    grid: VisibilityGridConfig = LOCALIZATION_GRID
     """Visibility grid of the analytic ray cast."""
     base_dir: str = ""
     """Directory relative paths resolve against (set by the loader)."""

@@ -105,3 +105,121 @@ def segments_cross_nb(ax: float, ay: float, bx: float, by: float, cx: float, cy:
     d3 = ux * (cy - ay) - uy * (cx - ax)
     d4 = ux * (dy - ay) - uy * (dx - ax)
     return d3 * d4 < 0.0
+
+
+# --------------------------------------------------------------------------- segment distances
+
+
+def segment_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Exact Euclidean distance between paired 2D segments ``a[i]`` and ``b[i]`` (M x 4 each):
+    0 where they cross, else the least of the four end-point-to-segment distances."""
+    a = np.asarray(a, dtype=np.float64).reshape(-1, 4)
+    b = np.asarray(b, dtype=np.float64).reshape(-1, 4)
+    out = np.empty(a.shape[0])
+    _segment_distances_nb(a, b, out)
+    return out
+
+
+@numba.njit(cache=True, inline="always")
+def _point_segment_nb(px: float, py: float, ax: float, ay: float, bx: float, by: float) -> float:  # pragma: no cover - numba
+    dx, dy = bx - ax, by - ay
+    L2 = dx * dx + dy * dy
+    t = 0.0
+    if L2 > 0.0:
+        t = min(1.0, max(0.0, ((px - ax) * dx + (py - ay) * dy) / L2))
+    return math.hypot(px - (ax + t * dx), py - (ay + t * dy))
+
+
+@numba.njit(cache=True)
+def segment_distance_nb(ax: float, ay: float, bx: float, by: float, cx: float, cy: float, dx: float, dy: float) -> float:  # pragma: no cover - numba
+    """Exact distance between segments a-b and c-d (0 when they cross)."""
+    if segments_cross_nb(ax, ay, bx, by, cx, cy, dx, dy):
+        return 0.0
+    return min(
+        min(_point_segment_nb(ax, ay, cx, cy, dx, dy), _point_segment_nb(bx, by, cx, cy, dx, dy)),
+        min(_point_segment_nb(cx, cy, ax, ay, bx, by), _point_segment_nb(dx, dy, ax, ay, bx, by)),
+    )
+
+
+@numba.njit(cache=True)
+def _segment_distances_nb(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover - numba
+    for i in range(a.shape[0]):
+        out[i] = segment_distance_nb(a[i, 0], a[i, 1], a[i, 2], a[i, 3], b[i, 0], b[i, 1], b[i, 2], b[i, 3])
+
+
+@numba.njit(cache=True)
+def _bucket_walls(walls: np.ndarray, x0: float, y0: float, size: float, nx: int, ny: int) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - numba
+    counts = np.zeros(nx * ny + 1, dtype=np.int64)
+    for pass_ in range(2):
+        fill = counts.copy() if pass_ == 1 else counts
+        idx = np.empty(counts[-1] if pass_ == 1 else 0, dtype=np.int64)
+        for w in range(walls.shape[0]):
+            i0 = max(0, int((min(walls[w, 0], walls[w, 2]) - x0) / size))
+            i1 = min(nx - 1, int((max(walls[w, 0], walls[w, 2]) - x0) / size))
+            j0 = max(0, int((min(walls[w, 1], walls[w, 3]) - y0) / size))
+            j1 = min(ny - 1, int((max(walls[w, 1], walls[w, 3]) - y0) / size))
+            for j in range(j0, j1 + 1):
+                for i in range(i0, i1 + 1):
+                    b = j * nx + i
+                    if pass_ == 0:
+                        counts[b + 1] += 1
+                    else:
+                        idx[fill[b]] = w
+                        fill[b] += 1
+        if pass_ == 0:
+            for b in range(nx * ny):
+                counts[b + 1] += counts[b]
+        else:
+            return counts, idx
+    return counts, np.empty(0, dtype=np.int64)
+
+
+@numba.njit(cache=True)
+def _clearances_nb(
+    q: np.ndarray, walls: np.ndarray, offsets: np.ndarray, idx: np.ndarray,
+    x0: float, y0: float, size: float, nx: int, ny: int, cutoff: float, out: np.ndarray,
+) -> None:  # pragma: no cover - numba
+    for k in range(q.shape[0]):
+        ax, ay, bx, by = q[k, 0], q[k, 1], q[k, 2], q[k, 3]
+        i0 = max(0, int((min(ax, bx) - cutoff - x0) / size))
+        i1 = min(nx - 1, int((max(ax, bx) + cutoff - x0) / size))
+        j0 = max(0, int((min(ay, by) - cutoff - y0) / size))
+        j1 = min(ny - 1, int((max(ay, by) + cutoff - y0) / size))
+        best = cutoff
+        for j in range(j0, j1 + 1):
+            for i in range(i0, i1 + 1):
+                b = j * nx + i
+                for t in range(offsets[b], offsets[b + 1]):
+                    w = idx[t]
+                    d = segment_distance_nb(ax, ay, bx, by, walls[w, 0], walls[w, 1], walls[w, 2], walls[w, 3])
+                    if d < best:
+                        best = d
+        out[k] = best
+
+
+class WallIndex:
+    """Walls bucketed on a square grid, for exact segment-to-wall clearances of many
+    query segments (each query looks only at the buckets within its cutoff)."""
+
+    def __init__(self, walls: np.ndarray, bucket_m: float = 1.0):
+        w = np.ascontiguousarray(np.asarray(walls, dtype=np.float64).reshape(-1, 4))
+        self.walls = w
+        self.bucket_m = float(bucket_m)
+        if w.shape[0]:
+            self.x0 = float(min(w[:, 0].min(), w[:, 2].min()))
+            self.y0 = float(min(w[:, 1].min(), w[:, 3].min()))
+            x1 = float(max(w[:, 0].max(), w[:, 2].max()))
+            y1 = float(max(w[:, 1].max(), w[:, 3].max()))
+        else:
+            self.x0 = self.y0 = x1 = y1 = 0.0
+        self.nx = int((x1 - self.x0) / self.bucket_m) + 1
+        self.ny = int((y1 - self.y0) / self.bucket_m) + 1
+        self.offsets, self.idx = _bucket_walls(w, self.x0, self.y0, self.bucket_m, self.nx, self.ny)
+
+    def clearances(self, segments: np.ndarray, cutoff_m: float) -> np.ndarray:
+        """(M,) exact distance from each query segment (M, 4) (or point, as a zero-length
+        segment) to the nearest wall, capped at ``cutoff_m``."""
+        q = np.ascontiguousarray(np.asarray(segments, dtype=np.float64).reshape(-1, 4))
+        out = np.empty(q.shape[0])
+        _clearances_nb(q, self.walls, self.offsets, self.idx, self.x0, self.y0, self.bucket_m, self.nx, self.ny, float(cutoff_m), out)
+        return out

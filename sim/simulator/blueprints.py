@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from autonomy.errors import InputError
+from autonomy.geometry import WallIndex, segment_distances
 from autonomy.vectormap import (
     MapFormatError,
     NavEdge,
@@ -110,71 +111,9 @@ class Blueprint:
 # --------------------------------------------------------------------------- geometry checks
 
 
-def _point_seg_dist(p: np.ndarray, s: np.ndarray) -> np.ndarray:
-    a, b = s[:, 0:2], s[:, 2:4]
-    ab = b - a
-    den = np.einsum("ij,ij->i", ab, ab)
-    t = np.einsum("ij,ij->i", p - a, ab) / np.where(den > 0, den, 1.0)
-    t = np.clip(t, 0.0, 1.0)
-    c = a + t[:, None] * ab
-    return np.hypot(p[:, 0] - c[:, 0], p[:, 1] - c[:, 1])
-
-
-def segment_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Exact Euclidean distance between paired 2D segments ``a[i]`` and ``b[i]`` (M x 4 each)."""
-    a = np.asarray(a, dtype=np.float64).reshape(-1, 4)
-    b = np.asarray(b, dtype=np.float64).reshape(-1, 4)
-    d = np.minimum(
-        np.minimum(_point_seg_dist(a[:, 0:2], b), _point_seg_dist(a[:, 2:4], b)),
-        np.minimum(_point_seg_dist(b[:, 0:2], a), _point_seg_dist(b[:, 2:4], a)),
-    )
-
-    def cross(o: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        return (u[:, 0] - o[:, 0]) * (v[:, 1] - o[:, 1]) - (u[:, 1] - o[:, 1]) * (v[:, 0] - o[:, 0])
-
-    p, p2, q, q2 = a[:, 0:2], a[:, 2:4], b[:, 0:2], b[:, 2:4]
-    o1, o2 = cross(p, p2, q), cross(p, p2, q2)
-    o3, o4 = cross(q, q2, p), cross(q, q2, p2)
-    crossing = (o1 * o2 < 0) & (o3 * o4 < 0)
-    d[crossing] = 0.0
-    return d
-
-
 def nav_edge_clearances(bp: Blueprint, cutoff_m: float = 5.0) -> np.ndarray:
     """(E,) exact distance from each nav-graph edge to the nearest wall, capped at ``cutoff_m``."""
-    edges = bp.navgraph.edge_segments()
-    walls = bp.vectormap.segments
-    out = np.full(edges.shape[0], float(cutoff_m))
-    if edges.shape[0] == 0:
-        return out
-    ebox = np.stack(
-        [
-            np.minimum(edges[:, 0], edges[:, 2]) - cutoff_m,
-            np.minimum(edges[:, 1], edges[:, 3]) - cutoff_m,
-            np.maximum(edges[:, 0], edges[:, 2]) + cutoff_m,
-            np.maximum(edges[:, 1], edges[:, 3]) + cutoff_m,
-        ],
-        axis=1,
-    )
-    wx0 = np.minimum(walls[:, 0], walls[:, 2])
-    wy0 = np.minimum(walls[:, 1], walls[:, 3])
-    wx1 = np.maximum(walls[:, 0], walls[:, 2])
-    wy1 = np.maximum(walls[:, 1], walls[:, 3])
-    chunk = max(1, 2_000_000 // max(1, walls.shape[0]))
-    for s in range(0, edges.shape[0], chunk):
-        eb = ebox[s : s + chunk]
-        near = (
-            (wx1[None, :] >= eb[:, 0:1])
-            & (wx0[None, :] <= eb[:, 2:3])
-            & (wy1[None, :] >= eb[:, 1:2])
-            & (wy0[None, :] <= eb[:, 3:4])
-        )
-        ei, wi = np.nonzero(near)
-        if ei.size == 0:
-            continue
-        d = segment_distances(edges[s + ei], walls[wi])
-        np.minimum.at(out, s + ei, d)
-    return out
+    return WallIndex(bp.vectormap.segments).clearances(bp.navgraph.edge_segments(), cutoff_m)
 
 
 # --------------------------------------------------------------------------- builders

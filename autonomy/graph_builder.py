@@ -124,7 +124,8 @@ class GraphBuild:
 
 # --------------------------------------------------------------------------- kernels
 
-_N8 = ((-1, 0), (-1, 1), (0, 1), (1, 1), (1, 0), (1, -1), (0, -1), (-1, -1))  # N, NE, E, SE, S, SW, W, NW (rows grow with y)
+#: Node coordinates are written to the millimetre; edges are checked with this much to spare.
+_ROUNDING_M = 0.001
 
 
 @numba.njit(cache=True)
@@ -375,7 +376,7 @@ class _Builder:
 
     def polyline(self, pts: np.ndarray, i: int, j: int) -> None:
         """Replace the skeleton branch ``pts`` (from node i to node j) by straight edges."""
-        need, tol = self.cfg.clearance_m, self.cfg.tolerance_m
+        need, tol = self.cfg.clearance_m + _ROUNDING_M, self.cfg.tolerance_m
         ids = {0: i, len(pts) - 1: j}
         stack = [(0, len(pts) - 1)]
         while stack:
@@ -556,7 +557,7 @@ def _connect(b: _Builder, added: list[int], cfg: GraphBuildConfig) -> None:
     """Join each new node to the nearest node it sees clearly and to the new nodes around
     it (a mesh across wide halls); a new node that can join nothing stays alone and is
     dropped at the end."""
-    need = cfg.clearance_m
+    need = cfg.clearance_m + _ROUNDING_M
     xy = np.asarray(b.xy)
     reach = 4.0 * cfg.cover_radius_m
     is_new = np.zeros(len(xy), dtype=bool)
@@ -646,6 +647,8 @@ def _finish(b: _Builder, fs: FreeSpace, cfg: GraphBuildConfig) -> GraphBuild:
     new_id = np.cumsum(keep) - 1
     xy, region = xy[keep], region[keep]
     ij = new_id[ij]
+    # each edge's own exact clearance (a piece of a chained run may clear more than the run)
+    clear = b.walls.clearances(np.concatenate([xy[ij[:, 0]], xy[ij[:, 1]]], axis=1), 5.0)
     comp = graph_components(len(xy), ij)
     nodes = tuple(NavNode(int(i), float(x), float(y)) for i, (x, y) in enumerate(xy))
     edges = []

@@ -34,18 +34,86 @@ def _map_arg(text: str) -> Path:
     raise InputError(f"{text}: map file not found (give a path or a building in sim/assets)")
 
 
+def _graph_config(args: argparse.Namespace):
+    from autonomy.freespace import FreeSpaceConfig
+    from autonomy.graph_builder import GraphBuildConfig
+
+    if not (math.isfinite(args.robot_radius) and args.robot_radius > 0):
+        raise InputError(f"--robot-radius: expected a positive number of metres, got {args.robot_radius!r}")
+    return GraphBuildConfig(free_space=FreeSpaceConfig(robot_radius_m=args.robot_radius))
+
+
 def cmd_map_check(args: argparse.Namespace) -> int:
     import numpy as np
 
+    from autonomy.graph_builder import build_navgraph
     from autonomy.vectormap import load_vectormap
 
-    vm = load_vectormap(args.file)
+    path = _map_arg(args.file)
+    vm = load_vectormap(path)
     xmin, ymin, xmax, ymax = vm.extent()
-    print(f"{args.file}: {vm.n_segments} segments")
+    print(f"{path}: {vm.n_segments} segments")
     print(f"  extent: x [{xmin:.3f}, {xmax:.3f}] m, y [{ymin:.3f}, {ymax:.3f}] m ({xmax - xmin:.2f} x {ymax - ymin:.2f} m)")
     print(f"  total wall length: {vm.total_length_m:.2f} m")
     lengths = vm.lengths
     print(f"  segment length: min {lengths.min():.3f} m, median {float(np.median(lengths)):.3f} m, max {lengths.max():.3f} m")
+    cfg = _graph_config(args)
+    gb = build_navgraph(vm, cfg)
+    fs = gb.free_space
+    areas = ", ".join(f"{a:.1f}" for a in fs.region_area_m2[1:6]) + (", ..." if fs.n_regions > 6 else "")
+    print(f"  free space for a robot of radius {cfg.free_space.robot_radius_m:.2f} m: {fs.region_area_m2.sum():.1f} m2 "
+          f"in {fs.n_regions} region(s); largest {fs.region_area_m2[0]:.1f} m2" + (f"; others {areas} m2" if fs.n_regions > 1 else ""))
+    print(f"  outside the building: {fs.outside_area_m2:.1f} m2 (no nodes); voids: {fs.n_voids}")
+    main = int(np.count_nonzero(gb.component == 0))
+    print(f"  navigation graph: {gb.graph.n_nodes} nodes, {gb.graph.n_edges} edges, {gb.n_components} component(s); "
+          f"the largest has {main} nodes")
+    if gb.split_regions:
+        print(f"  regions {list(gb.split_regions)} fall into several graph components: a passage the robot fits "
+              f"only without the {cfg.margin_m:.2f} m margin")
+    return 0
+
+
+def cmd_map_graph(args: argparse.Namespace) -> int:
+    import time
+
+    import numpy as np
+
+    from autonomy.graph_builder import build_navgraph, graph_key, with_key
+    from autonomy.graph_quality import graph_quality
+    from autonomy.vectormap import format_navgraph_json, load_vectormap
+
+    cfg = _graph_config(args)
+    src = _map_arg(args.file)
+    if args.out:
+        out = Path(args.out)
+    else:
+        name = src.name
+        for suf in (".vectormap.txt", ".vectormap.json", "_vector.txt", ".txt", ".json"):
+            if name.endswith(suf):
+                name = name[: -len(suf)]
+                break
+        out = src.with_name(name + ".navigation.json")
+        if out.exists() and not args.force:
+            raise InputError(f"{out}: exists (a hand-made graph?); give --out PATH or --force to overwrite it")
+    vm = load_vectormap(src)
+    t0 = time.perf_counter()
+    gb = build_navgraph(vm, cfg)
+    dt = time.perf_counter() - t0
+    out.write_text(with_key(format_navgraph_json(gb.graph), graph_key(vm, cfg)), encoding="utf-8")
+    print(f"wrote {out}: {gb.summary()} in {dt:.2f} s")
+    if gb.n_components > 1:
+        sizes = np.bincount(gb.component)
+        print(f"  components by size: {', '.join(str(int(n)) for n in sizes[:8])}{', ...' if sizes.size > 8 else ''} nodes "
+              "(the largest is where missions and env episodes run)")
+    if args.quality:
+        q = graph_quality(gb.graph, vm, gb.free_space, np.random.default_rng(0))
+        print(f"  coverage within {q.cover_radius_m:.1f} m: {100 * q.coverage:.1f} %; smallest wall clearance "
+              f"{q.min_clearance_m:.3f} m; path stretch median {q.stretch_median:.3f}, p90 {q.stretch_p90:.3f} "
+              f"({q.n_pairs} point pairs)")
+    if args.png:
+        from sim.viz.maps import render_map
+
+        print(f"wrote {render_map(vm, args.png, gb.graph, title=src.name)}")
     return 0
 
 
@@ -191,9 +259,18 @@ def build_parser() -> argparse.ArgumentParser:
 def _add_map_commands(sub) -> None:
     pm = sub.add_parser("map", help="inspect, convert and draw vector maps")
     msub = pm.add_subparsers(dest="map_command", required=True, parser_class=_Parser)
-    c = msub.add_parser("check", help="validate a map; print segments, extent, wall length")
-    c.add_argument("file")
+    c = msub.add_parser("check", help="validate a map; print segments, extent, free space, regions and graph size")
+    c.add_argument("file", help="a vector map file or a building name in sim/assets")
+    c.add_argument("--robot-radius", type=float, default=0.3, help="robot footprint radius in metres (default 0.3)")
     c.set_defaults(func=cmd_map_check)
+    c = msub.add_parser("graph", help="make a navigation graph (navigation.json) from the walls alone")
+    c.add_argument("file", help="a vector map file or a building name in sim/assets")
+    c.add_argument("--out", help="output *.navigation.json (default: beside the map)")
+    c.add_argument("--force", action="store_true", help="overwrite the default output if it exists")
+    c.add_argument("--robot-radius", type=float, default=0.3, help="robot footprint radius in metres (default 0.3)")
+    c.add_argument("--quality", action="store_true", help="also print coverage, clearance and path stretch")
+    c.add_argument("--png", help="also draw the map and the graph to this PNG")
+    c.set_defaults(func=cmd_map_graph)
     c = msub.add_parser("convert", help="convert between *.vectormap.txt and *.vectormap.json")
     c.add_argument("input")
     c.add_argument("output")

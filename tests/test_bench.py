@@ -19,7 +19,8 @@ def test_bench_harness_writes_results(tmp_path: Path) -> None:
     )
     assert p.returncode == 0, p.stderr
     res = json.loads(out.read_text())
-    assert {"map_load_9000", "world_compile_9000"} <= set(res)
+    assert {"map_load_9000", "world_compile_9000", "map_graph_9000"} <= set(res)
+    assert res["map_graph_9000"]["coverage"] >= 0.95 and res["map_graph_9000"]["min_clearance_m"] >= 0.35
     for row in res.values():
         assert {"median_ms", "min_ms", "max_ms", "target_ms", "paper_ms"} <= set(row)
         assert row["min_ms"] <= row["median_ms"] <= row["max_ms"]

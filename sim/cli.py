@@ -105,11 +105,17 @@ def cmd_map_graph(args: argparse.Namespace) -> int:
         sizes = np.bincount(gb.component)
         print(f"  components by size: {', '.join(str(int(n)) for n in sizes[:8])}{', ...' if sizes.size > 8 else ''} nodes "
               "(the largest is where missions and env episodes run)")
-    if args.quality:
-        q = graph_quality(gb.graph, vm, gb.free_space, np.random.default_rng(0))
-        print(f"  coverage within {q.cover_radius_m:.1f} m: {100 * q.coverage:.1f} %; smallest wall clearance "
-              f"{q.min_clearance_m:.3f} m; path stretch median {q.stretch_median:.3f}, p90 {q.stretch_p90:.3f} "
-              f"({q.n_pairs} point pairs)")
+    graphs = [("generated", gb.graph)] if args.quality or args.compare else []
+    if args.compare:
+        from autonomy.vectormap import load_navgraph
+
+        graphs.append((str(args.compare), load_navgraph(args.compare)))
+    for label, g in graphs:
+        # the same seed for every graph: the stretch is measured on the same point pairs
+        q = graph_quality(g, vm, gb.free_space, np.random.default_rng(0))
+        print(f"  {label}: {g.n_nodes} nodes; coverage within {q.cover_radius_m:.1f} m {100 * q.coverage:.1f} %; "
+              f"smallest wall clearance {q.min_clearance_m:.3f} m; {q.n_components} component(s); "
+              f"path stretch median {q.stretch_median:.3f}, p90 {q.stretch_p90:.3f} ({q.n_pairs} point pairs)")
     if args.png:
         from sim.viz.maps import render_map
 
@@ -269,6 +275,7 @@ def _add_map_commands(sub) -> None:
     c.add_argument("--force", action="store_true", help="overwrite the default output if it exists")
     c.add_argument("--robot-radius", type=float, default=0.3, help="robot footprint radius in metres (default 0.3)")
     c.add_argument("--quality", action="store_true", help="also print coverage, clearance and path stretch")
+    c.add_argument("--compare", help="also measure this (e.g. hand-made) *.navigation.json the same way")
     c.add_argument("--png", help="also draw the map and the graph to this PNG")
     c.set_defaults(func=cmd_map_graph)
     c = msub.add_parser("convert", help="convert between *.vectormap.txt and *.vectormap.json")

@@ -76,3 +76,12 @@ def test_bad_maps_give_one_line_errors(tmp_path, capsys):
     line.write_text("0, 0, 10, 0\n")
     assert main(["map", "graph", str(line), "--out", str(tmp_path / "y.json")]) == 2
     assert "robot" in _err_line(capsys)
+
+
+def test_map_graph_compares_with_a_hand_made_graph_on_the_same_pairs(tmp_path, capsys):
+    hand = ASSETS_DIR / "small_floor.navigation.json"
+    assert main(["map", "graph", str(SMALL), "--out", str(tmp_path / "g.json"), "--compare", str(hand)]) == 0
+    lines = [ln for ln in capsys.readouterr().out.splitlines() if "point pairs" in ln]
+    assert len(lines) == 2 and lines[0].lstrip().startswith("generated:") and str(hand) in lines[1]
+    pairs = {ln.rsplit("(", 1)[1] for ln in lines}
+    assert len(pairs) == 1  # measured on the same point pairs

@@ -13,6 +13,11 @@ Formats (CoBot / UT AMRL, DESIGN.md):
 
 Every malformed input raises :class:`MapFormatError`, whose one-line message names the
 file, the line (and for JSON the element path, e.g. ``[3].p1.y``) and what was expected.
+
+Loading also checks the walls (:mod:`autonomy.map_hygiene`): zero-length and duplicate
+segments are dropped, overlapping collinear ones reported, and a map whose extent is not a
+building in metres (a millimetre map, say) refused. Each finding is one warning line on the
+``"depthnav.map"`` logger; ``load_vectormap(path, scale=0.001)`` reads a millimetre map.
 """
 
 from __future__ import annotations
@@ -21,7 +26,6 @@ import json
 import math
 import os
 import re
-import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from autonomy.errors import InputError
+from autonomy.map_hygiene import Finding, clean_segments, log_findings
 
 __all__ = [
     "MapFormatError",
@@ -42,6 +47,7 @@ __all__ = [
     "format_vectormap_text",
     "format_vectormap_json",
     "load_vectormap",
+    "load_vectormap_checked",
     "save_vectormap",
     "parse_navgraph_json",
     "format_navgraph_json",
@@ -87,7 +93,7 @@ class VectorMap:
     """Walls of a floor as N line segments ``x1, y1, x2, y2`` in metres (world frame).
 
     The array is stored as a read-only, C-contiguous float64 copy. Segments must be finite
-    and of non-zero length (files drop zero-length ones with a warning).
+    and of non-zero length (loading a file drops zero-length ones and says so).
     """
 
     segments: np.ndarray
@@ -167,8 +173,18 @@ class VectorMap:
         ys = s[:, 1::2]
         return (float(xs.min()), float(ys.min()), float(xs.max()), float(ys.max()))
 
+    def scaled(self, factor: float) -> VectorMap:
+        """The same walls with every coordinate times ``factor`` (0.001 for a millimetre map)."""
+        _check_scale(factor)
+        return VectorMap(self.segments * float(factor), name=self.name)
+
     def __repr__(self) -> str:
         return f"VectorMap(name={self.name!r}, n_segments={self.n_segments})"
+
+
+def _check_scale(factor: Any) -> None:
+    if isinstance(factor, bool) or not (isinstance(factor, int | float) and math.isfinite(factor) and factor > 0):
+        raise InputError(f"scale: expected a positive number (0.001 for a map in millimetres), got {factor!r}")
 
 
 # --------------------------------------------------------------------------- text format
@@ -213,23 +229,37 @@ def _diagnose_text_line(s: str, lineno: int, source: str) -> MapFormatError:
     return _fail(source, lineno, f"expected 4 numbers {_FIELDS}, could not parse {_short(s)}")
 
 
-def _drop_zero_length(
-    arr: np.ndarray, lines: Sequence[Any], source: str, unit: str
-) -> np.ndarray:
-    zero = (arr[:, 0] == arr[:, 2]) & (arr[:, 1] == arr[:, 3])
-    if zero.any():
-        idx = np.flatnonzero(zero)
-        where = ", ".join(str(lines[i]) for i in idx[:10]) + (", ..." if idx.size > 10 else "")
-        warnings.warn(
-            f"{source}: dropped {idx.size} zero-length segment(s) at {unit} {where}",
-            stacklevel=3,
-        )
-        arr = arr[~zero]
-    return arr
+def _finish(
+    arr: np.ndarray, labels: Any, source: str, unit: str, scale: float, checks: bool
+) -> tuple[VectorMap, list[Finding]]:
+    """Scale and check parsed segments; raise the first error, return the map and the rest."""
+    _check_scale(scale)
+    if scale != 1:
+        arr = arr * float(scale)
+    res = clean_segments(arr, source, labels, unit, checks=checks)
+    for f in res.findings:
+        if f.severity == "error":
+            log_findings(res.warnings)
+            raise MapFormatError(f.message, source=source, line=f.line)
+    return VectorMap(res.segments, name=_stem_name(source)), list(res.findings)
 
 
-def parse_vectormap_text(text: str, source: str = "<string>") -> VectorMap:
-    """Parse the text format (one ``x1, y1, x2, y2`` wall per line)."""
+def parse_vectormap_text(
+    text: str, source: str = "<string>", *, scale: float = 1.0, checks: bool = True
+) -> VectorMap:
+    """Parse the text format (one ``x1, y1, x2, y2`` wall per line).
+
+    Coordinates are multiplied by ``scale``, then checked (:mod:`autonomy.map_hygiene`):
+    findings are logged as warnings on ``"depthnav.map"``, errors raised as
+    :class:`MapFormatError`. ``checks=False`` keeps only what a :class:`VectorMap` needs
+    (drops zero-length segments; no duplicate, extent or overlap checks).
+    """
+    vm, findings = _parse_text(text, source, scale, checks)
+    log_findings(findings)
+    return vm
+
+
+def _parse_text(text: str, source: str, scale: float, checks: bool) -> tuple[VectorMap, list[Finding]]:
     if text.startswith("\ufeff"):
         text = text[1:]
     vals: list[str] = []
@@ -252,10 +282,7 @@ def parse_vectormap_text(text: str, source: str = "<string>") -> VectorMap:
     if bad.any():  # e.g. 1e999 overflows to inf
         i = int(np.flatnonzero(bad)[0])
         raise _fail(source, linenos[i], f"expected finite numbers {_FIELDS}, got {arr[i].tolist()}")
-    arr = _drop_zero_length(arr, linenos, source, "line(s)")
-    if arr.shape[0] == 0:
-        raise _fail(source, None, "no wall segments left after dropping zero-length ones")
-    return VectorMap(arr, name=_stem_name(source))
+    return _finish(arr, linenos, source, "line(s)", scale, checks)
 
 
 def format_vectormap_text(vm: VectorMap) -> str:
@@ -412,8 +439,20 @@ def _fast_point(p: Any) -> tuple[float, float] | None:
         return None
 
 
-def parse_vectormap_json(text: str, source: str = "<string>") -> VectorMap:
-    """Parse the JSON format ``[{"p0": {"x", "y"}, "p1": {"x", "y"}}, ...]``."""
+def parse_vectormap_json(
+    text: str, source: str = "<string>", *, scale: float = 1.0, checks: bool = True
+) -> VectorMap:
+    """Parse the JSON format ``[{"p0": {"x", "y"}, "p1": {"x", "y"}}, ...]``.
+
+    ``scale`` and ``checks`` as for :func:`parse_vectormap_text`; findings name elements
+    as ``[i] (line L)``.
+    """
+    vm, findings = _parse_json(text, source, scale, checks)
+    log_findings(findings)
+    return vm
+
+
+def _parse_json(text: str, source: str, scale: float, checks: bool) -> tuple[VectorMap, list[Finding]]:
     data = _json_load(text, source)
     ctx = _JsonCtx(text, source)
     if not isinstance(data, list):
@@ -446,23 +485,41 @@ def parse_vectormap_json(text: str, source: str = "<string>") -> VectorMap:
         for k in ("p0", "p1"):
             for c in ("x", "y"):
                 ctx.number(el[k][c], [i, k, c])
-    lines = _LazyElementLines(text, len(rows))
-    arr = _drop_zero_length(arr, lines, source, "element(s)")
-    if arr.shape[0] == 0:
-        raise _fail(source, None, "no wall segments left after dropping zero-length ones")
-    return VectorMap(arr, name=_stem_name(source))
+    return _finish(arr, _LazyElementLines(text, len(rows)), source, "element(s)", scale, checks)
 
 
 class _LazyElementLines:
-    """``lines[i]`` -> ``"[i] (line L)"`` for warnings, computed only when asked."""
+    """``lines[i]`` -> ``"[i] (line L)"`` for messages, computed only when asked.
+
+    The element start offsets are found by one walk over the top-level array, extended as
+    far as the largest index asked for (a message lists only a few elements).
+    """
 
     def __init__(self, text: str, n: int):
         self.text = text
         self.n = n
+        self._starts: list[int] = []
+        self._pos: int | None = None  # where the walk goes on; -1 once it cannot
+        self._dec = json.JSONDecoder()
+
+    def _start(self, i: int) -> int | None:
+        text = self.text
+        if self._pos is None:
+            p = _skip_ws(text, 1 if text.startswith("\ufeff") else 0)
+            self._pos = _skip_ws(text, p + 1) if p < len(text) and text[p] == "[" else -1
+        try:
+            while len(self._starts) <= i and self._pos >= 0:
+                self._starts.append(self._pos)
+                _, p = self._dec.raw_decode(text, self._pos)
+                p = _skip_ws(text, p)
+                self._pos = _skip_ws(text, p + 1) if p < len(text) and text[p] == "," else -1
+        except ValueError:
+            self._pos = -1
+        return self._starts[i] if i < len(self._starts) else None
 
     def __getitem__(self, i: int) -> str:
-        line = _json_line(self.text, [int(i)])
-        return f"[{i}]" if line is None else f"[{i}] (line {line})"
+        off = self._start(int(i))
+        return f"[{i}]" if off is None else f"[{i}] (line {self.text.count(chr(10), 0, off) + 1})"
 
 
 def format_vectormap_json(vm: VectorMap) -> str:
@@ -517,13 +574,27 @@ def _suffix_kind(path: PathLike) -> str:
     )
 
 
-def load_vectormap(path: PathLike) -> VectorMap:
-    """Load a vector map, choosing the format from the suffix (``.txt`` or ``.json``)."""
+def load_vectormap(path: PathLike, *, scale: float = 1.0, checks: bool = True) -> VectorMap:
+    """Load a vector map, choosing the format from the suffix (``.txt`` or ``.json``).
+
+    Coordinates are multiplied by ``scale`` (0.001 for a map in millimetres), then checked
+    (:mod:`autonomy.map_hygiene`): each finding is logged as one warning line on the
+    ``"depthnav.map"`` logger; an error raises :class:`MapFormatError`.
+    """
+    vm, findings = load_vectormap_checked(path, scale=scale, checks=checks)
+    log_findings(findings)
+    return vm
+
+
+def load_vectormap_checked(
+    path: PathLike, *, scale: float = 1.0, checks: bool = True
+) -> tuple[VectorMap, list[Finding]]:
+    """:func:`load_vectormap` that returns the findings (file line numbers) instead of logging them."""
     kind = _suffix_kind(path)
     text, source = _read_text(path)
     if kind == "text":
-        return parse_vectormap_text(text, source)
-    return parse_vectormap_json(text, source)
+        return _parse_text(text, source, scale, checks)
+    return _parse_json(text, source, scale, checks)
 
 
 def save_vectormap(vm: VectorMap, path: PathLike) -> Path:

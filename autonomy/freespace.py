@@ -364,7 +364,7 @@ def build_free_space(vm: VectorMap, cfg: FreeSpaceConfig = FreeSpaceConfig()) ->
         if outside_cells:
             raise InputError(
                 f"{name}: no space inside the walls fits a robot of radius {cfg.robot_radius_m:.2f} m; "
-                "only the outside of the building is free (is the map a closed outline with nothing inside?)"
+                "only the outside of the building is free (the walls enclose no room for it)"
             )
         raise InputError(f"{name}: no free space fits a robot of radius {cfg.robot_radius_m:.2f} m")
     return FreeSpace(

@@ -314,7 +314,7 @@ def _extent_finding(
     rows = sorted({r_lo, r_hi})
     if big > MAX_EXTENT_M:
         if big * 1e-3 <= MAX_EXTENT_M:
-            what = "looks like millimetres; scale by 0.001"
+            what = "looks like millimetres; scale by 0.001 (depthnav map convert IN OUT --scale 0.001)"
         else:
             what = "not a building in metres (a stray coordinate?)"
         return Finding(

@@ -47,12 +47,14 @@ def cmd_map_check(args: argparse.Namespace) -> int:
     import numpy as np
 
     from autonomy.graph_builder import build_navgraph
-    from autonomy.vectormap import load_vectormap
+    from autonomy.vectormap import load_vectormap_checked
 
     path = _map_arg(args.file)
-    vm = load_vectormap(path)
+    vm, findings = load_vectormap_checked(path)
     xmin, ymin, xmax, ymax = vm.extent()
     print(f"{path}: {vm.n_segments} segments")
+    for f in findings:
+        print(f"  {f.severity}: {f}")
     print(f"  extent: x [{xmin:.3f}, {xmax:.3f}] m, y [{ymin:.3f}, {ymax:.3f}] m ({xmax - xmin:.2f} x {ymax - ymin:.2f} m)")
     print(f"  total wall length: {vm.total_length_m:.2f} m")
     lengths = vm.lengths
@@ -126,7 +128,9 @@ def cmd_map_graph(args: argparse.Namespace) -> int:
 def cmd_map_convert(args: argparse.Namespace) -> int:
     from autonomy.vectormap import load_vectormap, save_vectormap
 
-    vm = load_vectormap(args.input)
+    if not (math.isfinite(args.scale) and args.scale > 0):
+        raise InputError(f"--scale: expected a positive factor (0.001 for millimetres), got {args.scale!r}")
+    vm = load_vectormap(args.input, scale=args.scale)
     out = save_vectormap(vm, args.output)
     print(f"wrote {out} ({vm.n_segments} segments)")
     return 0
@@ -278,9 +282,10 @@ def _add_map_commands(sub) -> None:
     c.add_argument("--compare", help="also measure this (e.g. hand-made) *.navigation.json the same way")
     c.add_argument("--png", help="also draw the map and the graph to this PNG")
     c.set_defaults(func=cmd_map_graph)
-    c = msub.add_parser("convert", help="convert between *.vectormap.txt and *.vectormap.json")
+    c = msub.add_parser("convert", help="convert between *.vectormap.txt and *.vectormap.json (and rescale)")
     c.add_argument("input")
     c.add_argument("output")
+    c.add_argument("--scale", type=float, default=1.0, help="multiply coordinates (0.001: a map in millimetres)")
     c.set_defaults(func=cmd_map_convert)
     c = msub.add_parser("render", help="draw a map (and its navigation graph) to PNG")
     c.add_argument("file")

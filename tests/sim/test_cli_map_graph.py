@@ -85,3 +85,18 @@ def test_map_graph_compares_with_a_hand_made_graph_on_the_same_pairs(tmp_path, c
     assert len(lines) == 2 and lines[0].lstrip().startswith("generated:") and str(hand) in lines[1]
     pairs = {ln.rsplit("(", 1)[1] for ln in lines}
     assert len(pairs) == 1  # measured on the same point pairs
+
+
+def test_map_check_lists_the_loader_findings_and_convert_rescales(tmp_path, capsys):
+    dup = tmp_path / "dup.vectormap.txt"
+    dup.write_text("0, 0, 10, 0\n10, 0, 10, 6\n10, 6, 0, 6\n0, 6, 0, 0\n0, 0, 10, 0\n")
+    assert main(["map", "check", str(dup)]) == 0
+    out = capsys.readouterr().out
+    assert "warning:" in out and "duplicate" in out and "line(s) 5" in out
+    mm = tmp_path / "mm.vectormap.txt"
+    mm.write_text("0, 0, 10000, 0\n10000, 0, 10000, 6000\n10000, 6000, 0, 6000\n0, 6000, 0, 0\n")
+    assert main(["map", "check", str(mm)]) == 2
+    assert "--scale 0.001" in _err_line(capsys)
+    m = tmp_path / "m.vectormap.txt"
+    assert main(["map", "convert", str(mm), str(m), "--scale", "0.001"]) == 0
+    assert load_vectormap(m).extent() == (0.0, 0.0, 10.0, 6.0)

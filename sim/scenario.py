@@ -2,7 +2,8 @@
 
 A scenario names a map, the robot and sensor configuration, actors, a mission, a seed
 and what to report. Paths in a scenario are relative to the scenario file; a map given
-by ``name`` is one of the buildings shipped in ``sim/assets``.
+by ``name`` is one of the buildings shipped in ``sim/assets``; a ``vectormap`` without a
+``navgraph`` gets a graph made from its walls (cached beside the map file).
 """
 
 from __future__ import annotations
@@ -42,14 +43,17 @@ class MapConfig:
     vectormap: str = ""
     """Path to a *.vectormap.txt / *.vectormap.json (relative to the scenario file)."""
     navgraph: str = ""
-    """Path to a *.navigation.json (relative to the scenario file)."""
+    """Path to a *.navigation.json (relative to the scenario file); empty with a
+    ``vectormap``: a graph made from the walls, cached as <map>.auto.navigation.json."""
     generate_seed: int = -1
     """>= 0: draw a procedural building with this seed instead (sim.simulator.blueprints)."""
 
     def __post_init__(self) -> None:
         given = sum([bool(self.name), bool(self.vectormap), self.generate_seed >= 0])
         if given != 1:
-            raise InputError("map: give exactly one of 'name', 'vectormap' (with 'navgraph') or 'generate_seed'")
+            raise InputError("map: give exactly one of 'name', 'vectormap' (optionally with 'navgraph') or 'generate_seed'")
+        if self.navgraph and not self.vectormap:
+            raise InputError("map.navgraph: give it with 'vectormap' (the map it belongs to)")
 
 
 @dataclass(frozen=True)
@@ -201,13 +205,10 @@ def load_scenario(path: str | Path, overrides: list[str] | None = None) -> Scena
     data["base_dir"] = str(path.resolve().parent)
     scn = from_dict(Scenario, data, source=src)
     # Map files must exist now, not halfway through a run.
-    if scn.map.vectormap:
-        for key in ("vectormap", "navgraph"):
-            value = getattr(scn.map, key)
-            if not value:
-                raise InputError(f"{src}: key 'map.{key}' is required when 'map.vectormap' is given")
-            if not scn.resolve(value).is_file():
-                raise InputError(f"{src}: key 'map.{key}': file not found: {scn.resolve(value)}")
+    for key in ("vectormap", "navgraph"):
+        value = getattr(scn.map, key)
+        if value and not scn.resolve(value).is_file():
+            raise InputError(f"{src}: key 'map.{key}': file not found: {scn.resolve(value)}")
     if scn.map.name and not (ASSETS_DIR / f"{scn.map.name}.vectormap.txt").is_file():
         names = ", ".join(sorted(p.name.removesuffix(".vectormap.txt") for p in ASSETS_DIR.glob("*.vectormap.txt")))
         raise InputError(f"{src}: key 'map.name': no building {scn.map.name!r} in sim/assets (have: {names})")

@@ -26,7 +26,13 @@ def run(cfg: Scenario, out_dir: str | Path, *, seed: int | None = None, rrd=None
 
 
 def trials(cfg: Scenario, n: int, seed: int) -> list[dict]:
-    """``n`` trials with seeds spawned from the sweep's seed."""
+    """``n`` trials with seeds spawned from the sweep's seed. A map without a navigation
+    graph gets its graph made here, once, so the workers read it from the cache instead
+    of each making it."""
+    if cfg.map.vectormap and not cfg.map.navgraph:
+        from sim.experiments.runner import load_building
+
+        load_building(cfg)
     seeds = np.random.SeedSequence(seed).generate_state(n, dtype=np.uint32)
     return [{"id": f"trial-{i:04d}", "seed": int(s)} for i, s in enumerate(seeds)]
 

@@ -37,7 +37,7 @@ from sim.scenario import Scenario
 from sim.simulator import blueprints
 from sim.simulator.actors import Furniture, Person
 from sim.simulator.blueprints import ASSETS_DIR
-from sim.simulator.building import Building, random_furniture, random_people
+from sim.simulator.building import Building, navgraph_from_walls, random_furniture, random_people
 from sim.simulator.kinect import KinectCamera
 from sim.simulator.robot import Odometry
 from sim.simulator.step import EpisodeSeeds, SimFrame, SimStep
@@ -59,7 +59,9 @@ STAGES = ("physics", "render", "noise", "fspf", "obstacles", "localization", "na
 
 
 def load_building(scn: Scenario) -> Building:
-    """The building a scenario names (shipped asset, files, or a generated one)."""
+    """The building a scenario names (shipped asset, files, or a generated one). A vector
+    map without a navigation graph gets one made from its walls for the scenario's robot
+    radius, cached beside the map (:func:`sim.simulator.building.navgraph_from_walls`)."""
     m = scn.map
     if m.generate_seed >= 0:
         bp = blueprints.generate_building(blueprints.BuildingConfig(), m.generate_seed)
@@ -68,7 +70,9 @@ def load_building(scn: Scenario) -> Building:
         bp = blueprints.load_blueprint(ASSETS_DIR / m.name)
         return Building(bp.vectormap, bp.navgraph, tuple(bp.open_areas), tuple(bp.rooms), ASSETS_DIR / f"{m.name}.vectormap.txt")
     path = scn.resolve(m.vectormap)
-    return Building(load_vectormap(path), load_navgraph(scn.resolve(m.navgraph)), map_path=path)
+    vm = load_vectormap(path)
+    graph = load_navgraph(scn.resolve(m.navgraph)) if m.navgraph else navgraph_from_walls(vm, path, scn.robot.radius_m)
+    return Building(vm, graph, map_path=path)
 
 
 def write_tum(path: Path, t: np.ndarray, poses: np.ndarray) -> None:
@@ -138,7 +142,7 @@ def build_run(scn: Scenario, seed: int) -> Run:
     building = load_building(scn)
     graph = building.navgraph
     furniture = tuple(scn.actors.furniture) + random_furniture(building, scn.actors.random_furniture, seeds.actors, scn.robot.radius_m)
-    people = tuple(scn.actors.people) + random_people(graph, scn.actors.random_people, seeds.actors)
+    people = tuple(scn.actors.people) + random_people(graph, scn.actors.random_people, seeds.actors, building.main_node_ids)
     mission = plan_mission(scn.mission, graph, seeds.mission)
     world = build_world(
         building.vectormap, world=scn.world, robot=scn.robot, intrinsics=scn.kinect.intrinsics, mount=scn.kinect.mount,

@@ -4,6 +4,10 @@ The robot's navigator says when it has arrived (on its estimate); the mission ch
 truth, counts the waypoint reached, failed on a timeout, or reached at the wrong place,
 and hands the navigator the next goal. A long run draws one random waypoint at a time
 until the robot has driven the target distance.
+
+Random waypoints come from the navigation graph's largest connected component (a graph
+made from the walls has one component per closed room); given waypoints and a given
+start must lie in one component.
 """
 
 from __future__ import annotations
@@ -14,6 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from autonomy.errors import InputError
+from autonomy.graph_builder import graph_components
 from autonomy.vectormap import NavGraph
 from sim.scenario import MissionConfig
 
@@ -38,6 +43,8 @@ class Mission:
     reached: int = 0
     failed: int = 0
     events: list[dict] = field(default_factory=list)
+    pool: list[int] = field(default_factory=list)
+    """Node ids a long run draws its next waypoints from (the mission's component)."""
 
     @property
     def done(self) -> bool:
@@ -62,7 +69,8 @@ def plan_mission(m: MissionConfig, graph: NavGraph, rng: np.random.Generator) ->
             raise InputError(f"mission.waypoints: node id {w} is not in the navigation graph")
     if m.start_node >= 0 and m.start_node not in known:
         raise InputError(f"mission.start_node: node id {m.start_node} is not in the navigation graph")
-    wps = list(m.waypoints) if m.waypoints else _random_waypoints(m, ids, rng)
+    pool = _component_pool(m, graph, ids)
+    wps = list(m.waypoints) if m.waypoints else _random_waypoints(m, pool, rng)
     start = m.start_node if m.start_node >= 0 else None
     if start is None:
         nbrs = graph.neighbors(wps[0])
@@ -73,7 +81,34 @@ def plan_mission(m: MissionConfig, graph: NavGraph, rng: np.random.Generator) ->
     p = xy[graph.index_of(start)]
     q = xy[graph.index_of(wps[0])]
     heading = math.atan2(q[1] - p[1], q[0] - p[0]) if np.hypot(*(q - p)) > 1e-6 else 0.0
-    return Mission(waypoints=wps, start_pose=np.array([p[0], p[1], heading]))
+    return Mission(waypoints=wps, start_pose=np.array([p[0], p[1], heading]), pool=pool)
+
+
+def _component_pool(m: MissionConfig, graph: NavGraph, ids: list[int]) -> list[int]:
+    """The node ids of the mission's connected component: the start's (or the first given
+    waypoint's) when waypoints are given, else the largest. A given node in another
+    component is a one-line InputError."""
+    comp = dict(zip(ids, graph_components(len(ids), graph.edge_indices()).tolist(), strict=True))
+    if m.waypoints:
+        ref_node = m.start_node if m.start_node >= 0 else m.waypoints[0]
+        ref = comp[ref_node]
+        for w in m.waypoints:
+            if comp[w] != ref:
+                raise InputError(
+                    f"mission.waypoints: node id {w} cannot be reached from node {ref_node} "
+                    "(they are in separate parts of the navigation graph)"
+                )
+    else:
+        ref = 0
+        if m.start_node >= 0 and comp[m.start_node] != 0:
+            raise InputError(
+                f"mission.start_node: node id {m.start_node} is not in the navigation graph's largest "
+                "connected part, which random waypoints are drawn from (a room without a door has its own part)"
+            )
+    pool = [i for i in ids if comp[i] == ref]
+    if not m.waypoints and len(pool) < 2:
+        raise InputError("mission: random waypoints need a navigation graph with two connected nodes")
+    return pool
 
 
 def _random_waypoints(m: MissionConfig, ids: list[int], rng: np.random.Generator) -> list[int]:
@@ -119,7 +154,9 @@ def close_leg(
     mission.current += 1
     mission.started_at = t
     if m.target_distance_m > 0 and distance_m < m.target_distance_m and mission.done:
-        ids = [int(i) for i in graph.node_ids()]
+        ids = mission.pool or [int(i) for i in graph.node_ids()]
+        if len(ids) < 2:
+            return
         nxt = node
         while nxt == node:
             nxt = int(rng.choice(ids))

@@ -3,18 +3,37 @@
 The scenario runner and the gymnasium env place furniture and route people through the
 same functions here, so a scenario and an env episode drawn from the same seed furnish and
 populate a building the same way.
+
+A map given by its walls alone gets its navigation graph from
+:func:`autonomy.graph_builder.load_or_build_navgraph` (:func:`navgraph_from_walls`), and
+random furniture goes anywhere in the free space where the map has no zones (open areas
+or rooms). Such a graph can have several connected components (a room without a door
+is one of its own): starts, goals, waypoints and people's routes come from the largest
+(:func:`main_component_ids`).
 """
 
 from __future__ import annotations
 
+import json
 import math
-from dataclasses import dataclass, replace
+import os
+import sys
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
+from autonomy.constants import ROBOT_RADIUS_M
 from autonomy.errors import InputError
+from autonomy.freespace import FreeSpace, FreeSpaceConfig, build_free_space
 from autonomy.geometry import point_segment_distance
+from autonomy.graph_builder import (
+    GraphBuildConfig,
+    _cache_paths,
+    graph_components,
+    graph_key,
+    load_or_build_navgraph,
+)
 from autonomy.planner import astar, path_points
 from autonomy.vectormap import NavGraph, VectorMap
 from sim.simulator.actors import Furniture, Person
@@ -35,18 +54,99 @@ MIN_ROUTE_M = 3.0
 
 @dataclass
 class Building:
-    """A map with its graph, (if known) its zones, and the map file it came from."""
+    """A map with its graph, (if known) its zones, and the map file it came from.
+
+    Its free space (per robot radius) and the node ids of its graph's largest connected
+    component are computed on first use and kept: the free space of a 100 x 100 m map
+    takes about 0.3 s, and an env reuses one building for many episodes."""
 
     vectormap: VectorMap
     navgraph: NavGraph
     open_areas: tuple[tuple[float, float, float, float], ...] = ()
     rooms: tuple[tuple[float, float, float, float], ...] = ()
     map_path: Path | None = None
+    _free: dict[float, FreeSpace] = field(default_factory=dict, init=False, repr=False, compare=False)
+    _spots: dict[tuple[float, float], tuple[np.ndarray, np.ndarray]] = field(
+        default_factory=dict, init=False, repr=False, compare=False
+    )
+    _main: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
+
+    def __getstate__(self) -> dict:
+        # The caches are large grids and quick to remake: a pickled building leaves them out.
+        state = dict(self.__dict__)
+        state.update(_free={}, _spots={}, _main=None)
+        return state
 
     @property
     def furniture_zones(self) -> tuple[tuple[float, float, float, float], ...]:
-        """Where random furniture goes: the open areas, else the rooms."""
+        """Where random furniture goes: the open areas, else the rooms (empty: the free space)."""
         return self.open_areas or self.rooms
+
+    def free_space(self, robot_radius_m: float = ROBOT_RADIUS_M) -> FreeSpace:
+        """Where a robot of this radius fits inside the building (one-line InputError when
+        nowhere); computed once per radius."""
+        key = float(robot_radius_m)
+        if key not in self._free:
+            self._free[key] = build_free_space(self.vectormap, FreeSpaceConfig(robot_radius_m=key))
+        return self._free[key]
+
+    def free_spot(self, rng: np.random.Generator, clearance_m: float, robot_radius_m: float) -> np.ndarray | None:
+        """A point uniform over the largest free region at least ``clearance_m`` from every
+        wall (as :meth:`autonomy.freespace.FreeSpace.sample` draws it, with the cells kept
+        per clearance); None when there is no such place."""
+        fs = self.free_space(robot_radius_m)
+        key = (float(robot_radius_m), float(clearance_m))
+        if key not in self._spots:
+            # A cell centre this far from the walls keeps any point of the cell clearance_m away.
+            self._spots[key] = fs.free_cells(clearance_m + math.sqrt(0.5) * fs.cell_m, region=0)
+        rows, cols = self._spots[key]
+        if rows.size == 0:
+            return None
+        k = int(rng.integers(rows.size))
+        return fs.centres(rows[k], cols[k]) + rng.uniform(-0.5, 0.5, 2) * fs.cell_m
+
+    @property
+    def main_node_ids(self) -> np.ndarray:
+        """Node ids (in node order) of the graph's largest connected component."""
+        if self._main is None:
+            self._main = main_component_ids(self.navgraph)
+        return self._main
+
+
+def main_component_ids(graph: NavGraph) -> np.ndarray:
+    """Node ids (in node order) of the graph's largest connected component: all of them
+    for a connected graph."""
+    ids = graph.node_ids()
+    if ids.size == 0:
+        return ids
+    return ids[graph_components(graph.n_nodes, graph.edge_indices()) == 0]
+
+
+def _holds_graph(path: Path, key: str) -> bool:
+    """Whether a cached graph file is the one for ``key``."""
+    try:
+        return json.loads(path.read_text(encoding="utf-8")).get("depthnav", {}).get("key") == key
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
+def navgraph_from_walls(
+    vm: VectorMap, map_path: str | os.PathLike[str] | None, robot_radius_m: float, *, quiet: bool = False
+) -> NavGraph:
+    """The navigation graph made from the walls for a robot of this radius, cached beside
+    the map file (or under ~/.cache/depthnav). When it is made rather than read from the
+    cache, one line on stderr (unless ``quiet``) says so and where it is kept."""
+    cfg = GraphBuildConfig(free_space=FreeSpaceConfig(robot_radius_m=robot_radius_m))
+    key = graph_key(vm, cfg)
+    paths = _cache_paths(map_path, key)
+    cached = any(_holds_graph(p, key) for p in paths)
+    graph = load_or_build_navgraph(vm, map_path, cfg)
+    if not cached and not quiet:
+        where = next((p for p in paths if _holds_graph(p, key)), None)
+        name = Path(map_path).name if map_path is not None else (vm.name or "the map")
+        kept = f"cached in {os.path.normpath(where)}" if where is not None else "not cached (no writable place)"
+        print(f"{name}: navigation graph made from the walls ({graph.n_nodes} nodes, {graph.n_edges} edges), {kept}", file=sys.stderr)
+    return graph
 
 
 def _half_diagonal(f: Furniture) -> float:
@@ -77,25 +177,45 @@ def furniture_fits(
     return not any(math.hypot(o.x - f.x, o.y - f.y) < half + _half_diagonal(o) + PIECE_GAP_M for o in placed)
 
 
+def draw_furniture_in_free_space(
+    building: Building, rng: np.random.Generator, robot_radius_m: float, kind: str | None = None
+) -> Furniture | None:
+    """One piece at a uniform place in the building's largest free region, its
+    half-diagonal plus ``WALL_CLEARANCE_M`` from every wall, at a uniform heading (kind
+    drawn if not given); None when no place is that far from the walls."""
+    if kind is None:
+        kind = str(FURNITURE_KINDS[rng.integers(len(FURNITURE_KINDS))])
+    xy = building.free_spot(rng, _half_diagonal(Furniture(kind=kind)) + WALL_CLEARANCE_M, robot_radius_m)
+    if xy is None:
+        return None
+    return Furniture(kind=kind, x=float(xy[0]), y=float(xy[1]), yaw=float(rng.uniform(-math.pi, math.pi)))
+
+
+def _draw_piece(building: Building, rng: np.random.Generator, robot_radius_m: float, kind: str | None = None) -> Furniture | None:
+    """A candidate piece: in a zone when the map has zones, else anywhere in the free space."""
+    zones = building.furniture_zones
+    if zones:
+        return draw_furniture(zones, rng, kind)
+    return draw_furniture_in_free_space(building, rng, robot_radius_m, kind)
+
+
 def random_furniture(building: Building, n: int, rng: np.random.Generator, robot_radius_m: float) -> tuple[Furniture, ...]:
-    """``n`` pieces of random kinds in the building's open areas (or rooms), clear of
-    walls, of each other and of the navigation graph's edges."""
+    """``n`` pieces of random kinds in the building's open areas (or rooms; the free space
+    when it has neither), clear of walls, of each other and of the navigation graph's edges."""
     if n == 0:
         return ()
-    zones = building.furniture_zones
-    if not zones:
-        raise InputError("actors.random_furniture: the map has no open areas or rooms to place furniture in")
     edges = building.navgraph.edge_segments()
     walls = np.asarray(building.vectormap.segments)
     out: list[Furniture] = []
     for _ in range(TRIES_PER_PIECE * n):
         if len(out) == n:
             break
-        f = draw_furniture(zones, rng)
-        if furniture_fits(f, out, edges, walls, robot_radius_m):
+        f = _draw_piece(building, rng, robot_radius_m)
+        if f is not None and furniture_fits(f, out, edges, walls, robot_radius_m):
             out.append(f)
     if len(out) < n:
-        raise InputError(f"actors.random_furniture: only {len(out)} of {n} pieces fit in the map's open areas clear of the nav graph")
+        where = "open areas" if building.furniture_zones else "free space"
+        raise InputError(f"actors.random_furniture: only {len(out)} of {n} pieces fit in the map's {where} clear of the nav graph")
     return tuple(out)
 
 
@@ -105,25 +225,27 @@ def replace_furniture(
     """New places for ``pieces[fixed:]`` (kinds kept), as :func:`random_furniture` places
     them; a piece that does not fit in ``TRIES_PER_PIECE`` tries is parked at ``park``
     (outside the building), offset 10 m per piece."""
-    zones = building.furniture_zones
     edges = building.navgraph.edge_segments()
     walls = np.asarray(building.vectormap.segments)
     placed = list(pieces[:fixed])
     for k in range(fixed, len(pieces)):
         new = replace(pieces[k], x=park[0] - 10.0 * k, y=park[1])
         for _ in range(TRIES_PER_PIECE):
-            f = draw_furniture(zones, rng, pieces[k].kind)
-            if furniture_fits(f, placed, edges, walls, robot_radius_m):
+            f = _draw_piece(building, rng, robot_radius_m, pieces[k].kind)
+            if f is not None and furniture_fits(f, placed, edges, walls, robot_radius_m):
                 new = f
                 break
         placed.append(new)
     return placed
 
 
-def random_people(graph: NavGraph, n: int, rng: np.random.Generator) -> tuple[Person, ...]:
-    """People walking back and forth along random shortest paths of the nav graph."""
-    out = []
-    ids = graph.node_ids()
+def random_people(graph: NavGraph, n: int, rng: np.random.Generator, nodes: np.ndarray | None = None) -> tuple[Person, ...]:
+    """People walking back and forth along random shortest paths of the nav graph, between
+    ``nodes`` (default: the graph's largest connected component)."""
+    out: list[Person] = []
+    ids = main_component_ids(graph) if nodes is None else np.asarray(nodes)
+    if len(ids) < 2:
+        return ()
     for _ in range(n):
         for _attempt in range(20):
             a, b = (int(v) for v in rng.choice(ids, 2, replace=False))

@@ -334,8 +334,11 @@ def test_buildings_from_files(tmp_path: Path) -> None:
     env.reset(seed=0)
     env.step(env.action_space.sample())
     env.close()
-    with pytest.raises(InputError, match="'n_furniture'"):
-        DepthNavEnv(building="", vectormap=str(tmp_path / "b9.vectormap.txt"), navgraph=str(tmp_path / "b9.navigation.json"), n_furniture=1)
+    # A map without zones takes random furniture in its free space.
+    env = DepthNavEnv(building="", vectormap=str(tmp_path / "b9.vectormap.txt"), navgraph=str(tmp_path / "b9.navigation.json"), n_furniture=1)
+    env.reset(seed=0)
+    assert abs(env._site.furniture[0].x) < 100.0
+    env.close()
 
 
 def test_env_pickles_before_reset() -> None:
@@ -359,7 +362,8 @@ def test_env_pickles_before_reset() -> None:
         (dict(observe_pose_estimate=True, localization=LocalizationConfig(enabled=False)), "'observe_pose_estimate'"),
         (dict(start_nodes=(99999,)), "'start_nodes'"),
         (dict(render_mode="human"), "'render_mode'"),
-        (dict(building="", vectormap="x.txt"), "'vectormap' with 'navgraph'"),
+        (dict(building="", navgraph="x.json"), "'vectormap', optionally with 'navgraph'"),
+        (dict(building="", vectormap="x.txt"), "argument 'vectormap' expected an existing file"),
     ],
 )
 def test_bad_arguments_are_input_errors(kwargs: dict, needle: str) -> None:

@@ -45,11 +45,13 @@ class EnvConfig:
     building: str = "small_floor"
     """A shipped building (sim/assets: small_floor, corridor_loop), a blueprint file stem
     (``path/name`` with name.vectormap.txt, .navigation.json, .zones.json), 'procedural',
-    or '' when ``vectormap`` and ``navgraph`` are given."""
+    or '' when ``vectormap`` is given."""
     vectormap: str = ""
-    """A vector-map file (text or JSON); with ``navgraph`` and ``building=''``."""
+    """A vector-map file (text or JSON), with ``building=''``; random furniture goes
+    anywhere in its free space."""
     navgraph: str = ""
-    """The navigation-graph file that goes with ``vectormap``."""
+    """The navigation-graph file that goes with ``vectormap``; empty: a graph made from
+    the walls for ``robot.radius_m``, cached as <vectormap>.auto.navigation.json."""
     procedural: blueprints.BuildingConfig = field(default_factory=_default_procedural)
     """Generator parameters for ``building='procedural'`` (default: 30 x 24 m floors)."""
     building_seed: int = -1
@@ -65,14 +67,16 @@ class EnvConfig:
     """People walking fixed routes."""
     n_furniture: int = 0
     """Extra furniture pieces (kinds drawn per building) placed at random in the open
-    areas (or rooms), clear of the navigation graph, every episode."""
+    areas (or rooms; a map without zones: its free space), clear of the navigation graph,
+    every episode."""
     n_people: int = 0
     """Extra people walking random navigation-graph routes, redrawn every episode."""
     # -- episodes -------------------------------------------------------------------
     start_nodes: tuple[int, ...] = ()
-    """Navigation-graph node ids to start at (empty: any node)."""
+    """Navigation-graph node ids to start at (empty: any node of the graph's largest
+    connected component)."""
     goal_nodes: tuple[int, ...] = ()
-    """Node ids to draw goals from (empty: any node)."""
+    """Node ids to draw goals from (empty: any node of the largest connected component)."""
     min_goal_distance_m: float = 2.0
     """Smallest geodesic start-goal distance drawn."""
     max_goal_distance_m: float = 0.0
@@ -156,10 +160,10 @@ class EnvConfig:
                 raise InputError(f"DepthNav: argument '{name}' expected {what}, got {getattr(self, name)!r}")
 
         choices = sum([bool(self.building), bool(self.vectormap)])
-        if choices != 1 or bool(self.vectormap) != bool(self.navgraph):
+        if choices != 1 or (self.navgraph and not self.vectormap):
             raise InputError(
                 "DepthNav: give exactly one of 'building' (a shipped name, a blueprint stem or "
-                "'procedural') or 'vectormap' with 'navgraph' (and building='')"
+                "'procedural') or 'vectormap', optionally with 'navgraph' (and building='')"
             )
         need(self.new_building_every >= 1, "new_building_every", "an integer >= 1")
         need(self.building_seed >= -1, "building_seed", "an integer >= -1")
@@ -226,7 +230,7 @@ class EnvConfig:
         elif m.name:
             where = dict(building=m.name)
         else:
-            where = dict(building="", vectormap=str(scn.resolve(m.vectormap)), navgraph=str(scn.resolve(m.navgraph)))
+            where = dict(building="", vectormap=str(scn.resolve(m.vectormap)), navgraph=str(scn.resolve(m.navgraph)) if m.navgraph else "")
         base = cls(
             **where,
             furniture=tuple(scn.actors.furniture),

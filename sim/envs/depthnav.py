@@ -303,6 +303,8 @@ class DepthNavEnv(gym.Env):
         goal_opt = _option_array(opts, "goal", 2)
         cfg = self.config
         site = self._ensure_site(seeded=seed is not None)
+        if start_opt is not None:
+            _check_start_pose(site, cfg, start_opt)
         self._episodes_on_site += 1
         seeds = EpisodeSeeds.from_seed(seed if seed is not None else int(self.np_random.integers(0, 2**63)))
         if cfg.n_furniture:
@@ -553,6 +555,17 @@ class DepthNavEnv(gym.Env):
             self._site = None
         self._ready = False
         super().close()
+
+
+def _check_start_pose(site: Site, cfg: EnvConfig, start: np.ndarray) -> None:
+    """A given start pose must be where the robot fits inside the building."""
+    fs = site.building.free_space(cfg.robot.radius_m)
+    if int(fs.region_at(start[:2])) < 0:
+        pose = ", ".join(f"{v:g}" for v in start)
+        raise InputError(
+            f"DepthNav: reset option 'start_pose' ({pose}) is outside the building's free space "
+            f"(no room there for a robot of radius {cfg.robot.radius_m:g} m inside the walls)"
+        )
 
 
 def _option_array(opts: dict[str, Any], key: str, n: int) -> np.ndarray | None:

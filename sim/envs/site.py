@@ -22,7 +22,13 @@ from sim.envs.config import EnvConfig
 from sim.simulator import blueprints
 from sim.simulator.actors import Furniture, PeopleController, Person
 from sim.simulator.blueprints import ASSETS_DIR
-from sim.simulator.building import FURNITURE_KINDS, Building, random_people, replace_furniture
+from sim.simulator.building import (
+    FURNITURE_KINDS,
+    Building,
+    navgraph_from_walls,
+    random_people,
+    replace_furniture,
+)
 from sim.simulator.kinect import KinectCamera, KinectConfig
 from sim.simulator.world import World, build_world
 
@@ -40,9 +46,11 @@ def load_fixed_building(cfg: EnvConfig) -> Building | None:
         return procedural_building(cfg, cfg.building_seed)
     if cfg.vectormap:
         for key in ("vectormap", "navgraph"):
-            if not Path(getattr(cfg, key)).is_file():
+            if getattr(cfg, key) and not Path(getattr(cfg, key)).is_file():
                 raise InputError(f"DepthNav: argument '{key}' expected an existing file, got {getattr(cfg, key)!r}")
-        b = Building(load_vectormap(cfg.vectormap), load_navgraph(cfg.navgraph), map_path=Path(cfg.vectormap))
+        vm = load_vectormap(cfg.vectormap)
+        graph = load_navgraph(cfg.navgraph) if cfg.navgraph else navgraph_from_walls(vm, cfg.vectormap, cfg.robot.radius_m)
+        b = Building(vm, graph, map_path=Path(cfg.vectormap))
     else:
         stem = cfg.building
         for suffix in (".vectormap.txt", ".navigation.json", ".zones.json"):
@@ -68,18 +76,13 @@ def procedural_building(cfg: EnvConfig, seed: int) -> Building:
 
 def check_building(cfg: EnvConfig, b: Building) -> None:
     g = b.navgraph
-    if g.n_nodes < 2 or g.n_edges < 1:
+    if g.n_edges < 1 or len(b.main_node_ids) < 2:
         raise InputError("DepthNav: the building's navigation graph needs at least two connected nodes")
     ids = {int(i) for i in g.node_ids()}
     for name in ("start_nodes", "goal_nodes"):
         for i in getattr(cfg, name):
             if i not in ids:
                 raise InputError(f"DepthNav: argument '{name}' expected node ids of the navigation graph, got {i}")
-    if cfg.n_furniture and not b.furniture_zones:
-        raise InputError(
-            "DepthNav: argument 'n_furniture' expected 0 for a map without zones (open areas or rooms), "
-            f"got {cfg.n_furniture}"
-        )
 
 
 def _yaw_quat(yaw: float) -> np.ndarray:
@@ -161,7 +164,8 @@ class Site:
 
     def route_people(self, cfg: EnvConfig, rng: np.random.Generator) -> None:
         """New routes for the random people, drawn as the scenario runner draws them."""
-        routes = list(random_people(self.building.navgraph, cfg.n_people, rng)) if cfg.n_people else []
+        b = self.building
+        routes = list(random_people(b.navgraph, cfg.n_people, rng, b.main_node_ids)) if cfg.n_people else []
         routes += [_parked_person() for _ in range(cfg.n_people - len(routes))]
         self.people = list(cfg.people) + routes
         self._restart_people(cfg)

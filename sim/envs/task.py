@@ -45,9 +45,10 @@ class Episode:
 
 def sample_task(cfg: EnvConfig, site: Site, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, int]:
     """A start node (random heading) and a goal node at a geodesic distance within
-    ``[min_goal_distance_m, max_goal_distance_m]`` (the farthest reachable if none is)."""
+    ``[min_goal_distance_m, max_goal_distance_m]`` (the farthest reachable if none is);
+    unless given, both from the graph's largest connected component."""
     g = site.building.navgraph
-    ids = [int(i) for i in g.node_ids()]
+    ids = [int(i) for i in site.building.main_node_ids]
     xy = g.node_xy()
     starts = list(cfg.start_nodes) or ids
     goals = list(cfg.goal_nodes) or ids

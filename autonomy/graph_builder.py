@@ -43,7 +43,7 @@ from autonomy.vectormap import (
     parse_navgraph_json,
 )
 
-__all__ = ["GraphBuildConfig", "GraphBuild", "build_navgraph", "load_or_build_navgraph", "graph_components"]
+__all__ = ["GraphBuildConfig", "GraphBuild", "CachedGraph", "build_navgraph", "cached_navgraph", "load_or_build_navgraph", "graph_components"]
 
 
 @dataclass(frozen=True)
@@ -681,9 +681,21 @@ def _cache_paths(map_path: str | os.PathLike[str] | None, key: str) -> list[Path
     return paths
 
 
-def load_or_build_navgraph(
+@dataclass(frozen=True)
+class CachedGraph:
+    """A graph from :func:`cached_navgraph`, with where it is kept and whether it was made."""
+
+    graph: NavGraph
+    """The navigation graph."""
+    path: Path | None
+    """The cache file holding it (None when no place was writable)."""
+    built: bool
+    """Made now (True) or read from the cache (False)."""
+
+
+def cached_navgraph(
     vm: VectorMap, map_path: str | os.PathLike[str] | None, cfg: GraphBuildConfig = GraphBuildConfig()  # noqa: B008
-) -> NavGraph:
+) -> CachedGraph:
     """The automatic graph of ``vm``, cached as ``<map file>.auto.navigation.json`` (or under
     ``~/.cache/depthnav``) with the key in a ``"depthnav"`` entry the format's readers
     ignore. A stale, foreign or corrupt cache file is rebuilt, never an error."""
@@ -696,7 +708,7 @@ def load_or_build_navgraph(
             text = p.read_text(encoding="utf-8")
             if json.loads(text).get("depthnav", {}).get("key") != key:
                 continue
-            return parse_navgraph_json(text, str(p))
+            return CachedGraph(parse_navgraph_json(text, str(p)), p, False)
         except (OSError, ValueError, AttributeError):
             continue
     graph = build_navgraph(vm, cfg).graph
@@ -705,10 +717,17 @@ def load_or_build_navgraph(
         try:
             p.parent.mkdir(parents=True, exist_ok=True)
             p.write_text(text, encoding="utf-8")
-            break
+            return CachedGraph(graph, p, True)
         except OSError:
             continue
-    return graph
+    return CachedGraph(graph, None, True)
+
+
+def load_or_build_navgraph(
+    vm: VectorMap, map_path: str | os.PathLike[str] | None, cfg: GraphBuildConfig = GraphBuildConfig()  # noqa: B008
+) -> NavGraph:
+    """The graph of :func:`cached_navgraph`."""
+    return cached_navgraph(vm, map_path, cfg).graph
 
 
 def with_key(text: str, key: str) -> str:

@@ -14,7 +14,6 @@ is one of its own): starts, goals, waypoints and people's routes come from the l
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import sys
@@ -27,13 +26,7 @@ from autonomy.constants import ROBOT_RADIUS_M
 from autonomy.errors import InputError
 from autonomy.freespace import FreeSpace, FreeSpaceConfig, build_free_space
 from autonomy.geometry import point_segment_distance
-from autonomy.graph_builder import (
-    GraphBuildConfig,
-    _cache_paths,
-    graph_components,
-    graph_key,
-    load_or_build_navgraph,
-)
+from autonomy.graph_builder import GraphBuildConfig, cached_navgraph, graph_components
 from autonomy.planner import astar, path_points
 from autonomy.vectormap import NavGraph, VectorMap
 from sim.simulator.actors import Furniture, Person
@@ -122,31 +115,19 @@ def main_component_ids(graph: NavGraph) -> np.ndarray:
     return ids[graph_components(graph.n_nodes, graph.edge_indices()) == 0]
 
 
-def _holds_graph(path: Path, key: str) -> bool:
-    """Whether a cached graph file is the one for ``key``."""
-    try:
-        return json.loads(path.read_text(encoding="utf-8")).get("depthnav", {}).get("key") == key
-    except (OSError, ValueError, AttributeError):
-        return False
-
-
 def navgraph_from_walls(
     vm: VectorMap, map_path: str | os.PathLike[str] | None, robot_radius_m: float, *, quiet: bool = False
 ) -> NavGraph:
     """The navigation graph made from the walls for a robot of this radius, cached beside
     the map file (or under ~/.cache/depthnav). When it is made rather than read from the
     cache, one line on stderr (unless ``quiet``) says so and where it is kept."""
-    cfg = GraphBuildConfig(free_space=FreeSpaceConfig(robot_radius_m=robot_radius_m))
-    key = graph_key(vm, cfg)
-    paths = _cache_paths(map_path, key)
-    cached = any(_holds_graph(p, key) for p in paths)
-    graph = load_or_build_navgraph(vm, map_path, cfg)
-    if not cached and not quiet:
-        where = next((p for p in paths if _holds_graph(p, key)), None)
+    got = cached_navgraph(vm, map_path, GraphBuildConfig(free_space=FreeSpaceConfig(robot_radius_m=robot_radius_m)))
+    if got.built and not quiet:
         name = Path(map_path).name if map_path is not None else (vm.name or "the map")
-        kept = f"cached in {os.path.normpath(where)}" if where is not None else "not cached (no writable place)"
-        print(f"{name}: navigation graph made from the walls ({graph.n_nodes} nodes, {graph.n_edges} edges), {kept}", file=sys.stderr)
-    return graph
+        kept = f"cached in {os.path.normpath(got.path)}" if got.path is not None else "not cached (no writable place)"
+        g = got.graph
+        print(f"{name}: navigation graph made from the walls ({g.n_nodes} nodes, {g.n_edges} edges), {kept}", file=sys.stderr)
+    return got.graph
 
 
 def _half_diagonal(f: Furniture) -> float:

@@ -3,11 +3,12 @@ VENV    ?= .venv
 PYTHON  ?= python3
 PY      := $(VENV)/bin/python
 STAMP   := $(VENV)/.installed
+WARM    := $(VENV)/.warm
 export MUJOCO_GL ?= egl
 # Numba's on-disk JIT cache lives beside the sources; keep it per-checkout.
 export NUMBA_CACHE_DIR ?= $(CURDIR)/.numba_cache
 
-.PHONY: all demo test test-fast test-all bench lint assets clean
+.PHONY: all demo test test-fast test-all bench lint assets clean gl
 
 all: demo
 
@@ -17,17 +18,29 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install -q -e '.[dev]'
 	@touch $(STAMP)
 
+# The numba kernels compiled once after installing (about 40 s), so no run pays for it.
+$(WARM): $(STAMP) | gl
+	$(PY) -m sim.warmup
+	@touch $(WARM)
+
+## Mesa's EGL for headless depth rendering: installed if missing (root or sudo -n), else
+## one line naming the command to run; then a GL context must open.
+gl: $(STAMP)
+	@bash scripts/setup_gl.sh
+	@$(PY) -c "from mujoco import gl_context; gl_context.GLContext(8, 8).free()" 2>/dev/null || \
+	  { echo "depthnav: no OpenGL context with MUJOCO_GL=$(MUJOCO_GL); install Mesa's EGL (scripts/setup_gl.sh lists the packages) or run with MUJOCO_GL=osmesa" >&2; exit 1; }
+
 ## The main job, headless: report, figures and a rerun recording in runs/demo/.
-demo: $(STAMP)
+demo: $(STAMP) gl $(WARM)
 	$(VENV)/bin/depthnav run scenarios/demo.toml --out runs/demo --rrd runs/demo/demo.rrd
 
 ## The test suite (unit, property and end-to-end scenario tests) on both cores.
-test: $(STAMP)
-	$(PY) -m pytest -n 2 -q
+test: $(STAMP) gl $(WARM)
+	DEPTHNAV_REQUIRE_GL=1 $(PY) -m pytest -n 2 -q
 
 ## Unit tests only (skips the slow end-to-end scenario tests).
-test-fast: $(STAMP)
-	$(PY) -m pytest -n 2 -q -m "not slow"
+test-fast: $(STAMP) gl $(WARM)
+	DEPTHNAV_REQUIRE_GL=1 $(PY) -m pytest -n 2 -q -m "not slow"
 
 ## Benchmarks: prints a table and writes bench/results.json.
 bench: $(STAMP)

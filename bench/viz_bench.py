@@ -5,7 +5,8 @@
   time over its frames, for a 20 s stretch of the demo (8 s with ``--quick``).
 - ``closed_loop_frame_rrd``: the same run (same seed, so the same frames) writing an .rrd
   at the demo's settings (heavy items every ``report.rrd_every`` frames). Its target is
-  1.2 x the unrecorded frame's median. The runner's own measurement (time spent logging
+  1.2 x the unrecorded frame's median; its ``realtime_factor`` (target 2.5) is the demo's
+  real-time factor with the recording on. The runner's own measurement (time spent logging
   over the rest of the loop) goes to stderr.
 
 Samples alternate between the two so that load drifts on a shared machine hit both.
@@ -42,6 +43,7 @@ def bench_viz(results: dict[str, Result], quick: bool) -> None:
     plain: list[float] = []
     logged: list[float] = []
     shares: list[float] = []
+    rtf: list[float] = []
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp)
         run_scenario(warm, out / "warm", seed=scn.seed, rrd=out / "warm" / "w.rrd", progress=False)  # JIT and GL warm-up
@@ -52,11 +54,15 @@ def bench_viz(results: dict[str, Result], quick: bool) -> None:
             rep = run_scenario(scn, out / f"rrd{k}", seed=scn.seed, rrd=out / f"rrd{k}" / "run.rrd", progress=False)
             m = rep["metrics"]
             logged.append(1e3 * (m["wall_time_s"] + m["recording_flush_s"]) / max(m["frames"], 1))
+            rtf.append(m["realtime_factor"])
             shares.append(m["logging_overhead"])
             size_mb = (out / f"rrd{k}" / "run.rrd").stat().st_size / 1e6
     base = entry(plain)
     results["closed_loop_frame"] = base
     results["closed_loop_frame_rrd"] = entry(logged, target=round((1 + MAX_OVERHEAD) * base["median_ms"], 3))
+    # The demo's real-time factor with the recording on (simulated over wall time): a
+    # wall-clock figure, so it is measured here and never asserted by a test.
+    results["closed_loop_frame_rrd"].update(realtime_factor=round(float(sorted(rtf)[len(rtf) // 2]), 3), realtime_factor_target=2.5)
     ratio = entry(logged)["median_ms"] / base["median_ms"] - 1
     print(
         f"bench viz: recording costs {100 * ratio:+.1f}% of the loop (runner's own measure: "

@@ -206,6 +206,13 @@ def _save_depth_png(depth, path: Path) -> None:
     imsave(path, rgba)
 
 
+def cmd_warmup(args: argparse.Namespace) -> int:
+    from sim.warmup import warm_up
+
+    warm_up()
+    return 0
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     from sim.experiments.kinds import load_experiment
 
@@ -260,6 +267,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_snapshot_command(sub)
     _add_run_command(sub)
     _add_sweep_command(sub)
+    c = sub.add_parser("warmup", help="compile the numba kernels once into the on-disk cache (after pip install)")
+    c.set_defaults(func=cmd_warmup)
     c = sub.add_parser("scenarios", help="list the scenario files")
     c.add_argument("--dir", help="directory (default: the project's scenarios/)")
     c.set_defaults(func=cmd_scenarios)

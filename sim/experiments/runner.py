@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sys
 import time
 from dataclasses import dataclass, field
@@ -193,6 +194,14 @@ def run_scenario(
 # --------------------------------------------------------------------------- the loop
 
 
+def depth_backend_line(name: str) -> str:
+    """How depth frames are made, in words, with the fix when it is the slow fallback."""
+    if name == "gl":
+        return f"rendered by MuJoCo through OpenGL (MUJOCO_GL={os.environ.get('MUJOCO_GL', 'default')})"
+    return ("ray cast on the CPU (no OpenGL context could be made; about 20x slower than rendering: "
+            "install Mesa's EGL with `make gl`)")
+
+
 def drive(run: Run, recorder, progress: bool | None) -> bool:
     """The closed loop until the mission is done or its time is up; True if interrupted."""
     scn, mission = run.scn, run.mission
@@ -204,6 +213,9 @@ def drive(run: Run, recorder, progress: bool | None) -> bool:
 
         bar = tqdm(total=max_frames, unit="frame", desc=scn.name, leave=False)
     first = run.sim.first()
+    if progress is not False and scn.report.progress:
+        # The depth backend decides the speed of a run by 20x: say which one this is.
+        print(f"{scn.name}: depth camera {depth_backend_line(run.camera.backend_name)}", file=sys.stderr)
     run.truth.append(first.pose)
     run.times.append(0.0)
     # The first frame, so the navigator sees before it moves.

@@ -232,6 +232,10 @@ def print_table(results: dict[str, Result]) -> None:
             f"{name:<22}{r['median_ms']:>11.3f}{r['min_ms']:>10.3f}{r['max_ms']:>10.3f}"
             f"{fmt(tgt):>10}{fmt(r['paper_ms']):>10}  {ok}"
         )
+        for key in ("fspf_speedup", "ransac_speedup"):
+            if key in r:
+                ours = "FSPF" if key == "fspf_speedup" else "our RANSAC"
+                print(f"{'':<22}{ours} is {r[key]}x faster than Open3D's segment_plane on the same frames")
         if "realtime_factor" in r:
             print(f"{'':<22}real-time factor {r['realtime_factor']:.2f} (target >= {r['realtime_factor_target']})")
         if name == "map_graph_9000":  # the graph's quality beside its targets
@@ -241,7 +245,7 @@ def print_table(results: dict[str, Result]) -> None:
             )
 
 
-GROUP_NAMES = ["maps", "localization", "sim", "planes", "env", "scans", "viz", "start"]
+GROUP_NAMES = ["maps", "localization", "sim", "planes", "env", "scans", "viz", "start", "open3d"]
 
 
 def _groups() -> dict[str, Callable[[dict[str, Result], bool], None]]:
@@ -249,6 +253,7 @@ def _groups() -> dict[str, Callable[[dict[str, Result], bool], None]]:
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from env_bench import bench_env
     from loc_bench import bench_scans
+    from open3d_bench import bench_open3d
     from planes_bench import bench_planes
     from start_bench import bench_start
     from viz_bench import bench_viz
@@ -262,6 +267,7 @@ def _groups() -> dict[str, Callable[[dict[str, Result], bool], None]]:
         "scans": bench_scans,
         "viz": bench_viz,
         "start": bench_start,
+        "open3d": bench_open3d,
     }
 
 

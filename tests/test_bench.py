@@ -32,3 +32,20 @@ def test_every_group_is_registered() -> None:
     import run
 
     assert list(run._groups()) == run.GROUP_NAMES
+
+
+def test_the_open3d_group_is_optional(tmp_path: Path) -> None:
+    """Without open3d the group says it is skipped and writes nothing; with it, its rows."""
+    out = tmp_path / "results.json"
+    p = subprocess.run(
+        [sys.executable, str(ROOT / "bench" / "run.py"), "--quick", "--only", "open3d", "--out", str(out)],
+        capture_output=True, text=True, timeout=600, cwd=ROOT,
+    )
+    assert p.returncode == 0, p.stderr
+    res = json.loads(out.read_text())
+    try:
+        import open3d  # noqa: F401
+    except ImportError:
+        assert res == {} and "Open3D comparison is skipped" in p.stderr
+    else:
+        assert res["o3d_plane_frame"]["fspf_speedup"] > 0 and res["o3d_plane_ransac"]["ransac_speedup"] > 0

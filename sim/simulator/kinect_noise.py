@@ -27,10 +27,10 @@ that stays with the sensor). Two terms model this:
 - Spatially correlated axial noise (``correlated``): Nguyen's sigma_z = a + qz (+ the
   grazing term), qz = b (z - z0)^2. Our reading of its two terms: the range term qz, which
   grows like the disparity error (z^2), is the block-matched error and is correlated; the
-  constant a and the grazing term stay per pixel. The split keeps sigma_z per pixel: the
-  share qz^2 / (a^2 + qz^2) of (a + qz)^2 goes to a unit-variance Gaussian field of
-  correlation length ``corr_length_px`` (autocorrelation exp(-(r / L)^2)), new every frame;
-  the rest of sigma_z^2 stays independent. At 1 m the field holds 25 % of the variance, at
+  constant a is per pixel. The split keeps sigma_z per pixel: the share
+  qz^2 / (a^2 + qz^2) of sigma_z^2 goes to a unit-variance Gaussian field of correlation
+  length ``corr_length_px`` (autocorrelation exp(-(r / L)^2)), new every frame; the rest
+  stays independent from pixel to pixel. At 1 m the field holds 25 % of the variance, at
   3 m 99 %. L = 32 px: the sources give no length; the correlation window (9 px) is its
   lower bound, and FSPF with BV2012 Table I's parameters, which BV2012 ran on real frames
   to the sensor's range, needs L >= 16-24 px to find planes on a wall at 3.5 m (docs/
@@ -75,9 +75,9 @@ from __future__ import annotations
 import functools
 import math
 import os
+import queue
 import threading
 import time
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, fields, replace
 from statistics import NormalDist
 
@@ -109,9 +109,10 @@ class KinectNoiseConfig:
     axial_grazing_start_rad: float = math.radians(60.0)
     """Incidence angle above which the grazing term is added (60 degrees)."""
     correlated: bool = True
-    """Spatially correlated axial noise: the part of sigma_z that grows with range (the
-    disparity error) is a smooth random field, the constant and grazing parts stay per pixel.
-    False: all of sigma_z is independent from pixel to pixel (the independent model)."""
+    """Spatially correlated axial noise: the share qz^2 / (a^2 + qz^2) of sigma_z^2, with a
+    its constant and qz = b (z - z0)^2 its range term, is a smooth random field; the rest
+    stays per pixel. False: all of sigma_z is independent from pixel to pixel (the
+    independent model)."""
     corr_length_px: float = 32.0
     """Correlation length L of that field (px of the focal_px camera): its autocorrelation
     is exp(-(r / L)^2)."""
@@ -323,6 +324,7 @@ _ZIG_X32 = _ZIG_X.astype(np.float32)  # the vectorised fast-path test
 #: lateral offsets are rounded to whole pixels, so this discretised normal gets each offset's
 #: probability right to 1/2048 for one table load.
 _LAT_G = np.array([NormalDist().inv_cdf((i + 0.5) / 2048) for i in range(2048)], dtype=np.float32)
+_LAT_G_MAX = float(np.abs(_LAT_G).max())
 
 
 @numba.njit(cache=True, inline="always")
@@ -391,40 +393,38 @@ def _normals(key, n, out):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def _coarse_field(key, ny, nx, kern):  # pragma: no cover - numba
-    """ny x nx smooth field: white normals (words of key) on a grid padded by the kernel's
-    radius, filtered along both axes by kern (whose squares sum to 1: unit variance)."""
+def _field_block(key, kern, nx, j0, j1, iu, wu0, wu1):  # pragma: no cover - numba
+    """Coarse rows j0..j1 of a smooth field, interpolated to the pixel columns ((j1 - j0 + 1)
+    x width, float32). The coarse field is white normals (words of key; node (i, j) of the
+    grid padded by the kernel's radius r has counter i (nx + 2 r) + j + 1) filtered along
+    both axes by kern (whose squares sum to 1: unit variance); any range of rows comes out
+    the same as in the whole field, so image blocks can each make their own."""
     r = (kern.size - 1) // 2
-    wy = ny + 2 * r
     wx = nx + 2 * r
-    white = np.empty((wy, wx))
-    for i in range(wy):
+    nr = j1 - j0 + 1
+    tmp = np.zeros((nr + 2 * r, nx))
+    white = np.empty(wx)
+    for i in range(nr + 2 * r):
+        base = (j0 + i) * wx
         for j in range(wx):
-            white[i, j] = _normal_slow(_mix64(key + np.uint64(i * wx + j + 1) * _GAMMA))
-    tmp = np.zeros((wy, nx))
-    for i in range(wy):
+            white[j] = _normal_slow(_mix64(key + np.uint64(base + j + 1) * _GAMMA))
         for j in range(nx):
             acc = 0.0
             for t in range(kern.size):
-                acc += kern[t] * white[i, j + t]
+                acc += kern[t] * white[j + t]
             tmp[i, j] = acc
-    out = np.zeros((ny, nx))
-    for i in range(ny):
+    out = np.empty((nr, iu.size), dtype=np.float32)
+    crow = np.zeros(nx)
+    for i in range(nr):
+        crow[:] = 0.0
         for t in range(kern.size):
             kt = kern[t]
             for j in range(nx):
-                out[i, j] += kt * tmp[i + t, j]
+                crow[j] += kt * tmp[i + t, j]
+        orow = out[i]
+        for u in range(iu.size):
+            orow[u] = wu0[u] * crow[iu[u]] + wu1[u] * crow[iu[u] + 1]
     return out
-
-
-@numba.njit(cache=True, nogil=True)
-def _interp_rows(coarse, iu, wu0, wu1, out):  # pragma: no cover - numba
-    """Each coarse row interpolated to the pixel columns (out: coarse rows x width)."""
-    for r in range(coarse.shape[0]):
-        cr = coarse[r]
-        orow = out[r]
-        for u in range(out.shape[1]):
-            orow[u] = wu0[u] * cr[iu[u]] + wu1[u] * cr[iu[u] + 1]
 
 
 @functools.lru_cache(maxsize=16)
@@ -452,9 +452,13 @@ def _field_rows(key: np.uint64, h: int, w: int, length_px: float) -> tuple[np.nd
     """A unit-variance field of correlation length ``length_px`` as (hrows, rj, rw0, rw1):
     pixel (v, u) is rw0[v] hrows[rj[v], u] + rw1[v] hrows[rj[v] + 1, u]."""
     ny, nx, kern, (iu, wu0, wu1), (rj, rw0, rw1) = _field_plan(h, w, float(length_px))
-    hrows = np.empty((ny, w), dtype=np.float32)
-    _interp_rows(_coarse_field(key, ny, nx, kern), iu, wu0, wu1, hrows)
-    return hrows, rj, rw0, rw1
+    return _field_block(key, kern, nx, 0, ny - 1, iu, wu0, wu1), rj, rw0, rw1
+
+
+def _field_arg(key: np.uint64, h: int, w: int, length_px: float) -> tuple:
+    """The kernel's field argument: each image block makes the coarse rows it needs."""
+    ny, nx, kern, (iu, wu0, wu1), (rj, rw0, rw1) = _field_plan(h, w, float(length_px))
+    return (True, key, kern, nx, iu, wu0, wu1, rj, rw0, rw1)
 
 
 def smooth_field(seed: int, h: int, w: int, length_px: float) -> np.ndarray:
@@ -674,6 +678,14 @@ def _shadow_rows(depth, v0, v1, row0, shift_px, lit):  # pragma: no cover - numb
 
 
 @numba.njit(cache=True, inline="always", error_model="numpy")
+def _split_sigma(sigma, aa, qz):  # pragma: no cover - numba
+    """(per-pixel, correlated) parts of sigma_z, with a + qz its constant and range terms:
+    the share qz^2 / (a^2 + qz^2) of sigma_z^2 is correlated, the rest is per pixel."""
+    r = sigma / math.sqrt(aa * aa + qz * qz + _F_TINY)
+    return r * aa, r * qz
+
+
+@numba.njit(cache=True, inline="always", error_model="numpy")
 def _pixel(z, ts, gzu, gfu, pu, udu, z0, prm, corr, pon):  # pragma: no cover - numba
     """Output depth of one pixel (step 5 of _noise_rows) from its source's lit depth z and
     incidence angle ts, its random numbers, field and pattern values and its own clean depth
@@ -683,17 +695,12 @@ def _pixel(z, ts, gzu, gfu, pu, udu, z0, prm, corr, pon):  # pragma: no cover - 
     q = tc / (_F_HALF_PI - tc)
     graze = ag * q * q / math.sqrt(z) if tc > agst else _F0
     qz = ab * (z - az0) * (z - az0)
+    sigma = aon * (aa + qz + graze)
     if corr:
-        # sigma_z = a + qz + graze: the range term's share qz^2 / (a^2 + qz^2) of
-        # (a + qz)^2 is correlated, the rest of sigma_z^2 is per pixel
-        s0 = aon * (aa + qz)
-        r = s0 / math.sqrt(aa * aa + qz * qz + _F_TINY)
-        sw = r * aa
-        g = aon * graze
-        sw = math.sqrt(sw * sw + g * (s0 + s0 + g))
-        zn = z + sw * gzu + r * qz * gfu
+        sw, sc = _split_sigma(sigma, aa, qz)
+        zn = z + sw * gzu + sc * gfu
     else:
-        zn = z + aon * (aa + qz + graze) * gzu
+        zn = z + sigma * gzu
     if pon:
         dk = fbs / zn + pu
         zq = fbs / np.rint(dk) if quantize else fbs / dk
@@ -717,7 +724,8 @@ def _noise_rows(
     axl = (on, a, b, z0, c, theta_g): sigma_z = a + b (z - z0)^2 [+ c / sqrt(z) q^2 if
     theta > theta_g], q = theta / (pi/2 - theta), at the source pixel; drop = (on, start,
     1 / (full - start), rate). fbs = subpixel f b, zmin, zmax are float32 (zmax may be inf).
-    fld = (on, hrows, rj, rw0, rw1) is the per-frame correlated field (see _field_rows) and
+    fld = (on, hrows, j0, rj, rw0, rw1) is the per-frame correlated field (hrows holds coarse
+    rows j0.. interpolated to the columns; see _field_rows) and
     pat = (on, image) the fixed pattern in 1/subpixel px of disparity, added before rounding.
 
     Per row, lean scalar loops (table lookups, gathers) and loops that LLVM vectorises
@@ -731,9 +739,9 @@ def _noise_rows(
     thf = th.ravel()
     prm = (axl[0], axl[1], axl[2], axl[3], axl[4], axl[5], drop[0], drop[1], drop[2], drop[3],
            quantize, fbs, zmin, zmax)  # fmt: skip
-    corr, hrows, rj, rw0, rw1 = fld
+    corr, hrows, j0, rj, rw0, rw1 = fld
     pon, patim = pat
-    gf = np.zeros(w, dtype=np.float32)  # the correlated field on this row
+    gf = np.zeros(w, dtype=np.float32)  # stands in for the pattern's row when it is off
     hi = np.empty(w, dtype=np.uint32)  # bits 32-63 of the pixel's random word
     g1 = np.empty(w, dtype=np.float32)  # lateral normals
     g2 = np.empty(w, dtype=np.float32)
@@ -786,28 +794,27 @@ def _noise_rows(
                     gz[u] = _F32(_normal_slow(_mix64(ctr + np.uint64(u + 1) * _GAMMA)))
         rc = depth[v]
         orow = out[v]
-        if corr:
-            j = rj[v]
-            h0 = hrows[j]
-            h1 = hrows[j + 1]
-            c0 = rw0[v]
-            c1 = rw1[v]
-            for u in range(w):  # vectorised
-                gf[u] = c0 * h0[u] + c1 * h1[u]
+        j = rj[v] - j0 if corr else 0
+        h0 = hrows[j]  # the correlated field on this row: c0 h0 + c1 h1
+        h1 = hrows[j + 1]
+        c0 = rw0[v]
+        c1 = rw1[v]
         prow = patim[v] if pon else gf
         # 5: vectorised; one loop per combination of the terms, so each is branch free
         if corr and pon:
             for u in range(w):
-                orow[u] = _pixel(zb[u], tb[u], gz[u], gf[u], prow[u], ud[u], rc[u], prm, True, True)
+                g = c0 * h0[u] + c1 * h1[u]
+                orow[u] = _pixel(zb[u], tb[u], gz[u], g, prow[u], ud[u], rc[u], prm, True, True)
         elif corr:
             for u in range(w):
-                orow[u] = _pixel(zb[u], tb[u], gz[u], gf[u], prow[u], ud[u], rc[u], prm, True, False)
+                g = c0 * h0[u] + c1 * h1[u]
+                orow[u] = _pixel(zb[u], tb[u], gz[u], g, _F0, ud[u], rc[u], prm, True, False)
         elif pon:
             for u in range(w):
-                orow[u] = _pixel(zb[u], tb[u], gz[u], gf[u], prow[u], ud[u], rc[u], prm, False, True)
+                orow[u] = _pixel(zb[u], tb[u], gz[u], _F0, prow[u], ud[u], rc[u], prm, False, True)
         else:
             for u in range(w):
-                orow[u] = _pixel(zb[u], tb[u], gz[u], gf[u], prow[u], ud[u], rc[u], prm, False, False)
+                orow[u] = _pixel(zb[u], tb[u], gz[u], _F0, _F0, ud[u], rc[u], prm, False, False)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -851,8 +858,13 @@ def _block(
         return
     _params_rows(depth, a0, a1, a0, xn, yn, jump, lat, sl, lit, th, False)
     _shadow_rows(depth, a0, a1, a0, shift_px, lit)
+    corr, fkey, kern, nx, iu, wu0, wu1, rj, rw0, rw1 = fld
+    j0 = rj[r0] if r1 > r0 else 0
+    j1 = rj[r1 - 1] + 1 if (corr and r1 > r0) else j0 + 1
+    hrows = _field_block(fkey, kern, nx, j0, j1, iu, wu0, wu1) if corr else np.zeros((2, iu.size), np.float32)
+    rows = (corr, hrows, j0, rj, rw0, rw1)
     _noise_rows(
-        depth, r0, r1, a0, lit, th, sl, key, axl, drop, quantize, fbs, zmin, zmax, fld, pat, out
+        depth, r0, r1, a0, lit, th, sl, key, axl, drop, quantize, fbs, zmin, zmax, rows, pat, out
     )
 
 
@@ -872,11 +884,14 @@ def _check_depth(depth, intr: CameraIntrinsics) -> np.ndarray:
     return np.ascontiguousarray(arr, dtype=np.float32)
 
 
+@functools.lru_cache(maxsize=8)
 def _normalised_coords(intr: CameraIntrinsics) -> tuple[np.ndarray, np.ndarray]:
-    """float32 (u - cx) / fx and (v - cy) / fy."""
-    xn = (np.arange(intr.width, dtype=np.float64) - intr.cx) / intr.fx
-    yn = (np.arange(intr.height, dtype=np.float64) - intr.cy) / intr.fy
-    return xn.astype(np.float32), yn.astype(np.float32)
+    """float32 (u - cx) / fx and (v - cy) / fy (cached per camera; read-only)."""
+    xn = ((np.arange(intr.width, dtype=np.float64) - intr.cx) / intr.fx).astype(np.float32)
+    yn = ((np.arange(intr.height, dtype=np.float64) - intr.cy) / intr.fy).astype(np.float32)
+    xn.setflags(write=False)
+    yn.setflags(write=False)
+    return xn, yn
 
 
 def incidence_angle(
@@ -926,15 +941,26 @@ def _seed_key(seed: int) -> np.uint64:
     return np.uint64(s ^ (s >> 31))
 
 
+_CPUS = os.cpu_count() or 1  # read once: the call costs tens of microseconds here
 _tls = threading.local()
 _pool_lock = threading.Lock()
-_pool: ThreadPoolExecutor | None = None
-_pool_workers = 0
+_workers: list[queue.SimpleQueue] = []  # one task queue per worker thread
 
 
 def _reset_pool() -> None:
-    global _pool, _pool_workers
-    _pool, _pool_workers = None, 0
+    global _workers
+    _workers = []
+
+
+def _worker(tasks: queue.SimpleQueue) -> None:
+    """A block worker: runs (call, done) tasks, reporting None or the exception to done."""
+    while True:
+        call, done = tasks.get()
+        try:
+            _block(*call)
+            done.put(None)
+        except BaseException as exc:  # handed to the caller, which raises it
+            done.put(exc)
 
 
 os.register_at_fork(after_in_child=_reset_pool)  # a forked child has no pool threads
@@ -957,7 +983,6 @@ def _run_blocks(n: int, depth: np.ndarray, margin: int, args: tuple, out: np.nda
     Every row's result depends only on the inputs and the seed, so the output is the same
     for any n.
     """
-    global _pool, _pool_workers
     h, w = depth.shape
     bounds = [h * c // n for c in range(n + 1)]
     calls = []
@@ -969,24 +994,32 @@ def _run_blocks(n: int, depth: np.ndarray, margin: int, args: tuple, out: np.nda
         _block(*calls[0])
         return
     with _pool_lock:
-        if _pool is None or _pool_workers < n - 1:
-            _pool = ThreadPoolExecutor(max_workers=n - 1, thread_name_prefix="kinect_noise")
-            _pool_workers = n - 1
-        pool = _pool
-    futures = [pool.submit(_block, *call) for call in calls[1:]]
+        while len(_workers) < n - 1:
+            tasks: queue.SimpleQueue = queue.SimpleQueue()
+            name = f"kinect_noise_{len(_workers)}"
+            threading.Thread(target=_worker, args=(tasks,), name=name, daemon=True).start()
+            _workers.append(tasks)
+        workers = _workers[: n - 1]
+    # A plain queue hand-off: a thread pool's futures cost tens of microseconds a frame.
+    done: queue.SimpleQueue = queue.SimpleQueue()
+    for tasks, call in zip(workers, calls[1:], strict=True):
+        tasks.put((call, done))
     _block(*calls[0])
-    for f in futures:
-        f.result()
+    errors = [done.get() for _ in workers]
+    for exc in errors:
+        if exc is not None:
+            raise exc
 
 
+@functools.lru_cache(maxsize=8)
 def _no_field(shape: tuple[int, int]) -> tuple:
-    """The kernel's field argument when the correlated term is off."""
-    h, w = shape
-    zi, zf = np.zeros(h, dtype=np.int32), np.zeros(h, dtype=np.float32)
-    return (False, np.zeros((2, w), dtype=np.float32), zi, zf, zf)
+    """The kernel's field argument when the correlated term is off (cached; never written)."""
+    ny, nx, kern, (iu, wu0, wu1), (rj, rw0, rw1) = _field_plan(shape[0], shape[1], 2.0)
+    return (False, np.uint64(0), kern, nx, iu, wu0, wu1, rj, rw0, rw1)
 
 
 _EMPTY_PATTERN = np.zeros((1, 1), dtype=np.float32)
+_EMPTY_PATTERN.setflags(write=False)  # the same array type as a pattern image
 
 
 def _no_pattern() -> tuple:
@@ -1029,6 +1062,7 @@ def pattern_disparity_px(cfg: KinectNoiseConfig, intr: CameraIntrinsics) -> np.n
     return _pattern_image(cfg, intr.height, intr.width, scale) / np.float32(cfg.subpixel)
 
 
+@functools.lru_cache(maxsize=32)
 def _cfg_arrays(cfg: KinectNoiseConfig, intr: CameraIntrinsics) -> tuple[np.ndarray, ...]:
     f32 = np.float32
     lat = np.array(
@@ -1080,12 +1114,12 @@ def apply_kinect_noise(
     lat, axl, drop = _cfg_arrays(cfg, intr)
     # bound on |lateral row offset|: the largest table normal times the largest sigma_L
     sigma_max = float(lat[0]) * float(lat[3]) * (float(lat[1]) + float(lat[2]) * _Q_MAX)
-    margin = math.ceil(float(np.abs(_LAT_G).max()) * sigma_max) + 1
-    n = max(1, min(cfg.threads, os.cpu_count() or 1, d.shape[0]))
+    margin = math.ceil(_LAT_G_MAX * sigma_max) + 1
+    n = max(1, min(cfg.threads, _CPUS, d.shape[0]))
     h, w = d.shape
     scale = intr.fx / cfg.focal_px  # correlation lengths are in px of the focal_px camera
     if cfg.correlated and cfg.axial:
-        fld = (True, *_field_rows(_field_key(key, 1), h, w, cfg.corr_length_px * scale))
+        fld = _field_arg(_field_key(key, 1), h, w, cfg.corr_length_px * scale)
     else:
         fld = _no_field(d.shape)
     pat = (True, _pattern_image(cfg, h, w, scale)) if _pattern_on(cfg) else _no_pattern()

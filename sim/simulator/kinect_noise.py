@@ -119,7 +119,8 @@ class KinectNoiseConfig:
     pattern: bool = True
     """Add the sensor's fixed disparity pattern: the same in every frame of a run."""
     pattern_sigma_px: float = 0.09
-    """Standard deviation of the fixed pattern in disparity (px of the focal_px camera)."""
+    """Standard deviation of the fixed pattern in disparity over the image (px of the
+    focal_px camera); the pattern has zero mean."""
     pattern_length_px: float = 96.0
     """Correlation length of the fixed pattern (px of the focal_px camera)."""
     pattern_seed: int = 0
@@ -1045,7 +1046,13 @@ def _pattern_image(cfg: KinectNoiseConfig, h: int, w: int, scale: float) -> np.n
         img = _patterns.get(k)
         if img is None:
             hrows, rj, rw0, rw1 = _field_rows(_field_key(_seed_key(k[0]), 2), h, w, k[3])
-            img = (k[4] * (rw0[:, None] * hrows[rj] + rw1[:, None] * hrows[rj + 1])).astype(np.float32)
+            f = (rw0[:, None] * hrows[rj] + rw1[:, None] * hrows[rj + 1]).astype(np.float64)
+            # Over one image a field this smooth has few independent samples: its mean and
+            # spread vary from sensor to sensor. Each pattern is made zero-mean with exactly
+            # the configured spread, so sensors differ in shape only.
+            f -= f.mean()
+            f *= k[4] / max(float(f.std()), 1e-12)
+            img = f.astype(np.float32)
             img.setflags(write=False)
             if len(_patterns) >= 8:
                 _patterns.clear()

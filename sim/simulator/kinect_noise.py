@@ -32,9 +32,10 @@ that stays with the sensor). Two terms model this:
   length ``corr_length_px`` (autocorrelation exp(-(r / L)^2)), new every frame; the rest
   stays independent from pixel to pixel. At 1 m the field holds 25 % of the variance, at
   3 m 99 %. L = 32 px: the sources give no length; the correlation window (9 px) is its
-  lower bound, and FSPF with BV2012 Table I's parameters, which BV2012 ran on real frames
-  to the sensor's range, needs L >= 16-24 px to find planes on a wall at 3.5 m (docs/
-  kinect_noise.md has the measurements); 32 px is the value we took.
+  lower bound. FSPF with BV2012 Table I's parameters, which BV2012 ran on real frames to
+  the sensor's range, finds planes on a wall at 3.5 m from L = 16 px on, and from about
+  32 px at a cost in sampled neighbourhoods like a near wall's (docs/kinect_noise.md has
+  the measurements); 32 px is the value we took.
 - Fixed pattern (``pattern``), the temporal term: a smooth disparity offset per pixel,
   the same in every frame of a sensor (``pattern_seed``), added to d before the 1/8 px
   rounding, so its depth effect grows like z^2 / (f b). Standard deviation

@@ -55,6 +55,39 @@ PAPER_FIGURES: dict[str, dict[str, float]] = {
     "demo": {"distance_m": 4000.0, "resets": 3, "resets_per_km": 0.75},
 }
 
+#: Resident memory is sampled every this many frames (30 s of simulated time).
+RSS_EVERY = 900
+#: The report's frame times at the start and the end of a run are medians over this many frames.
+ENDS_FRAMES = 2000
+
+
+def resident_mb() -> float:
+    """This process's resident memory in MB (Linux /proc; elsewhere its peak so far)."""
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 1e6
+    except (OSError, ValueError, IndexError):
+        import resource
+
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e3
+
+
+def resources(run: Run) -> dict[str, float]:
+    """Memory and per-frame time at the start and the end of a run, to show nothing grows
+    over a long one: resident MB at the first and last samples and at the peak, and the
+    median frame time (all stages) over the first and last ``ENDS_FRAMES`` frames."""
+    out: dict[str, float] = {}
+    if run.rss_mb:
+        mb = [m for _, m in run.rss_mb]
+        out.update(rss_start_mb=round(mb[0], 1), rss_end_mb=round(mb[-1], 1), rss_peak_mb=round(max(mb), 1))
+    n = len(run.timing["physics"])
+    if n:
+        total = np.sum([np.asarray(run.timing[k]) for k in STAGES], axis=0) * 1e3
+        k = min(ENDS_FRAMES, n)
+        out.update(frame_ms_start=round(float(np.median(total[:k])), 3), frame_ms_end=round(float(np.median(total[-k:])), 3))
+    return out
+
+
 #: Stages timed every frame, in the order of the report's ``timing_ms``.
 STAGES = ("physics", "render", "noise", "fspf", "obstacles", "localization", "navigation", "viz")
 
@@ -124,6 +157,8 @@ class Run:
     nav_states: dict[str, int] = field(default_factory=dict)
     near_frames: int = 0
     timing: dict[str, list[float]] = field(default_factory=lambda: {k: [] for k in STAGES})
+    rss_mb: list[tuple[int, float]] = field(default_factory=list)
+    """(frame, resident memory in MB), sampled every ``RSS_EVERY`` frames."""
     last_in_view: np.ndarray = field(default_factory=lambda: np.zeros(0))
     blackbox: FlightRecorder | None = None
 
@@ -272,6 +307,8 @@ def tick(run: Run, recorder) -> bool:
     timings = {**frame.timings_s, **stack.timings_s, "navigation": nav_ms, "viz": time.perf_counter() - t_viz}
     for k in STAGES:
         run.timing[k].append(timings[k])
+    if run.frames % RSS_EVERY == 1:
+        run.rss_mb.append((run.frames, resident_mb()))
     return True
 
 
@@ -502,6 +539,7 @@ def build_report(run: Run, metrics: dict, files: dict[str, str], interrupted: bo
         "metrics": metrics,
         "paper": PAPER_FIGURES.get(scn.name, {}),
         "timing_ms": {k: round(float(np.median(v) * 1000.0) if v else 0.0, 4) for k, v in run.timing.items()},
+        "resources": resources(run),
         "render_backend": run.camera.backend_name if run.camera._backend is not None else "none",
         "map": {"segments": run.building.vectormap.n_segments, "nodes": len(graph.nodes), "edges": len(graph.edges)},
         "actors": {"furniture": len(run.furniture), "people": len(run.people)},

@@ -107,3 +107,18 @@ def test_the_depth_backend_line_names_the_fix_for_the_slow_fallback():
     assert "OpenGL" in depth_backend_line("gl")
     slow = depth_backend_line("raycast")
     assert "20x slower" in slow and "make gl" in slow and "\n" not in slow
+
+
+def test_resources_report_memory_and_frame_time_at_both_ends():
+    from types import SimpleNamespace
+
+    from sim.experiments.runner import ENDS_FRAMES, STAGES, resident_mb, resources
+
+    n = 2 * ENDS_FRAMES + 500
+    timing = {k: [0.001] * n for k in STAGES}
+    timing["render"] = [0.002] * (ENDS_FRAMES + 500) + [0.004] * ENDS_FRAMES  # the last frames slower
+    r = resources(SimpleNamespace(rss_mb=[(1, 300.0), (901, 320.0), (1801, 310.0)], timing=timing))
+    assert r["rss_start_mb"] == 300.0 and r["rss_end_mb"] == 310.0 and r["rss_peak_mb"] == 320.0
+    assert r["frame_ms_start"] == pytest.approx(1e3 * (0.001 * (len(STAGES) - 1) + 0.002))
+    assert r["frame_ms_end"] > r["frame_ms_start"]
+    assert 10.0 < resident_mb() < 1e5

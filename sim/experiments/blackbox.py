@@ -94,6 +94,7 @@ def frame_record(
 
 _ROBOT_COLOR = "#1f77b4"
 _PERSON_COLOR = "#d62728"
+_FURNITURE_COLOR = "burlywood"
 _COMMAND_COLOR = "#2ca02c"
 _MAX_PANELS = 12
 _VIEW_HALF_M = 3.0
@@ -109,9 +110,12 @@ def render_incidents(
     robot_radius_m: float = ROBOT_RADIUS_M,
     person_radius_m: float = 0.22,
     dpi: int = 110,
+    furniture: tuple = (),
 ) -> Path | None:
-    """One panel per incident (up to 12): the walls, the robot's true track (its
-    footprint at the contact), each person's track, arrows for the commanded direction."""
+    """One panel per incident (up to 12): the walls, the furniture (footprints, kinds
+    labelled: the map does not hold them, the contact often names them), the robot's true
+    track (its footprint at the contact), each person's track, arrows for the commanded
+    direction."""
     if not incidents:
         return None
     import matplotlib
@@ -127,7 +131,9 @@ def render_incidents(
     FigureCanvasAgg(fig)
     segs = np.asarray(walls, dtype=np.float64).reshape(-1, 4)
     for k, inc in enumerate(shown):
-        _draw_incident(fig.add_subplot(rows, cols, k + 1), inc, segs, robot_radius_m, person_radius_m)
+        ax = fig.add_subplot(rows, cols, k + 1)
+        _draw_furniture(ax, furniture)
+        _draw_incident(ax, inc, segs, robot_radius_m, person_radius_m)
     fig.tight_layout()
     out = Path(out_png)
     fig.savefig(out, dpi=dpi)
@@ -155,6 +161,20 @@ def _draw_incident(ax, inc: dict, segs: np.ndarray, robot_radius_m: float, perso
         fontsize=8,
     )
     ax.tick_params(labelsize=7)
+
+
+def _draw_furniture(ax, furniture: tuple) -> None:
+    """Each piece's footprint (a rotated rectangle) and its kind and index, as the contact
+    events name them (``furniture_<i>``)."""
+    from matplotlib.patches import Polygon
+
+    for i, f in enumerate(furniture):
+        lx, ly, _ = f.dims
+        c, s = math.cos(f.yaw), math.sin(f.yaw)
+        corners = [(f.x + c * dx - s * dy, f.y + s * dx + c * dy)
+                   for dx, dy in ((-lx / 2, -ly / 2), (lx / 2, -ly / 2), (lx / 2, ly / 2), (-lx / 2, ly / 2))]
+        ax.add_patch(Polygon(corners, closed=True, fill=True, facecolor=_FURNITURE_COLOR, edgecolor="saddlebrown", lw=1.0, alpha=0.6))
+        ax.text(f.x, f.y, f"{f.kind} {i}", fontsize=6, ha="center", va="center", clip_on=True)
 
 
 def _draw_tracks(ax, tr: list[dict], cx: float, cy: float, person_radius_m: float) -> None:

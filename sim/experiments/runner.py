@@ -519,7 +519,7 @@ def write_outputs(run: Run, out: Path, metrics: dict, rrd: str | Path | None) ->
         files["incidents"] = "incidents.json"
         (out / files["incidents"]).write_text(json.dumps({"seconds": scn.report.incident_seconds, "incidents": run.blackbox.incidents}) + "\n", encoding="utf-8")
         if scn.report.figures:
-            render_incidents(run.blackbox.incidents, np.asarray(vm.segments), out / "incidents.png", scn.robot.radius_m)
+            render_incidents(run.blackbox.incidents, np.asarray(vm.segments), out / "incidents.png", scn.robot.radius_m, furniture=run.furniture)
             files["incidents_figure"] = "incidents.png"
     if rrd:
         r, o = Path(rrd).resolve(), out.resolve()

@@ -122,3 +122,21 @@ def test_resources_report_memory_and_frame_time_at_both_ends():
     assert r["frame_ms_start"] == pytest.approx(1e3 * (0.001 * (len(STAGES) - 1) + 0.002))
     assert r["frame_ms_end"] > r["frame_ms_start"]
     assert 10.0 < resident_mb() < 1e5
+
+
+def test_the_incident_figure_draws_the_furniture_the_contact_names(tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    from sim.experiments.blackbox import _draw_furniture, render_incidents
+    from sim.simulator.actors import Furniture
+
+    pieces = (Furniture("table", 1.0, 2.0, 0.5), Furniture("cabinet", 3.0, 2.0, 0.0))
+    ax = Figure().add_subplot()
+    _draw_furniture(ax, pieces)
+    assert len(ax.patches) == 2 and {t.get_text() for t in ax.texts} == {"table 0", "cabinet 1"}
+    inc = {"event": {"t": 5.0, "x": 1.5, "y": 2.0, "bodies": ["furniture_0"]}, "trace": []}
+    walls = np.array([[0.0, 0.0, 4.0, 0.0]])
+    assert render_incidents([inc], walls, tmp_path / "i.png", furniture=pieces).stat().st_size > 0

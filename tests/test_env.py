@@ -80,7 +80,7 @@ def test_spaces_and_docstring_tables() -> None:
     env = DepthNavEnv(observe_points=64, observe_scan=40, observe_pose_estimate=True)
     obs_space = env.observation_space
     assert set(obs_space.spaces) == {"depth", "goal", "odometry", "points", "scan", "pose_estimate"}
-    assert obs_space["depth"].shape == (120, 160) and obs_space["depth"].dtype == np.float32
+    assert obs_space["depth"].shape == (120, 160, 1) and obs_space["depth"].dtype == np.float32
     assert obs_space["points"].shape == (64, 8) and obs_space["scan"].shape == (40,)
     assert env.action_space.shape == (3,) and float(env.action_space.low.min()) == -1.0
     assert env.metadata["render_fps"] == 30 and set(env.metadata["render_modes"]) == {"rgb_array", "depth"}
@@ -299,7 +299,7 @@ def test_render_modes() -> None:
     obs, _ = env.reset(seed=4)
     img = env.render()
     assert img.shape == (240, 320, 3) and img.dtype == np.uint8
-    assert ((img.sum(axis=2) == 0)[::2, ::2] == (obs["depth"] <= 0)).all()
+    assert ((img.sum(axis=2) == 0)[::2, ::2] == (obs["depth"][..., 0] <= 0)).all()
     env.close()
     env = DepthNavEnv()
     env.reset(seed=4)
@@ -315,7 +315,7 @@ def test_from_scenario() -> None:
     env = DepthNavEnv(scenario=SCENARIOS_DIR / "demo.toml", max_steps=10)
     assert env.config.building == "corridor_loop"
     obs, info = env.reset(seed=0)
-    assert obs["depth"].shape == (120, 160)
+    assert obs["depth"].shape == (120, 160, 1)
     env.step(env.action_space.sample())
     env.close()
 
@@ -392,7 +392,7 @@ def test_bad_actions_and_options() -> None:
 def test_sync_vector_env_steps() -> None:
     venv = gym.vector.SyncVectorEnv([functools.partial(DepthNavEnv, observe_scan=16)] * 2)
     obs, info = venv.reset(seed=[1, 2])
-    assert obs["depth"].shape == (2, 120, 160) and obs["scan"].shape == (2, 16)
+    assert obs["depth"].shape == (2, 120, 160, 1) and obs["scan"].shape == (2, 16)
     for _ in range(5):
         obs, r, term, trunc, info = venv.step(venv.action_space.sample())
     assert r.shape == (2,) and info["pose"].shape == (2, 3)
@@ -415,7 +415,7 @@ def test_async_vector_env_with_two_workers_steps_like_single_envs() -> None:
             break
         assert np.array_equal(obs["depth"][0], o1["depth"]) and np.array_equal(obs["points"][0], o1["points"])
         assert r[0] == r1
-    assert obs["depth"].shape == (2, 120, 160) and obs["points"].shape == (2, 32, 8)
+    assert obs["depth"].shape == (2, 120, 160, 1) and obs["points"].shape == (2, 32, 8)
     venv.close()
     single.close()
 
@@ -438,3 +438,26 @@ def test_rrd_flag_records_the_episode(tmp_path) -> None:
     assert out.returncode == 0, out.stderr
     with pytest.raises(InputError, match="rrd_every"):
         gym.make("DepthNav-v0", building="small_floor", rrd_every=0)
+
+
+def test_depth_layouts_dtypes_and_a_polar_goal() -> None:
+    """The depth image in each layout and type holds the same frame; the polar goal is the
+    cartesian goal's distance and bearing."""
+    obs = {}
+    for layout, dtype, goal in (("hw", "float32", "cartesian"), ("hwc", "uint8", "polar"), ("chw", "float32", "polar")):
+        env = DepthNavEnv(depth_layout=layout, depth_dtype=dtype, goal_format=goal)
+        o, _ = env.reset(seed=3)
+        assert env.observation_space.contains(o)
+        obs[layout] = o
+        env.close()
+    hw, hwc, chw = obs["hw"]["depth"], obs["hwc"]["depth"], obs["chw"]["depth"]
+    assert chw.shape == (1, 120, 160) and np.array_equal(chw[0], hw)
+    assert hwc.shape == (120, 160, 1) and hwc.dtype == np.uint8
+    valid = hw > 0
+    assert ((hwc[..., 0] > 0) == valid).all()
+    assert np.abs(hwc[..., 0][valid] * (4.0 / 255.0) - hw[valid]).max() <= 4.0 / 255.0 + 1e-6
+    x, y = obs["hw"]["goal"]
+    rho, phi = obs["chw"]["goal"]
+    assert rho == pytest.approx(np.hypot(x, y), abs=1e-4) and phi == pytest.approx(np.arctan2(y, x), abs=1e-5)
+    with pytest.raises(InputError, match="depth_layout"):
+        DepthNavEnv(depth_layout="whc")

@@ -107,6 +107,18 @@ class EnvConfig:
     depth_shape: tuple[int, int] = (120, 160)
     """(rows, columns) of the depth observation; same aspect ratio as kinect.intrinsics.
     The camera renders at this size directly (scaled intrinsics, same field of view)."""
+    depth_layout: str = "hwc"
+    """Axes of the depth observation: 'hwc' (rows, columns, 1: an image with a channel
+    axis, as gymnasium's image wrappers and stable-baselines3's CnnPolicy take it), 'chw'
+    (1, rows, columns: PyTorch's order) or 'hw' (rows, columns)."""
+    depth_dtype: str = "float32"
+    """'float32': metres, 0 = invalid (with stable-baselines3, pass
+    ``policy_kwargs=dict(normalize_images=False)``); 'uint8': depth scaled to 1-255 over
+    (0, depth range], 0 = invalid, the image type CNN policies normalise by 255 themselves."""
+    goal_format: str = "cartesian"
+    """'cartesian': the goal's (x, y) in the robot frame, metres; 'polar': (distance in
+    metres, bearing in radians counter-clockwise from the robot's heading), Habitat's
+    PointGoal convention."""
     goal_from_truth: bool = False
     """Observe the goal relative to the true pose instead of the pose estimate."""
     observe_points: int = 0
@@ -180,6 +192,9 @@ class EnvConfig:
         need(self.rrd_every >= 1, "rrd_every", "an integer >= 1")
         h, w = self.depth_shape
         need(h >= 8 and w >= 8, "depth_shape", "(rows, columns), each >= 8")
+        need(self.depth_layout in ("hwc", "chw", "hw"), "depth_layout", "'hwc', 'chw' or 'hw'")
+        need(self.depth_dtype in ("float32", "uint8"), "depth_dtype", "'float32' or 'uint8'")
+        need(self.goal_format in ("cartesian", "polar"), "goal_format", "'cartesian' or 'polar'")
         intr = self.kinect.intrinsics
         need(
             h * intr.width == w * intr.height,

@@ -51,6 +51,7 @@ from sim.envs.task import (
     REWARD_TERMS,
     Episode,
     collision_reward,
+    depth_observation,
     goal_observation,
     nearest_node,
     odometry_observation,
@@ -122,8 +123,8 @@ class DepthNavEnv(gym.Env):
 
     | Key | Shape | Range | Meaning |
     | --- | --- | --- | --- |
-    | ``depth`` | ``depth_shape`` (120, 160) | [0, max range (4 m)] | Kinect-model planar depth in metres (noise at this size), 0 = invalid |
-    | ``goal`` | (2,) | [-1000, 1000] m | goal (x forward, y left) in the robot frame of the pose estimate (or of the true pose) |
+    | ``depth`` | (120, 160, 1): ``depth_shape`` with a channel axis (``depth_layout``: 'hwc', 'chw' (1, 120, 160) or 'hw') | [0, max range (4 m)] float32, or [0, 255] uint8 (``depth_dtype``) | Kinect-model planar depth in metres (noise at this size), 0 = invalid |
+    | ``goal`` | (2,) | [-1000, 1000] m; polar: [0, 1000] m, [-pi, pi] | goal (x forward, y left) in the robot frame of the pose estimate (or of the true pose); ``goal_format='polar'``: (distance, bearing) |
     | ``odometry`` | (3,) | [-1, 1] m, [-pi, pi] rad | last noisy odometry increment (dx, dy, dtheta) in the previous robot frame; 0 after reset |
 
     Optional, chosen by constructor arguments:
@@ -242,12 +243,23 @@ class DepthNavEnv(gym.Env):
         self._rrd_time = 0.0
         self._rrd_site: Site | None = None
 
+    def _depth_space(self, h: int, w: int) -> spaces.Box:
+        cfg = self.config
+        shape = {"hwc": (h, w, 1), "chw": (1, h, w), "hw": (h, w)}[cfg.depth_layout]
+        if cfg.depth_dtype == "uint8":
+            return spaces.Box(0, 255, shape, np.uint8)
+        return spaces.Box(0.0, self.depth_max_m, shape, np.float32)
+
     def _observation_space(self) -> spaces.Dict:
         cfg = self.config
         h, w = cfg.depth_shape
         obs: dict[str, spaces.Space] = {
-            "depth": spaces.Box(0.0, self.depth_max_m, (h, w), np.float32),
-            "goal": spaces.Box(-GOAL_LIMIT_M, GOAL_LIMIT_M, (2,), np.float32),
+            "depth": self._depth_space(h, w),
+            "goal": (
+                spaces.Box(np.array([0.0, -np.pi], np.float32), np.array([GOAL_LIMIT_M, np.pi], np.float32), dtype=np.float32)
+                if cfg.goal_format == "polar"
+                else spaces.Box(-GOAL_LIMIT_M, GOAL_LIMIT_M, (2,), np.float32)
+            ),
             "odometry": spaces.Box(
                 np.array([-1.0, -1.0, -np.pi], np.float32), np.array([1.0, 1.0, np.pi], np.float32), dtype=np.float32
             ),
@@ -416,8 +428,8 @@ class DepthNavEnv(gym.Env):
         ep = self._episode
         assert ep is not None
         obs = {
-            "depth": self._depth.copy(),
-            "goal": goal_observation(self._pose if cfg.goal_from_truth else self._estimate, self.goal),
+            "depth": depth_observation(self._depth, cfg.depth_layout, cfg.depth_dtype, self.depth_max_m),
+            "goal": goal_observation(self._pose if cfg.goal_from_truth else self._estimate, self.goal, cfg.goal_format == "polar"),
             "odometry": odometry_observation(self._increment),
         }
         if cfg.observe_points:

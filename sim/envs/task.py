@@ -104,10 +104,26 @@ def time_reward(cfg: EnvConfig) -> float:
 # -- observations ------------------------------------------------------------------------
 
 
-def goal_observation(reference_pose: np.ndarray, goal: np.ndarray) -> np.ndarray:
-    """The goal in the robot frame of ``reference_pose``, clipped to +-GOAL_LIMIT_M."""
+def goal_observation(reference_pose: np.ndarray, goal: np.ndarray, polar: bool = False) -> np.ndarray:
+    """The goal in the robot frame of ``reference_pose``: (x, y) clipped to +-GOAL_LIMIT_M,
+    or (distance, bearing) with the distance clipped to GOAL_LIMIT_M."""
     rel = relative_pose(reference_pose, np.array([goal[0], goal[1], 0.0]))[:2]
+    if polar:
+        return np.array([min(math.hypot(rel[0], rel[1]), GOAL_LIMIT_M), math.atan2(rel[1], rel[0])], dtype=np.float32)
     return np.clip(rel.astype(np.float32), -GOAL_LIMIT_M, GOAL_LIMIT_M)
+
+
+def depth_observation(depth: np.ndarray, layout: str, dtype: str, depth_max_m: float) -> np.ndarray:
+    """The depth frame (metres, 0 = invalid) in the observation's layout and type (a copy)."""
+    if dtype == "uint8":
+        d = np.where(depth > 0, np.clip(np.ceil(depth * (255.0 / depth_max_m)), 1, 255), 0).astype(np.uint8)
+    else:
+        d = depth.astype(np.float32, copy=True)
+    if layout == "hwc":
+        return d[:, :, None]
+    if layout == "chw":
+        return d[None, :, :]
+    return d
 
 
 def odometry_observation(increment: np.ndarray) -> np.ndarray:

@@ -20,7 +20,7 @@ open space over at least a quarter turn, except in a courtyard). Regions smaller
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numba
 import numpy as np
@@ -29,7 +29,7 @@ from autonomy.constants import ROBOT_RADIUS_M
 from autonomy.errors import InputError, require_int, require_positive
 from autonomy.vectormap import VectorMap
 
-__all__ = ["FreeSpaceConfig", "FreeSpace", "build_free_space", "MAX_GRID_CELLS"]
+__all__ = ["FreeSpaceConfig", "FreeSpace", "build_free_space", "rasterise", "grid_distance", "label_components", "MAX_GRID_CELLS"]
 
 #: The largest grid :func:`build_free_space` makes (a 250 x 250 m floor at 5 cm cells).
 MAX_GRID_CELLS = 25_000_000
@@ -74,8 +74,9 @@ class FreeSpaceConfig:
 
 
 @numba.njit(cache=True)
-def _rasterise(seg: np.ndarray, x0: float, y0: float, cell: float, ny: int, nx: int) -> np.ndarray:  # pragma: no cover - numba
-    """Mark every cell a segment passes through (samples every 1/8 cell along it)."""
+def rasterise(seg: np.ndarray, x0: float, y0: float, cell: float, ny: int, nx: int) -> np.ndarray:  # pragma: no cover - numba
+    """Mark every cell of a (ny, nx) grid with lower-left corner (x0, y0) that a segment
+    passes through (samples every 1/8 cell along it)."""
     wall = np.zeros((ny, nx), dtype=np.bool_)
     step = _RASTER_STEP * cell
     for i in range(seg.shape[0]):
@@ -230,6 +231,11 @@ def _enclosed(
     return out
 
 
+def grid_distance(cells: np.ndarray, cell_m: float) -> np.ndarray:
+    """(ny, nx) float32 distance in metres from each cell centre to the nearest True cell."""
+    return (np.sqrt(_edt(cells)) * cell_m).astype(np.float32)
+
+
 def _coarsen(wall: np.ndarray, k: int) -> np.ndarray:
     ny, nx = wall.shape
     py, px = -ny % k, -nx % k
@@ -261,6 +267,7 @@ class FreeSpace:
     """Free area (robot-sized) outside the building, within the padded extent."""
     n_voids: int
     """Inside free components smaller than ``min_region_area_m2``."""
+    _cells: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def cell_m(self) -> float:
@@ -307,9 +314,12 @@ class FreeSpace:
     def free_cells(self, min_clearance_m: float, region: int | None = 0) -> tuple[np.ndarray, np.ndarray]:
         """(rows, cols) of cells at least ``min_clearance_m`` from every wall, in ``region``
         (``None``: any region)."""
-        ok = self.clearance() >= min_clearance_m
-        ok &= (self.region >= 0) if region is None else (self.region == region)
-        return np.nonzero(ok)
+        key = (float(min_clearance_m), region)
+        if key not in self._cells:  # placement draws many points at a few clearances
+            ok = self.clearance() >= min_clearance_m
+            ok &= (self.region >= 0) if region is None else (self.region == region)
+            self._cells[key] = np.nonzero(ok)
+        return self._cells[key]
 
     def sample(self, rng: np.random.Generator, n: int, min_clearance_m: float, region: int | None = 0) -> np.ndarray:
         """``n`` points (n, 2) uniform over the free space at least ``min_clearance_m`` from
@@ -339,8 +349,8 @@ def build_free_space(vm: VectorMap, cfg: FreeSpaceConfig = FreeSpaceConfig()) ->
             f"{name}: a {xmax - xmin:.0f} x {ymax - ymin:.0f} m map needs {nx * ny:,} cells of {c} m "
             f"(limit {MAX_GRID_CELLS:,}); is it in millimetres, or give a larger free_space.cell_m"
         )
-    wall = _rasterise(seg, x0, y0, c, ny, nx)
-    dist = (np.sqrt(_edt(wall)) * c).astype(np.float32)
+    wall = rasterise(seg, x0, y0, c, ny, nx)
+    dist = grid_distance(wall, c)
     robot_ok = dist - np.float32(cfg.error_m) >= cfg.robot_radius_m
     lab, sizes = label_components(robot_ok)
     border = np.unique(np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]]))

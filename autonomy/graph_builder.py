@@ -30,8 +30,15 @@ from pathlib import Path
 import numba
 import numpy as np
 
+from autonomy.cache import cache_paths
 from autonomy.errors import require_positive
-from autonomy.freespace import FreeSpace, FreeSpaceConfig, _edt, build_free_space
+from autonomy.freespace import (
+    FreeSpace,
+    FreeSpaceConfig,
+    build_free_space,
+    grid_distance,
+    rasterise,
+)
 from autonomy.geometry import WallIndex
 from autonomy.vectormap import (
     DEFAULT_MAX_SPEED,
@@ -310,21 +317,6 @@ def _trace(skel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nda
     return clus, a0, a1, o, cl, np.array([n_clus], dtype=np.int64)
 
 
-@numba.njit(cache=True)
-def _mark_segments(seg: np.ndarray, x0: float, y0: float, cell: float, ny: int, nx: int) -> np.ndarray:  # pragma: no cover - numba
-    out = np.zeros((ny, nx), dtype=np.bool_)
-    for i in range(seg.shape[0]):
-        ax, ay, bx, by = seg[i, 0], seg[i, 1], seg[i, 2], seg[i, 3]
-        n = int(math.ceil(math.hypot(bx - ax, by - ay) / (0.25 * cell))) + 1
-        for k in range(n + 1):
-            t = k / n
-            cx = int((ax + t * (bx - ax) - x0) / cell)
-            cy = int((ay + t * (by - ay) - y0) / cell)
-            if 0 <= cx < nx and 0 <= cy < ny:
-                out[cy, cx] = True
-    return out
-
-
 def distance_to_segments(fs: FreeSpace, segments: np.ndarray) -> np.ndarray:
     """(ny, nx) grid distance in metres from each cell centre to the nearest of ``segments``
     (rasterised as the walls are; error below one cell)."""
@@ -332,8 +324,7 @@ def distance_to_segments(fs: FreeSpace, segments: np.ndarray) -> np.ndarray:
     ny, nx = fs.shape
     if seg.shape[0] == 0:
         return np.full((ny, nx), np.inf, dtype=np.float32)
-    marks = _mark_segments(seg, fs.origin[0], fs.origin[1], fs.cell_m, ny, nx)
-    return (np.sqrt(_edt(marks)) * fs.cell_m).astype(np.float32)
+    return grid_distance(rasterise(seg, fs.origin[0], fs.origin[1], fs.cell_m, ny, nx), fs.cell_m)
 
 
 # --------------------------------------------------------------------------- construction
@@ -550,7 +541,7 @@ def _cover(b: _Builder, fs: FreeSpace, graph_ok: np.ndarray, cfg: GraphBuildConf
 
 def distance_to_cells(fs: FreeSpace, cells: np.ndarray) -> np.ndarray:
     """(ny, nx) grid distance in metres to the nearest True cell of ``cells``."""
-    return (np.sqrt(_edt(cells)) * fs.cell_m).astype(np.float32)
+    return grid_distance(cells, fs.cell_m)
 
 
 def _connect(b: _Builder, added: list[int], cfg: GraphBuildConfig) -> None:
@@ -673,14 +664,6 @@ def graph_key(vm: VectorMap, cfg: GraphBuildConfig) -> str:
     return h.hexdigest()
 
 
-def _cache_paths(map_path: str | os.PathLike[str] | None, key: str) -> list[Path]:
-    paths = []
-    if map_path is not None:
-        paths.append(Path(str(map_path) + ".auto.navigation.json"))
-    paths.append(Path.home() / ".cache" / "depthnav" / f"{key[:32]}.navigation.json")
-    return paths
-
-
 @dataclass(frozen=True)
 class CachedGraph:
     """A graph from :func:`cached_navgraph`, with where it is kept and whether it was made."""
@@ -700,7 +683,7 @@ def cached_navgraph(
     ``~/.cache/depthnav``) with the key in a ``"depthnav"`` entry the format's readers
     ignore. A stale, foreign or corrupt cache file is rebuilt, never an error."""
     key = graph_key(vm, cfg)
-    paths = _cache_paths(map_path, key)
+    paths = cache_paths(map_path, key, ".auto.navigation.json")
     for p in paths:
         if not p.is_file():
             continue

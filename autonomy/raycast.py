@@ -55,6 +55,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
+from autonomy.cache import cache_paths
 from autonomy.errors import InputError
 from autonomy.vectormap import VectorMap
 
@@ -1015,14 +1016,6 @@ class VisibilityGrid:
         return cls(offsets, indices, origin, shape, cfg, seg, key)  # type: ignore[arg-type]
 
 
-def _cache_paths(map_path: str | os.PathLike[str] | None, key: str) -> list[Path]:
-    paths = []
-    if map_path is not None:
-        paths.append(Path(str(map_path) + ".visgrid.npz"))
-    paths.append(Path.home() / ".cache" / "depthnav" / f"{key[:32]}.visgrid.npz")
-    return paths
-
-
 def load_or_build(
     vm: VectorMap,
     map_path: str | os.PathLike[str] | None,
@@ -1035,7 +1028,7 @@ def load_or_build(
     corrupt cache file is rebuilt and overwritten, never an error.
     """
     key = _grid_key(vm.segments, cfg)
-    paths = _cache_paths(map_path, key)
+    paths = cache_paths(map_path, key, ".visgrid.npz")
     for p in paths:
         if not p.is_file():
             continue

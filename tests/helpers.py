@@ -14,9 +14,20 @@ from autonomy.vectormap import VectorMap
 
 def box_room(w: float = 10.0, h: float = 6.0) -> VectorMap:
     """A closed w x h room with its corner at the origin."""
-    return VectorMap.from_segments(
-        np.array([[0, 0, w, 0], [w, 0, w, h], [w, h, 0, h], [0, h, 0, 0]], dtype=np.float64), name="room"
-    )
+    return VectorMap.from_segments(np.array(box_segments(0, 0, w, h), dtype=np.float64), name="room")
+
+
+def box_segments(
+    x0: float, y0: float, x1: float, y1: float, gap: tuple[float, float] | None = None
+) -> list[tuple[float, float, float, float]]:
+    """A rectangle of walls as segment rows; ``gap`` cuts (from x, to x) out of the bottom wall."""
+    bottom = [(x0, y0, x1, y0)] if gap is None else [(x0, y0, gap[0], y0), (gap[1], y0, x1, y0)]
+    return bottom + [(x1, y0, x1, y1), (x1, y1, x0, y1), (x0, y1, x0, y0)]
+
+
+def segments_map(rows) -> VectorMap:
+    """A vector map of explicit segment rows."""
+    return VectorMap.from_segments(np.array(rows, dtype=np.float64), name="test")
 
 
 @pytest.fixture
@@ -64,3 +75,12 @@ def rrd_chunks(path) -> list[tuple[str, str]]:
     p = subprocess.run([cli, "rrd", "print", str(path)], capture_output=True, text=True, timeout=120)
     assert p.returncode == 0, p.stderr
     return re.findall(r" - (/world[^ ]*) - data columns: \[([^\]]*)\]", p.stdout)
+
+
+def err_line(capsys) -> str:
+    """The one stderr line a CLI user error prints (no traceback), for CLI tests."""
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1, err
+    assert "Traceback" not in err
+    return lines[0]

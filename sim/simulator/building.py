@@ -59,15 +59,12 @@ class Building:
     rooms: tuple[tuple[float, float, float, float], ...] = ()
     map_path: Path | None = None
     _free: dict[float, FreeSpace] = field(default_factory=dict, init=False, repr=False, compare=False)
-    _spots: dict[tuple[float, float], tuple[np.ndarray, np.ndarray]] = field(
-        default_factory=dict, init=False, repr=False, compare=False
-    )
     _main: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
 
     def __getstate__(self) -> dict:
         # The caches are large grids and quick to remake: a pickled building leaves them out.
         state = dict(self.__dict__)
-        state.update(_free={}, _spots={}, _main=None)
+        state.update(_free={}, _main=None)
         return state
 
     @property
@@ -85,18 +82,11 @@ class Building:
 
     def free_spot(self, rng: np.random.Generator, clearance_m: float, robot_radius_m: float) -> np.ndarray | None:
         """A point uniform over the largest free region at least ``clearance_m`` from every
-        wall (as :meth:`autonomy.freespace.FreeSpace.sample` draws it, with the cells kept
-        per clearance); None when there is no such place."""
-        fs = self.free_space(robot_radius_m)
-        key = (float(robot_radius_m), float(clearance_m))
-        if key not in self._spots:
-            # A cell centre this far from the walls keeps any point of the cell clearance_m away.
-            self._spots[key] = fs.free_cells(clearance_m + math.sqrt(0.5) * fs.cell_m, region=0)
-        rows, cols = self._spots[key]
-        if rows.size == 0:
+        wall (:meth:`autonomy.freespace.FreeSpace.sample`); None when there is no such place."""
+        try:
+            return self.free_space(robot_radius_m).sample(rng, 1, clearance_m)[0]
+        except InputError:
             return None
-        k = int(rng.integers(rows.size))
-        return fs.centres(rows[k], cols[k]) + rng.uniform(-0.5, 0.5, 2) * fs.cell_m
 
     @property
     def main_node_ids(self) -> np.ndarray:

@@ -12,20 +12,10 @@ from hypothesis import strategies as st
 from autonomy.errors import InputError
 from autonomy.freespace import FreeSpaceConfig, _edt, build_free_space, label_components
 from autonomy.geometry import point_segment_distance
-from autonomy.vectormap import VectorMap
 from sim.simulator import blueprints
+from tests.helpers import box_segments, segments_map
 
 R = 0.3
-
-
-def _box(x0: float, y0: float, x1: float, y1: float, gap: tuple[float, float] | None = None) -> list[tuple[float, float, float, float]]:
-    """A rectangle of walls; ``gap`` cuts (from, to) out of the bottom wall."""
-    bottom = [(x0, y0, x1, y0)] if gap is None else [(x0, y0, gap[0], y0), (gap[1], y0, x1, y0)]
-    return bottom + [(x1, y0, x1, y1), (x1, y1, x0, y1), (x0, y1, x0, y0)]
-
-
-def _vm(rows) -> VectorMap:
-    return VectorMap.from_segments(np.array(rows, dtype=np.float64), name="test")
 
 
 def test_edt_matches_brute_force():
@@ -62,7 +52,7 @@ def test_grid_clearance_is_within_the_error_bound_of_the_exact_distance():
 
 
 def test_a_closed_box_is_one_region_of_the_expected_area_and_the_outside_is_not():
-    fs = build_free_space(_vm(_box(0, 0, 10, 6)))
+    fs = build_free_space(segments_map(box_segments(0, 0, 10, 6)))
     assert fs.n_regions == 1
     expected = (10 - 2 * R) * (6 - 2 * R)
     assert fs.region_area_m2[0] == pytest.approx(expected, rel=0.03)
@@ -72,15 +62,15 @@ def test_a_closed_box_is_one_region_of_the_expected_area_and_the_outside_is_not(
 
 def test_a_leaky_building_keeps_its_inside_and_drops_the_outside():
     # a 1.2 m gap in the bottom wall joins the inside to the outside on the grid
-    fs = build_free_space(_vm(_box(0, 0, 20, 12, gap=(9.4, 10.6))))
+    fs = build_free_space(segments_map(box_segments(0, 0, 20, 12, gap=(9.4, 10.6))))
     assert fs.region_at(np.array([[10.0, 6.0], [3.0, 3.0], [17.0, 9.0]])).tolist() == [0, 0, 0]
     assert fs.region_at(np.array([[10.0, -1.0], [-1.0, 6.0]])).tolist() == [-1, -1]
     assert fs.region_area_m2[0] == pytest.approx((20 - 2 * R) * (12 - 2 * R), rel=0.06)
 
 
 def test_a_closed_room_inside_is_a_second_region():
-    rows = _box(0, 0, 20, 10) + _box(14, 6, 18, 9)
-    fs = build_free_space(_vm(rows))
+    rows = box_segments(0, 0, 20, 10) + box_segments(14, 6, 18, 9)
+    fs = build_free_space(segments_map(rows))
     assert fs.n_regions == 2
     assert fs.region_at(np.array([[16.0, 7.5]]))[0] == 1
     assert fs.region_area_m2[1] == pytest.approx((4 - 2 * R) * (3 - 2 * R), rel=0.08)
@@ -88,7 +78,7 @@ def test_a_closed_room_inside_is_a_second_region():
 
 def test_no_room_for_the_robot_is_a_one_line_error():
     with pytest.raises(InputError, match="only the outside of the building is free") as e:
-        build_free_space(_vm(_box(0, 0, 0.5, 0.5)))
+        build_free_space(segments_map(box_segments(0, 0, 0.5, 0.5)))
     assert "\n" not in str(e.value)
 
 
@@ -112,7 +102,7 @@ def test_config_errors_name_the_key():
 @settings(max_examples=25, deadline=None)
 @given(w=st.floats(2.5, 12.0), h=st.floats(2.5, 12.0), x0=st.floats(-50, 50), y0=st.floats(-50, 50))
 def test_a_rectangle_room_has_the_area_a_robot_centre_can_reach(w, h, x0, y0):
-    fs = build_free_space(_vm(_box(x0, y0, x0 + w, y0 + h)))
+    fs = build_free_space(segments_map(box_segments(x0, y0, x0 + w, y0 + h)))
     expected = (w - 2 * R) * (h - 2 * R)
     # the grid's conservative threshold trims up to error_m from each side
     lo = (w - 2 * R - 2 * fs.error_m - 2 * fs.cell_m) * (h - 2 * R - 2 * fs.error_m - 2 * fs.cell_m)

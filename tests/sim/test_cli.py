@@ -12,17 +12,9 @@ import pytest
 
 from sim.cli import main
 from sim.scenario import ASSETS_DIR
-from tests.helpers import GL
+from tests.helpers import GL, err_line
 
 SMALL = ASSETS_DIR / "small_floor.vectormap.txt"
-
-
-def _err_line(capsys) -> str:
-    err = capsys.readouterr().err
-    lines = [ln for ln in err.splitlines() if ln.strip()]
-    assert len(lines) == 1, err
-    assert "Traceback" not in err
-    return lines[0]
 
 
 def test_map_check_prints_summary(capsys) -> None:
@@ -44,7 +36,7 @@ def test_map_check_bad_file_exits_2(tmp_path: Path, capsys, content: str, patter
     p = tmp_path / "bad.vectormap.txt"
     p.write_text(content)
     assert main(["map", "check", str(p)]) == 2
-    line = _err_line(capsys)
+    line = err_line(capsys)
     assert "bad.vectormap.txt" in line and pattern in line
 
 
@@ -94,19 +86,19 @@ def test_snapshot_writes_depth(tmp_path: Path) -> None:
 )
 def test_user_errors_exit_2_with_one_line(capsys, argv, pattern) -> None:
     assert main(argv) == 2
-    assert pattern in _err_line(capsys)
+    assert pattern in err_line(capsys)
 
 
 def test_unwritable_output_exits_2(tmp_path: Path, capsys) -> None:
     blocker = tmp_path / "file"
     blocker.write_text("not a directory")
     assert main(["map", "render", str(SMALL), "--out", str(blocker / "m.png")]) == 2
-    assert "file" in _err_line(capsys)
+    assert "file" in err_line(capsys)
 
 
 def test_run_with_bad_set_exits_2(capsys) -> None:
     assert main(["run", "scenarios/demo.toml", "--set", "robot.bogus=1"]) == 2
-    assert "unknown key 'robot.bogus'" in _err_line(capsys)
+    assert "unknown key 'robot.bogus'" in err_line(capsys)
 
 
 def test_scenarios_lists_each_file(capsys) -> None:

@@ -8,17 +8,9 @@ from autonomy.geometry import WallIndex
 from autonomy.vectormap import load_navgraph, load_vectormap, save_vectormap
 from sim.cli import main
 from sim.scenario import ASSETS_DIR
-from tests.autonomy.test_freespace import _box, _vm
+from tests.helpers import box_segments, err_line, segments_map
 
 SMALL = ASSETS_DIR / "small_floor.vectormap.txt"
-
-
-def _err_line(capsys) -> str:
-    err = capsys.readouterr().err
-    lines = [ln for ln in err.splitlines() if ln.strip()]
-    assert len(lines) == 1, err
-    assert "Traceback" not in err
-    return lines[0]
 
 
 def test_map_graph_writes_a_navigation_json_that_keeps_the_clearance(tmp_path, capsys):
@@ -36,7 +28,7 @@ def test_map_graph_writes_a_navigation_json_that_keeps_the_clearance(tmp_path, c
 
 def test_map_graph_beside_the_map_and_a_bigger_robot(tmp_path, capsys):
     p = tmp_path / "hall.vectormap.txt"
-    save_vectormap(_vm(_box(0, 0, 12, 6)), p)
+    save_vectormap(segments_map(box_segments(0, 0, 12, 6)), p)
     assert main(["map", "graph", str(p), "--robot-radius", "0.5"]) == 0
     g = load_navgraph(tmp_path / "hall.navigation.json")
     clear = WallIndex(load_vectormap(p).segments).clearances(g.edge_segments(), 5.0)
@@ -44,13 +36,13 @@ def test_map_graph_beside_the_map_and_a_bigger_robot(tmp_path, capsys):
     capsys.readouterr()
     # the default output exists now: refuse to overwrite it without --force
     assert main(["map", "graph", str(p)]) == 2
-    assert "--force" in _err_line(capsys)
+    assert "--force" in err_line(capsys)
     assert main(["map", "graph", str(p), "--force"]) == 0
 
 
 def test_map_check_reports_free_space_regions_and_graph(tmp_path, capsys):
     p = tmp_path / "two.vectormap.txt"
-    save_vectormap(_vm(_box(0, 0, 20, 10) + _box(14, 6, 18, 9)), p)
+    save_vectormap(segments_map(box_segments(0, 0, 20, 10) + box_segments(14, 6, 18, 9)), p)
     assert main(["map", "check", str(p)]) == 0
     out = capsys.readouterr().out
     assert "in 2 region(s)" in out and "navigation graph:" in out and "2 component(s)" in out
@@ -58,24 +50,24 @@ def test_map_check_reports_free_space_regions_and_graph(tmp_path, capsys):
 
 def test_bad_maps_give_one_line_errors(tmp_path, capsys):
     closed = tmp_path / "closed.vectormap.txt"
-    save_vectormap(_vm(_box(0, 0, 0.5, 0.5)), closed)
+    save_vectormap(segments_map(box_segments(0, 0, 0.5, 0.5)), closed)
     assert main(["map", "graph", str(closed), "--out", str(tmp_path / "x.json")]) == 2
-    assert "only the outside of the building is free" in _err_line(capsys)
+    assert "only the outside of the building is free" in err_line(capsys)
     degenerate = tmp_path / "degenerate.vectormap.txt"
     degenerate.write_text("1, 1, 1, 1\n2, 2, 2, 2\n")
     assert main(["map", "graph", str(degenerate)]) == 2
-    assert "degenerate.vectormap.txt" in _err_line(capsys)
+    assert "degenerate.vectormap.txt" in err_line(capsys)
     empty = tmp_path / "empty.vectormap.txt"
     empty.write_text("")
     assert main(["map", "check", str(empty)]) == 2
-    assert "empty.vectormap.txt" in _err_line(capsys)
+    assert "empty.vectormap.txt" in err_line(capsys)
     assert main(["map", "graph", str(SMALL), "--robot-radius", "-1"]) == 2
-    assert "--robot-radius" in _err_line(capsys)
+    assert "--robot-radius" in err_line(capsys)
     # a single wall: free space only around it, nothing inside
     line = tmp_path / "line.vectormap.txt"
     line.write_text("0, 0, 10, 0\n")
     assert main(["map", "graph", str(line), "--out", str(tmp_path / "y.json")]) == 2
-    assert "robot" in _err_line(capsys)
+    assert "robot" in err_line(capsys)
 
 
 def test_map_graph_compares_with_a_hand_made_graph_on_the_same_pairs(tmp_path, capsys):
@@ -96,7 +88,7 @@ def test_map_check_lists_the_loader_findings_and_convert_rescales(tmp_path, caps
     mm = tmp_path / "mm.vectormap.txt"
     mm.write_text("0, 0, 10000, 0\n10000, 0, 10000, 6000\n10000, 6000, 0, 6000\n0, 6000, 0, 0\n")
     assert main(["map", "check", str(mm)]) == 2
-    assert "--scale 0.001" in _err_line(capsys)
+    assert "--scale 0.001" in err_line(capsys)
     m = tmp_path / "m.vectormap.txt"
     assert main(["map", "convert", str(mm), str(m), "--scale", "0.001"]) == 0
     assert load_vectormap(m).extent() == (0.0, 0.0, 10.0, 6.0)

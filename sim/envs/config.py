@@ -60,6 +60,9 @@ class EnvConfig:
     new_building_every: int = 1
     """procedural with building_seed -1: draw a new building every N episodes (a reset
     with a seed always draws one)."""
+    building_seeds: tuple[int, ...] = ()
+    """procedural: draw each new building's seed from these with np_random (a fixed set of
+    buildings, e.g. a training split, sim.rl.splits) instead of any seed; empty: any."""
     # -- actors ---------------------------------------------------------------------
     furniture: tuple[Furniture, ...] = ()
     """Fixed furniture pieces (unmapped clutter)."""
@@ -179,6 +182,10 @@ class EnvConfig:
             )
         need(self.new_building_every >= 1, "new_building_every", "an integer >= 1")
         need(self.building_seed >= -1, "building_seed", "an integer >= -1")
+        if self.building_seeds:
+            need(self.building == "procedural", "building_seeds", "() unless building='procedural'")
+            need(min(self.building_seeds) >= 0, "building_seeds", "seeds >= 0")
+            need(self.building_seed < 0, "building_seeds", "() when building_seed >= 0 fixes the building")
         need(self.n_furniture >= 0, "n_furniture", "an integer >= 0")
         need(self.n_people >= 0, "n_people", "an integer >= 0")
         need(self.min_goal_distance_m >= 0, "min_goal_distance_m", "a number >= 0")

@@ -289,9 +289,11 @@ class DepthNavEnv(gym.Env):
             if self._site is None:
                 self._site = Site.build(cfg, self._kinect, self._fixed, None)
             return self._site
-        # Procedural, drawn from np_random: a seeded reset always draws a new building.
+        # Procedural, drawn from np_random (from building_seeds when given): a seeded reset
+        # always draws a new building.
         if self._site is None or seeded or self._episodes_on_site >= cfg.new_building_every:
-            seed = int(self.np_random.integers(0, 2**31 - 1))
+            seeds = cfg.building_seeds
+            seed = int(seeds[self.np_random.integers(len(seeds))] if seeds else self.np_random.integers(0, 2**31 - 1))
             if self._site is not None and self._site.seed == seed:
                 self._episodes_on_site = 0
                 return self._site

@@ -1,17 +1,21 @@
 """Benchmarks of the gymnasium environment DepthNav-v0 (``bench_env``, a group of bench/run.py).
 
-- ``env_step``: one env step of the default DepthNav-v0 (small_floor, 120 x 160 depth,
-  Kinect noise, FSPF + CGR localization), random actions, in this process. Target 6.67 ms
-  (150 steps/s). Resets (after collisions or the step limit) are timed apart.
-- ``env_async2_step``: one step of an ``AsyncVectorEnv`` of two such envs (spawned
-  workers); its steps/s (two env steps per vector step) go to stderr.
+- ``env_step``: the latency of one env step of the default DepthNav-v0 (small_floor,
+  120 x 160 depth, Kinect noise, FSPF + CGR localization), random actions, in this
+  process. Target 6.67 ms (150 steps/s). Resets (after collisions or the step limit) are
+  timed apart.
+- ``env_vec1``, ``env_vec2``, ``env_vec4``: throughput of the same env behind a gymnasium
+  vector env of 1 (``SyncVectorEnv``, in this process), 2 and 4 (``AsyncVectorEnv``,
+  spawned workers) envs, random actions, autoreset included. ``median_ms`` is the median
+  vector step divided by the number of envs (time per env step); ``env_steps_per_s`` is
+  env steps over the wall time of the whole run (resets included), and ``speedup`` that
+  rate over ``env_vec1``'s.
 
 Run alone: ``.venv/bin/python bench/env_bench.py [--quick]``.
 """
 
 from __future__ import annotations
 
-import functools
 import os
 import sys
 import time
@@ -30,12 +34,26 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import Result  # noqa: E402
 from common import entry as _entry  # noqa: E402
 
+#: Numbers of envs of the vectorized rows (``env_vec<n>``).
+VEC_SIZES = (1, 2, 4)
+
 
 def bench_env(results: dict[str, Result], quick: bool) -> None:
     import sim  # noqa: F401  (registers DepthNav-v0)
 
     results["env_step"] = _bench_env_step(300 if quick else 2000)
-    results["env_async2_step"] = _bench_async2_step(200 if quick else 1000)
+    base = None
+    for n in VEC_SIZES:
+        row = _bench_vec(n, 300 if quick else 2000)
+        base = base or row["env_steps_per_s"]
+        row["speedup"] = round(row["env_steps_per_s"] / base, 3)
+        results[f"env_vec{n}"] = row
+    print(
+        "  vectorized: " + ", ".join(f"{n} env(s) {results[f'env_vec{n}']['env_steps_per_s']:.0f} steps/s "
+                                     f"(x{results[f'env_vec{n}']['speedup']:.2f})" for n in VEC_SIZES)
+        + f" on {os.cpu_count()} cores",
+        file=sys.stderr,
+    )
 
 
 def _bench_env_step(n: int) -> Result:
@@ -70,33 +88,35 @@ def _bench_env_step(n: int) -> Result:
     return _entry(steps, target=round(1000.0 / 150.0, 2))
 
 
-def _bench_async2_step(m: int) -> Result:
-    """``m`` steps of an AsyncVectorEnv of two envs in spawned workers."""
+def _bench_vec(n_envs: int, env_steps: int) -> Result:
+    """About ``env_steps`` env steps through a vector env of ``n_envs`` default envs."""
     import gymnasium as gym
 
     from sim.envs.depthnav import DepthNavEnv
 
-    # Spawned workers: a forked child cannot render once this process has used EGL.
-    venv = gym.vector.AsyncVectorEnv([functools.partial(DepthNavEnv)] * 2, context="spawn")
+    if n_envs == 1:
+        venv = gym.vector.SyncVectorEnv([DepthNavEnv])
+    else:
+        # Spawned workers: a forked child cannot render once this process has used EGL.
+        venv = gym.vector.AsyncVectorEnv([DepthNavEnv] * n_envs, context="spawn")
     venv.action_space.seed(0)
-    venv.reset(seed=[0, 1])
-    for _ in range(30):
+    venv.reset(seed=0)
+    for _ in range(30):  # warm-up in every env: GL context, numba kernels
         venv.step(venv.action_space.sample())
+    m = max(1, env_steps // n_envs)
     vsteps: list[float] = []
     t_all = time.perf_counter()
     for _ in range(m):
         a = venv.action_space.sample()
         t = time.perf_counter()
         venv.step(a)
-        vsteps.append((time.perf_counter() - t) * 1e3)
+        vsteps.append((time.perf_counter() - t) * 1e3 / n_envs)
     wall = time.perf_counter() - t_all
     venv.close()
-    print(
-        f"  env_async2_step: {2000.0 / np.median(vsteps):.0f} env steps/s (median vector step), "
-        f"{2 * m / wall:.0f} env steps/s overall, 2 workers",
-        file=sys.stderr,
-    )
-    return _entry(vsteps)
+    row = _entry(vsteps)
+    row["num_envs"] = n_envs
+    row["env_steps_per_s"] = round(n_envs * m / wall, 1)
+    return row
 
 
 if __name__ == "__main__":

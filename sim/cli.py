@@ -260,6 +260,28 @@ def cmd_scenarios(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_eval(args: argparse.Namespace) -> int:
+    from sim.rl.evaluate import compare, comparison_table
+    from sim.rl.policies import make_policy
+    from sim.rl.splits import get_split
+
+    split = get_split(args.split)
+    if args.episodes < 1:
+        raise InputError(f"--episodes: expected an integer >= 1, got {args.episodes}")
+    if args.seed < 0:
+        raise InputError(f"--seed: expected an integer >= 0, got {args.seed}")
+    policies = [make_policy(spec) for spec in args.policy]  # every spec checked before any episode
+    try:
+        reports = compare(policies, split, args.episodes, args.seed, progress=not args.no_progress, out=args.out)
+    except KeyboardInterrupt:
+        print("depthnav: eval interrupted" + (f"; the finished episodes are in {args.out}" if args.out else ""), file=sys.stderr)
+        return 130
+    print(comparison_table(reports))
+    if args.out:
+        print(f"wrote {args.out}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="depthnav", description="Depth-camera indoor robot autonomy in simulation.")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
@@ -267,6 +289,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_snapshot_command(sub)
     _add_run_command(sub)
     _add_sweep_command(sub)
+    _add_eval_command(sub)
     c = sub.add_parser("warmup", help="compile the numba kernels once into the on-disk cache (after pip install)")
     c.set_defaults(func=cmd_warmup)
     c = sub.add_parser("scenarios", help="list the scenario files")
@@ -341,6 +364,18 @@ def _add_sweep_command(sub) -> None:
     c.add_argument("--resume", action="store_true", help="finish the sweep in --out, keeping its finished trials")
     _add_scenario_overrides(c)
     c.set_defaults(func=cmd_sweep)
+
+
+def _add_eval_command(sub) -> None:
+    c = sub.add_parser("eval", help="evaluate policies on a building split: success, SPL, soft-SPL, collisions (docs/rl.md)")
+    c.add_argument("--policy", nargs="+", required=True, metavar="SPEC",
+                   help="random, random:SEED, classical or ppo:PATH; several: the same episodes each, and a table")
+    c.add_argument("--split", default="val", help="train, val (default) or test")
+    c.add_argument("--episodes", type=int, default=50, help="number of episodes (default 50)")
+    c.add_argument("--seed", type=int, default=0, help="episode seed: which starts and goals (default 0)")
+    c.add_argument("--out", help="write the reports (every episode) to this JSON file")
+    c.add_argument("--no-progress", action="store_true", help="no progress bar")
+    c.set_defaults(func=cmd_eval)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -4,6 +4,10 @@ PYTHON  ?= python3
 PY      := $(VENV)/bin/python
 STAMP   := $(VENV)/.installed
 WARM    := $(VENV)/.warm
+RL      := $(VENV)/.rl
+# PyTorch for the rl extra, installed first: a bare `torch` requirement can pull a CUDA
+# build of several GB. Override, e.g. TORCH="torch --index-url https://download.pytorch.org/whl/cpu".
+TORCH   ?= torch==2.13.0
 export MUJOCO_GL ?= egl
 # Numba's on-disk JIT cache lives beside the sources; keep it per-checkout.
 export NUMBA_CACHE_DIR ?= $(CURDIR)/.numba_cache
@@ -17,6 +21,12 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q -e '.[dev]'
 	@touch $(STAMP)
+
+## The rl extra (PyTorch, stable-baselines3, triton) for the policy-research tests and tools.
+$(RL): $(STAMP)
+	$(PY) -m pip install -q $(TORCH)
+	$(PY) -m pip install -q -e '.[dev,rl]'
+	@touch $(RL)
 
 # The numba kernels compiled once after installing (about 40 s), so no run pays for it.
 $(WARM): $(STAMP) | gl
@@ -35,11 +45,11 @@ demo: $(STAMP) gl $(WARM)
 	$(VENV)/bin/depthnav run scenarios/demo.toml --out runs/demo --rrd runs/demo/demo.rrd
 
 ## The test suite (unit, property and end-to-end scenario tests) on both cores.
-test: $(STAMP) gl $(WARM)
+test: $(STAMP) $(RL) gl $(WARM)
 	DEPTHNAV_REQUIRE_GL=1 $(PY) -m pytest -n 2 -q
 
 ## Unit tests only (skips the slow end-to-end scenario tests).
-test-fast: $(STAMP) gl $(WARM)
+test-fast: $(STAMP) $(RL) gl $(WARM)
 	DEPTHNAV_REQUIRE_GL=1 $(PY) -m pytest -n 2 -q -m "not slow"
 
 ## Benchmarks: prints a table and writes bench/results.json.

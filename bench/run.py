@@ -140,12 +140,27 @@ def _corridor_world():
     return world
 
 
+def _render_in_process_times(n: int) -> list[float]:
+    """``render_depth`` with GL in the rendering process itself (the default goes through
+    the render server), timed in a child so Mesa never loads into this one."""
+    import subprocess
+
+    code = (
+        "import json, sys; sys.path.insert(0, sys.argv[1]); import run as b; w = b._corridor_world(); "
+        "cam = b.KinectCamera(w.model, w.camera_id, b.KinectConfig(render_process=False)); "
+        f"print(json.dumps(b.timeit(lambda: cam.render_clean(w.data), {n}, warmup=3)))"
+    )
+    r = subprocess.run([sys.executable, "-c", code, str(Path(__file__).resolve().parent)], capture_output=True, text=True, check=True)
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
+
 def bench_sim(results: dict[str, Result], quick: bool) -> None:
     world = _corridor_world()
     cfg = KinectConfig()
     cam = KinectCamera(world.model, world.camera_id, cfg)
     n = 30 if quick else 200
     results["render_depth"] = entry(timeit(lambda: cam.render_clean(world.data), n, warmup=3))
+    results["render_depth_inproc"] = entry(_render_in_process_times(n))
     clean = cam.render_clean(world.data).copy()
     seeds = iter(range(10**6))
     results["kinect_noise"] = entry(

@@ -36,15 +36,13 @@ def room() -> VectorMap:
 
 
 def gl_available() -> bool:
-    """True when an EGL/OSMesa context can be made on this machine."""
-    try:
-        from mujoco import gl_context
+    """True when an EGL/OSMesa context can be made on this machine (tried in a child
+    process: the test processes never load Mesa themselves, see sim.simulator.render_process)."""
+    import subprocess
+    import sys
 
-        ctx = gl_context.GLContext(64, 64)
-        ctx.free()
-        return True
-    except Exception:
-        return False
+    probe = "from mujoco import gl_context; gl_context.GLContext(64, 64).free()"
+    return subprocess.run([sys.executable, "-c", probe], capture_output=True, timeout=120).returncode == 0
 
 
 GL = gl_available()

@@ -400,7 +400,7 @@ def test_sync_vector_env_steps() -> None:
 
 
 def test_async_vector_env_with_two_workers_steps_like_single_envs() -> None:
-    # spawn: this test process has rendered already, and GL cannot render after fork().
+    # spawn: the workers start clean of this test process's numba thread pools.
     venv = gym.vector.AsyncVectorEnv([functools.partial(DepthNavEnv, observe_points=32)] * 2, context="spawn")
     single = DepthNavEnv(observe_points=32)
     obs, info = venv.reset(seed=[1, 2])

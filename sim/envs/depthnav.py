@@ -71,8 +71,9 @@ ENV_ID = "DepthNav-v0"
 FAR_PLANE_M = 60.0
 RENDER_MODES = ("rgb_array", "depth")
 
-#: True in a process forked from one that had already opened an EGL display: Mesa's
-#: renderer threads do not survive fork(), and rendering there would hang for ever.
+#: True in a process forked from one that had already opened an EGL display itself
+#: (``kinect.render_process=False``): Mesa's renderer threads do not survive fork(), and
+#: rendering there would hang for ever. The default render server is not affected.
 _GL_INHERITED = False
 
 
@@ -391,7 +392,8 @@ class DepthNavEnv(gym.Env):
         """The simulator step (or, after a reset, the first frame)."""
         site, sim = self._site, self._sim
         assert site is not None and sim is not None
-        if _GL_INHERITED and site.camera._backend is None and self.config.kinect.backend != "raycast":
+        kin = self.config.kinect
+        if _GL_INHERITED and site.camera._backend is None and kin.backend != "raycast" and not kin.render_process:
             raise RuntimeError(
                 "DepthNav: this process was forked from one that had already rendered with EGL, "
                 "and OpenGL cannot render after fork(); make AsyncVectorEnv(..., context='spawn') "

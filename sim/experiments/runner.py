@@ -229,10 +229,11 @@ def run_scenario(
 # --------------------------------------------------------------------------- the loop
 
 
-def depth_backend_line(name: str) -> str:
+def depth_backend_line(name: str, process: bool = True) -> str:
     """How depth frames are made, in words, with the fix when it is the slow fallback."""
     if name == "gl":
-        return f"rendered by MuJoCo through OpenGL (MUJOCO_GL={os.environ.get('MUJOCO_GL', 'default')})"
+        where = "in a render process" if process else "in this process"
+        return f"rendered by MuJoCo through OpenGL {where} (MUJOCO_GL={os.environ.get('MUJOCO_GL', 'default')})"
     return ("ray cast on the CPU (no OpenGL context could be made; about 20x slower than rendering: "
             "install Mesa's EGL with `make gl`)")
 
@@ -250,7 +251,7 @@ def drive(run: Run, recorder, progress: bool | None) -> bool:
     first = run.sim.first()
     if progress is not False and scn.report.progress:
         # The depth backend decides the speed of a run by 20x: say which one this is.
-        print(f"{scn.name}: depth camera {depth_backend_line(run.camera.backend_name)}", file=sys.stderr)
+        print(f"{scn.name}: depth camera {depth_backend_line(run.camera.backend_name, run.camera.cfg.render_process)}", file=sys.stderr)
     run.truth.append(first.pose)
     run.times.append(0.0)
     # The first frame, so the navigator sees before it moves.

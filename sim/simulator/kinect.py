@@ -2,9 +2,12 @@
 
 Clean depth comes from the OpenGL depth buffer of the ``kinect`` camera (planar depth,
 i.e. distance along the optical axis, in metres; background -> 0), converted in one numba
-pass. Where no GL context can be made, :class:`RaycastDepth` casts one ray per pixel
-with ``mujoco.mj_multiRay`` instead (same geometry, same output, much slower). The noise
-model is :mod:`sim.simulator.kinect_noise`. The robot's own geoms (group 3) are hidden.
+pass. By default the GL stack runs in a render server process
+(:mod:`sim.simulator.render_process`), so that Mesa's LLVM never loads into the caller
+(where it would crash PyTorch's triton). Where no GL context can be made,
+:class:`RaycastDepth` casts one ray per pixel with ``mujoco.mj_multiRay`` instead (same
+geometry, same output, much slower). The noise model is :mod:`sim.simulator.kinect_noise`.
+The robot's own geoms (group 3) are hidden.
 """
 
 from __future__ import annotations
@@ -46,6 +49,10 @@ class KinectConfig:
     """Noise model; every term switchable."""
     backend: str = "auto"
     """auto (GL if a context can be made, else ray casting), gl, or raycast."""
+    render_process: bool = True
+    """GL renders in a render server process, so Mesa (and its LLVM) never loads into
+    this one: safe with PyTorch and triton imported before or after. False renders in
+    this process (about 0.1 ms a frame less; a later ``import triton`` then crashes)."""
     render_far_m: float = 0.0
     """Nothing farther than this is rendered: the clean depth is 0 beyond it. 0 = the noise
     model's ``max_range_m`` plus ``RENDER_FAR_MARGIN_M`` (the noise model returns nothing
@@ -56,6 +63,8 @@ class KinectConfig:
     def __post_init__(self) -> None:
         if self.backend not in BACKENDS:
             raise InputError(f"kinect.backend {self.backend!r}: expected one of {', '.join(BACKENDS)}")
+        if not isinstance(self.render_process, bool):
+            raise InputError(f"kinect.render_process: expected true or false, got {self.render_process!r}")
         if not (math.isfinite(self.rate_hz) and self.rate_hz > 0):
             raise InputError(f"kinect.rate_hz: expected a positive number, got {self.rate_hz!r}")
         if not (self.render_far_m == 0 or self.render_far_m > self.noise.min_range_m):
@@ -93,6 +102,21 @@ def _linearize_flip(raw, c_coef, d_coef, out):  # pragma: no cover - numba
                 out[v, u] = 0.0
             else:
                 out[v, u] = np.float32(d_coef / (np.float64(r) + c_coef))
+
+
+def culled_geoms(geoms: np.ndarray, radii: np.ndarray, data: mujoco.MjData, camera_id: int, far_m: float) -> np.ndarray:
+    """The ``geoms`` whose bounding sphere (``radii``) lies wholly beyond ``far_m`` or
+    behind the camera (planar depth along the optical axis): nothing of them can show."""
+    fwd = -data.cam_xmat[camera_id].reshape(3, 3)[:, 2]
+    z = (data.geom_xpos[geoms] - data.cam_xpos[camera_id]) @ fwd
+    return geoms[(z - radii > far_m) | (z + radii < 0.0)]
+
+
+def static_geoms(model: mujoco.MjModel) -> np.ndarray:
+    """Geoms on the world body (walls) that may be culled: not the floor plane, not the
+    robot's own."""
+    static = (model.geom_bodyid == 0) & (model.geom_type != mujoco.mjtGeom.mjGEOM_PLANE) & (model.geom_group != ROBOT_GEOM_GROUP)
+    return np.flatnonzero(static)
 
 
 class GLDepth:
@@ -138,8 +162,7 @@ class GLDepth:
             far = self._far = np.float32(far_m)
         # Static geoms (walls) that may be culled: a thousand draw calls of walls beyond the
         # far plane or behind the camera still cost the CPU rasteriser ~1.5 ms a frame.
-        static = (model.geom_bodyid == 0) & (model.geom_type != mujoco.mjtGeom.mjGEOM_PLANE) & (model.geom_group != ROBOT_GEOM_GROUP)
-        self._static = np.flatnonzero(static) if self._far is not None else np.zeros(0, dtype=np.int64)
+        self._static = static_geoms(model) if self._far is not None else np.zeros(0, dtype=np.int64)
         self._static_r = model.geom_rbound[self._static].copy()
         c = -(far + near) / (far - near)
         d = -(np.float32(2) * far * near) / (far - near)
@@ -174,13 +197,9 @@ class GLDepth:
         return out
 
     def _culled(self, data: mujoco.MjData) -> np.ndarray:
-        """Static geoms whose bounding sphere lies wholly beyond the far plane or behind
-        the camera (planar depth along the optical axis)."""
         if not len(self._static):
             return self._static
-        fwd = -data.cam_xmat[self.camera_id].reshape(3, 3)[:, 2]
-        z = (data.geom_xpos[self._static] - data.cam_xpos[self.camera_id]) @ fwd
-        return self._static[(z - self._static_r > self._far) | (z + self._static_r < 0.0)]
+        return culled_geoms(self._static, self._static_r, data, self.camera_id, float(self._far))
 
     def close(self) -> None:
         if self._con is not None:
@@ -253,14 +272,24 @@ class RaycastDepth:
 
 
 def make_depth_backend(
-    model: mujoco.MjModel, camera_id: int, intr: CameraIntrinsics, backend: str = "auto", far_m: float = math.inf
+    model: mujoco.MjModel,
+    camera_id: int,
+    intr: CameraIntrinsics,
+    backend: str = "auto",
+    far_m: float = math.inf,
+    process: bool = True,
 ):
-    """The GL depth renderer, or the ray-cast fallback when no GL context can be made;
-    nothing farther than ``far_m`` is rendered (inf = the model's far plane)."""
+    """The GL depth renderer (in the render server process, or with ``process=False`` in
+    this one), or the ray-cast fallback when no GL context can be made; nothing farther
+    than ``far_m`` is rendered (inf = the model's far plane)."""
     if backend not in BACKENDS:
         raise InputError(f"kinect.backend {backend!r}: expected one of {', '.join(BACKENDS)}")
     if backend in ("auto", "gl"):
         try:
+            if process:
+                from sim.simulator.render_process import ProcessGLDepth
+
+                return ProcessGLDepth(model, camera_id, intr, far_m)
             return GLDepth(model, camera_id, intr, far_m)
         except InputError:
             raise
@@ -290,13 +319,15 @@ class KinectCamera:
 
     @property
     def backend_name(self) -> str:
-        b = self.backend
-        return "gl" if isinstance(b, GLDepth) else "raycast"
+        """'gl' (in the render process or this one) or 'raycast'."""
+        return "raycast" if isinstance(self.backend, RaycastDepth) else "gl"
 
     @property
     def backend(self):
         if self._backend is None:
-            self._backend = make_depth_backend(self.model, self.camera_id, self.cfg.intrinsics, self.cfg.backend, self.cfg.far_m())
+            self._backend = make_depth_backend(
+                self.model, self.camera_id, self.cfg.intrinsics, self.cfg.backend, self.cfg.far_m(), self.cfg.render_process
+            )
         return self._backend
 
     def render_clean(self, data: mujoco.MjData) -> np.ndarray:

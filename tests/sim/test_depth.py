@@ -1,4 +1,8 @@
-"""Depth rendering against closed form, GL vs ray casting, and seeded Kinect frames."""
+"""Depth rendering against closed form, GL vs ray casting, and seeded Kinect frames.
+
+GL renders through the render server process here, as it does by default: the test
+process never loads Mesa, so tests that import PyTorch can share its worker.
+"""
 
 from __future__ import annotations
 
@@ -10,11 +14,12 @@ import pytest
 from autonomy.camera import CameraIntrinsics, CameraMount
 from autonomy.vectormap import VectorMap
 from sim.simulator.kinect import (
-    GLDepth,
     KinectCamera,
     KinectConfig,
     RaycastDepth,
+    culled_geoms,
     make_depth_backend,
+    static_geoms,
 )
 from sim.simulator.world import WorldConfig, build_world
 from tests.helpers import GL
@@ -75,7 +80,7 @@ def test_gl_and_raycast_agree_on_a_pitched_camera() -> None:
     import mujoco
 
     mujoco.mj_forward(w.model, w.data)
-    a = GLDepth(w.model, w.camera_id, intr).render(w.data)
+    a = make_depth_backend(w.model, w.camera_id, intr, "gl").render(w.data)
     b = RaycastDepth(w.model, w.camera_id, intr).render(w.data)
     both = (a > 0) & (b > 0)
     assert both.mean() > 0.9
@@ -87,7 +92,7 @@ def test_gl_and_raycast_agree_on_a_pitched_camera() -> None:
 def test_robot_body_is_invisible_and_pitch_sees_floor() -> None:
     intr = CameraIntrinsics()
     w = _wall_world(6.0, intr, CameraMount())
-    d = GLDepth(w.model, w.camera_id, intr).render(w.data)
+    d = make_depth_backend(w.model, w.camera_id, intr, "gl").render(w.data)
     # Bottom row sees the floor at the closed-form depth (the base itself is hidden).
     ang = math.atan((intr.height - 1 - intr.cy) / intr.fy) + CameraMount().pitch_down_rad
     z = 0.7 / math.sin(ang) * math.cos(ang - CameraMount().pitch_down_rad)
@@ -107,19 +112,22 @@ def test_same_seed_same_frame_and_different_seed_differs() -> None:
     assert ((a == 0) | ((a >= 0.8) & (a <= 4.0))).all()
 
 
-def test_raycast_fallback_is_chosen_without_gl(monkeypatch: pytest.MonkeyPatch) -> None:
+@pytest.mark.parametrize("process", [True, False])
+def test_raycast_fallback_is_chosen_without_gl(monkeypatch: pytest.MonkeyPatch, process: bool) -> None:
     import sim.simulator.kinect as kinect
+    import sim.simulator.render_process as render_process
 
     def broken(*args, **kwargs):
         raise RuntimeError("no display")
 
     monkeypatch.setattr(kinect, "GLDepth", broken)
+    monkeypatch.setattr(render_process, "ProcessGLDepth", broken)
     w = _wall_world(2.0, SMALL)
     with pytest.warns(RuntimeWarning, match="ray-cast depth fallback"):
-        b = kinect.make_depth_backend(w.model, w.camera_id, SMALL, "auto")
+        b = kinect.make_depth_backend(w.model, w.camera_id, SMALL, "auto", process=process)
     assert isinstance(b, RaycastDepth)
     with pytest.raises(RuntimeError, match="OpenGL depth rendering unavailable"):
-        kinect.make_depth_backend(w.model, w.camera_id, SMALL, "gl")
+        kinect.make_depth_backend(w.model, w.camera_id, SMALL, "gl", process=process)
 
 
 @pytest.mark.parametrize("backend", _backends())
@@ -174,17 +182,23 @@ def test_far_distance_is_checked() -> None:
 @pytest.mark.skipif(not GL, reason="no EGL/OSMesa context on this machine")
 def test_walls_beyond_the_far_plane_or_behind_the_camera_are_not_drawn() -> None:
     """Three short walls: 2 m ahead (drawn), 9 m ahead and 3 m behind (culled with a 5 m
-    far plane); the render is the same as without culling."""
+    far plane); the render is the one of a world with the near wall alone (to float
+    rounding: the near plane follows the model's extent)."""
     intr = CameraIntrinsics()
-    vm = VectorMap.from_segments(np.array([[2.0, -1.0, 2.0, 1.0], [9.0, -1.0, 9.0, 1.0], [-3.0, -1.0, -3.0, 1.0]]))
-    w = build_world(vm, world=WorldConfig(wall_height_m=WALL_H), intrinsics=intr, mount=LEVEL, start_pose=(0.0, 0.0, 0.0))
-    gl = GLDepth(w.model, w.camera_id, intr, far_m=5.0)
-    culled = gl._culled(w.data)
+
+    def world(rows):
+        vm = VectorMap.from_segments(np.array(rows, dtype=np.float64))
+        return build_world(vm, world=WorldConfig(wall_height_m=WALL_H), intrinsics=intr, mount=LEVEL, start_pose=(0.0, 0.0, 0.0))
+
+    w = world([[2.0, -1.0, 2.0, 1.0], [9.0, -1.0, 9.0, 1.0], [-3.0, -1.0, -3.0, 1.0]])
+    static = static_geoms(w.model)
+    culled = culled_geoms(static, w.model.geom_rbound[static], w.data, w.camera_id, 5.0)
     x = w.data.geom_xpos[culled, 0]
     assert len(culled) == 2 and np.allclose(np.sort(np.round(x)), [-3.0, 9.0])
     groups = w.model.geom_group.copy()
-    a = gl.render(w.data).copy()
-    assert np.array_equal(w.model.geom_group, groups)  # hidden for the render only
-    gl._static = gl._static[:0]  # no culling
-    b = gl.render(w.data)
-    assert np.array_equal(a, b) and (a > 1.5).any()
+    a = make_depth_backend(w.model, w.camera_id, intr, "gl", far_m=5.0).render(w.data).copy()
+    assert np.array_equal(w.model.geom_group, groups)
+    near = world([[2.0, -1.0, 2.0, 1.0]])
+    b = make_depth_backend(near.model, near.camera_id, intr, "gl", far_m=5.0).render(near.data)
+    assert np.array_equal(a > 0, b > 0) and (a > 1.5).any()
+    np.testing.assert_allclose(a, b, rtol=1e-6)

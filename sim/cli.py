@@ -282,6 +282,61 @@ def cmd_eval(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_demos_record(args: argparse.Namespace) -> int:
+    from sim.rl.demos import record_demonstrations
+    from sim.rl.splits import get_split
+
+    get_split(args.split)
+    if args.episodes < 1:
+        raise InputError(f"--episodes: expected an integer >= 1, got {args.episodes}")
+    if args.seed < 0:
+        raise InputError(f"--seed: expected an integer >= 0, got {args.seed}")
+    if args.max_steps is not None and args.max_steps < 1:
+        raise InputError(f"--max-steps: expected an integer >= 1, got {args.max_steps}")
+    if not args.out.endswith(".npz"):
+        raise InputError(f"--out: expected a file name ending in .npz, got {args.out!r}")
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    env_kwargs = None if args.max_steps is None else {"max_steps": args.max_steps}
+    try:
+        d = record_demonstrations(args.split, args.episodes, args.seed, args.out, env_kwargs, progress=not args.no_progress)
+    except KeyboardInterrupt:
+        print(f"depthnav: demos record interrupted; the finished episodes (if any) are in {args.out}", file=sys.stderr)
+        return 130
+    print(f"wrote {args.out}: {d.n_episodes} episodes, {d.n_steps} steps of the classical stack on {args.split}; "
+          f"success {d.success.mean():.2f}, SPL {d.spl.mean():.2f}")
+    return 0
+
+
+def cmd_demos_bc(args: argparse.Namespace) -> int:
+    from sim.rl.demos import load_demonstrations
+
+    demos = load_demonstrations(args.file)  # a bad file fails before torch is imported
+    for name, v in (("--epochs", args.epochs), ("--batch-size", args.batch_size)):
+        if v < 1:
+            raise InputError(f"{name}: expected an integer >= 1, got {v}")
+    if args.seed < 0:
+        raise InputError(f"--seed: expected an integer >= 0, got {args.seed}")
+    if not (math.isfinite(args.lr) and args.lr > 0):
+        raise InputError(f"--lr: expected a positive number, got {args.lr}")
+    if args.eval_episodes < 0:
+        raise InputError(f"--eval-episodes: expected an integer >= 0, got {args.eval_episodes}")
+    from sim.rl.bc import train_bc
+
+    policy, hist = train_bc(demos, args.epochs, args.batch_size, args.seed, args.lr)
+    for e, (tr, ho) in enumerate(zip(hist["train_loss"], hist["heldout_loss"], strict=True), 1):
+        print(f"epoch {e}: train loss {tr:.4f}, held-out MSE {ho:.4f}")
+    print(f"held-out MSE {hist['heldout_loss'][-1]:.4f} against {hist['heldout_mean_baseline']:.4f} predicting the mean "
+          f"action ({hist['train_steps']} training steps in {hist['train_episodes']} episodes, "
+          f"{hist['heldout_steps']} held out in {hist['heldout_episodes']})")
+    out = policy.save(args.out, hist)
+    print(f"wrote {out}")
+    if args.eval_episodes:
+        from sim.rl.evaluate import evaluate
+
+        print(evaluate(policy, "val", args.eval_episodes, 0, progress=not args.no_progress).table())
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="depthnav", description="Depth-camera indoor robot autonomy in simulation.")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
@@ -290,6 +345,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_run_command(sub)
     _add_sweep_command(sub)
     _add_eval_command(sub)
+    _add_demos_command(sub)
     c = sub.add_parser("warmup", help="compile the numba kernels once into the on-disk cache (after pip install)")
     c.set_defaults(func=cmd_warmup)
     c = sub.add_parser("scenarios", help="list the scenario files")
@@ -376,6 +432,29 @@ def _add_eval_command(sub) -> None:
     c.add_argument("--out", help="write the reports (every episode) to this JSON file")
     c.add_argument("--no-progress", action="store_true", help="no progress bar")
     c.set_defaults(func=cmd_eval)
+
+
+def _add_demos_command(sub) -> None:
+    pd = sub.add_parser("demos", help="expert demonstrations of the classical stack, and behaviour cloning on them (docs/rl.md)")
+    dsub = pd.add_subparsers(dest="demos_command", required=True, parser_class=_Parser)
+    c = dsub.add_parser("record", help="record the classical stack's episodes on a split as an .npz dataset")
+    c.add_argument("--split", default="train", help="train (default), val or test")
+    c.add_argument("--episodes", type=int, default=100, help="number of episodes (default 100)")
+    c.add_argument("--seed", type=int, default=0, help="episode seed: which starts and goals (default 0)")
+    c.add_argument("--max-steps", type=int, help="shorter episodes than the benchmark task's 1000 steps")
+    c.add_argument("--out", required=True, help="output .npz file")
+    c.add_argument("--no-progress", action="store_true", help="no progress bar")
+    c.set_defaults(func=cmd_demos_record)
+    c = dsub.add_parser("bc", help="train a behaviour-cloning policy on a dataset; print train and held-out loss")
+    c.add_argument("file", help="a dataset written by 'depthnav demos record'")
+    c.add_argument("--epochs", type=int, default=10, help="passes over the training episodes (default 10)")
+    c.add_argument("--batch-size", type=int, default=256, help="steps per gradient step (default 256)")
+    c.add_argument("--lr", type=float, default=1e-3, help="Adam's learning rate (default 1e-3)")
+    c.add_argument("--seed", type=int, default=0, help="initialisation, shuffling and held-out episodes (default 0)")
+    c.add_argument("--out", required=True, help="output directory (model.pt, policy.json)")
+    c.add_argument("--eval-episodes", type=int, default=0, help="then evaluate the policy on this many val episodes")
+    c.add_argument("--no-progress", action="store_true", help="no progress bar")
+    c.set_defaults(func=cmd_demos_bc)
 
 
 def main(argv: list[str] | None = None) -> int:

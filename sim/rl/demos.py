@@ -1,0 +1,429 @@
+"""Expert demonstrations: the classical stack's episodes as a dataset for imitation and
+offline RL.
+
+:func:`record_demonstrations` runs :class:`sim.rl.policies.ClassicalPolicy` over a split's
+:func:`sim.rl.splits.episode_specs` through :func:`sim.rl.evaluate.run_episode`, with the
+learned-policy observations (:data:`sim.rl.splits.LEARNER_OBS`), and writes one ``.npz``
+that plain numpy reads (``np.load(path)``; no project import needed).
+:func:`load_demonstrations` reads it back into a :class:`Demonstrations`.
+
+File layout (format ``depthnav-demonstrations``, version 1; N steps in E episodes, the
+episodes one after another, in order):
+
+| key | shape | dtype | what |
+| --- | --- | --- | --- |
+| ``obs/<key>`` | (N, ...) | the space's | observation the action was chosen on, one array per observation key (``depth``, ``goal``, ``odometry``, ``scan``) |
+| ``actions`` | (N, 3) | float32 | the action the env was stepped with (the stack's ``info["stack_action"]`` as float32) |
+| ``rewards`` | (N,) | float32 | reward of the step |
+| ``terminations``, ``truncations`` | (N,) | bool | the step's ``terminated`` and ``truncated`` |
+| ``final_obs/<key>`` | (E, ...) | the space's | the observation after each episode's last step |
+| ``episode_starts`` | (E,) | int64 | index of each episode's first step |
+| ``episode_lengths`` | (E,) | int64 | steps of each episode |
+| ``episode_index`` | (E,) | int64 | the episode's index in ``episode_specs`` |
+| ``building_seed``, ``reset_seed`` | (E,) | int64 | the procedural building and the ``env.reset`` seed |
+| ``success`` | (E,) | bool | reached the goal |
+| ``spl``, ``soft_spl`` | (E,) | float32 | SPL (Anderson et al. 2018) and soft-SPL (Habitat) |
+| ``collisions`` | (E,) | int64 | new contacts in the episode |
+| ``meta`` | () | str | JSON: format, version, split, seed, policy, env kwargs, observation and action spaces (as text), date, depthnav version, whether the recording was interrupted |
+
+There is no ``next_obs``: within an episode the next observation of step t is
+``obs[t + 1]``; after an episode's last step it is ``final_obs[e]``
+(:meth:`Demonstrations.next_observations` assembles the full array).
+
+The actions are the stack's float64 ``info["stack_action"]`` rounded to float32 (the
+action space's type) *before* the env is stepped, so every stored action is exactly the
+one applied: replaying the actions from the same reset seed reproduces every
+observation bit for bit. (Stepping with the float64 action instead, as
+``depthnav eval --policy classical`` does, differs by less than 1e-7 of the command.)
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import os
+import sys
+import tempfile
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field, fields, is_dataclass
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+
+from autonomy.errors import InputError
+
+FORMAT = "depthnav-demonstrations"
+VERSION = 1
+
+#: Per-episode arrays and their dtypes (besides the boundaries and ``final_obs/``).
+_EPISODE_FIELDS = {
+    "episode_index": np.int64,
+    "building_seed": np.int64,
+    "reset_seed": np.int64,
+    "success": np.bool_,
+    "spl": np.float32,
+    "soft_spl": np.float32,
+    "collisions": np.int64,
+}
+
+
+@dataclass(frozen=True)
+class Episode:
+    """One episode of a :class:`Demonstrations` (views into its arrays)."""
+
+    index: int
+    building_seed: int
+    reset_seed: int
+    success: bool
+    spl: float
+    observations: Mapping[str, np.ndarray]
+    actions: np.ndarray
+    rewards: np.ndarray
+    terminations: np.ndarray
+    truncations: np.ndarray
+    final_observation: Mapping[str, np.ndarray]
+
+    def __len__(self) -> int:
+        return len(self.actions)
+
+
+@dataclass(frozen=True)
+class Demonstrations:
+    """A demonstration dataset: step arrays (N, ...) and per-episode arrays (E,)
+    as laid out in this module's docstring."""
+
+    observations: Mapping[str, np.ndarray]
+    actions: np.ndarray
+    rewards: np.ndarray
+    terminations: np.ndarray
+    truncations: np.ndarray
+    final_observations: Mapping[str, np.ndarray]
+    episode_starts: np.ndarray
+    episode_lengths: np.ndarray
+    episode_index: np.ndarray
+    building_seed: np.ndarray
+    reset_seed: np.ndarray
+    success: np.ndarray
+    spl: np.ndarray
+    soft_spl: np.ndarray
+    collisions: np.ndarray
+    meta: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def n_steps(self) -> int:
+        return len(self.actions)
+
+    @property
+    def n_episodes(self) -> int:
+        return len(self.episode_starts)
+
+    def episodes(self) -> Iterator[Episode]:
+        """The episodes in order."""
+        for e in range(self.n_episodes):
+            s = int(self.episode_starts[e])
+            t = s + int(self.episode_lengths[e])
+            yield Episode(
+                index=int(self.episode_index[e]),
+                building_seed=int(self.building_seed[e]),
+                reset_seed=int(self.reset_seed[e]),
+                success=bool(self.success[e]),
+                spl=float(self.spl[e]),
+                observations=MappingProxyType({k: v[s:t] for k, v in self.observations.items()}),
+                actions=self.actions[s:t],
+                rewards=self.rewards[s:t],
+                terminations=self.terminations[s:t],
+                truncations=self.truncations[s:t],
+                final_observation=MappingProxyType({k: v[e] for k, v in self.final_observations.items()}),
+            )
+
+    def next_observations(self) -> dict[str, np.ndarray]:
+        """The observation after every step, (N, ...) per key: ``obs[t + 1]`` within an
+        episode, ``final_obs[e]`` after its last step."""
+        ends = self.episode_starts + self.episode_lengths - 1
+        out = {}
+        for k, v in self.observations.items():
+            nxt = np.empty_like(v)
+            nxt[:-1] = v[1:]
+            nxt[ends] = self.final_observations[k]
+            out[k] = nxt
+        return out
+
+    def save(self, path: str | os.PathLike[str]) -> Path:
+        """Write the dataset to ``path`` (``.npz``, compressed), atomically."""
+        p = Path(path)
+        arrays: dict[str, np.ndarray] = {f"obs/{k}": v for k, v in self.observations.items()}
+        arrays.update({f"final_obs/{k}": v for k, v in self.final_observations.items()})
+        arrays.update(
+            actions=self.actions, rewards=self.rewards, terminations=self.terminations, truncations=self.truncations,
+            episode_starts=self.episode_starts, episode_lengths=self.episode_lengths,
+        )
+        arrays.update({k: getattr(self, k) for k in _EPISODE_FIELDS})
+        arrays["meta"] = np.array(json.dumps(dict(self.meta), default=_jsonable))
+        try:
+            fd, tmp = tempfile.mkstemp(prefix=p.name + ".", suffix=".tmp", dir=p.parent)
+        except OSError as e:
+            raise InputError(f"{p}: cannot write the demonstrations ({e.strerror or e})") from None
+        try:
+            with os.fdopen(fd, "wb") as f:
+                np.savez_compressed(f, **arrays)
+            os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes it private; a dataset is for sharing
+            os.replace(tmp, p)
+        except BaseException:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
+            raise
+        return p
+
+
+class _Expert:
+    """The classical stack (:class:`sim.rl.policies.ClassicalPolicy`) with the learned-policy
+    observations, acting in float32 so that the stored actions are exactly the applied ones."""
+
+    def __init__(self) -> None:
+        from sim.rl.policies import ClassicalPolicy
+        from sim.rl.splits import LEARNER_OBS
+
+        self._policy = ClassicalPolicy()
+        self.name = self._policy.name
+        self._env_kwargs = {**LEARNER_OBS, **self._policy.env_kwargs()}
+
+    def env_kwargs(self) -> dict[str, Any]:
+        return dict(self._env_kwargs)
+
+    def reset(self, seed: int) -> None:
+        self._policy.reset(seed)
+
+    def act(self, obs: dict[str, np.ndarray], info: dict[str, Any]) -> np.ndarray:
+        return np.asarray(self._policy.act(obs, info), dtype=np.float32)
+
+
+class _EpisodeBuffer:
+    """The steps of the episode being recorded (an ``on_step`` callback)."""
+
+    def __init__(self) -> None:
+        self.obs: list[dict[str, np.ndarray]] = []
+        self.actions: list[np.ndarray] = []
+        self.rewards: list[float] = []
+        self.terminations: list[bool] = []
+        self.truncations: list[bool] = []
+        self.final_obs: dict[str, np.ndarray] = {}
+
+    def __call__(self, obs, action, reward, next_obs, terminated, truncated, info) -> None:
+        self.obs.append(obs)
+        self.actions.append(action)
+        self.rewards.append(reward)
+        self.terminations.append(terminated)
+        self.truncations.append(truncated)
+        self.final_obs = next_obs
+
+    def arrays(self, space) -> dict[str, Any]:
+        """The episode as arrays: obs per key in the space's dtype, final obs, actions, ..."""
+        keys = list(space.spaces)
+        return {
+            "obs": {k: np.stack([o[k] for o in self.obs]).astype(space[k].dtype, copy=False) for k in keys},
+            "final_obs": {k: np.asarray(self.final_obs[k], dtype=space[k].dtype) for k in keys},
+            "actions": np.stack(self.actions).astype(np.float32, copy=False),
+            "rewards": np.asarray(self.rewards, dtype=np.float32),
+            "terminations": np.asarray(self.terminations, dtype=bool),
+            "truncations": np.asarray(self.truncations, dtype=bool),
+        }
+
+
+def record_demonstrations(
+    split: str = "train",
+    episodes: int = 100,
+    seed: int = 0,
+    out: str | os.PathLike[str] = "demos.npz",
+    env_kwargs: Mapping[str, Any] | None = None,
+    progress: bool = True,
+) -> Demonstrations:
+    """Record the classical stack on the ``episodes`` episodes of
+    :func:`sim.rl.splits.episode_specs` (split, seed) with the learned-policy observations
+    and write them to ``out`` (this module's ``.npz`` layout, atomically). ``env_kwargs``
+    override env arguments (e.g. ``max_steps`` for a short test).
+
+    On a KeyboardInterrupt the finished episodes are written (``meta["interrupted"]``
+    true; nothing is written when none finished) and the interrupt goes on.
+    Returns the dataset as written."""
+    import gymnasium as gym
+
+    import sim  # noqa: F401  (registers DepthNav-v0)
+    from sim.rl.evaluate import episode_env_kwargs, run_episode
+    from sim.rl.splits import episode_specs, get_split
+
+    sp = get_split(split)
+    specs = episode_specs(sp, episodes, seed)
+    p = Path(out)
+    if p.suffix != ".npz":
+        raise InputError(f"out: expected a file name ending in .npz, got {str(out)!r}")
+    p.parent.mkdir(parents=True, exist_ok=True)
+    expert = _Expert()
+    groups: dict[int, list] = {}
+    for s in specs:
+        groups.setdefault(s.building_seed, []).append(s)
+    shown = {k: v for k, v in episode_env_kwargs(expert, specs[0].building_seed, env_kwargs).items() if k != "building_seeds"}
+    meta: dict[str, Any] = {
+        "format": FORMAT,
+        "version": VERSION,
+        "policy": expert.name,
+        "split": sp.name,
+        "split_building_seeds": list(sp.building_seeds),
+        "seed": int(seed),
+        "episodes_requested": int(episodes),
+        "env_kwargs": shown,
+        "date": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+        "depthnav_version": _package_version(),
+    }
+    done: list[tuple[Any, dict[str, Any]]] = []  # (EpisodeResult, arrays)
+    space = None
+
+    from tqdm import tqdm
+
+    bar = tqdm(total=len(specs), desc=f"demos on {sp.name}", unit="ep", disable=not progress, file=sys.stderr, leave=False)
+    try:
+        for b, group in groups.items():
+            env = gym.make("DepthNav-v0", **episode_env_kwargs(expert, b, env_kwargs))
+            try:
+                if space is None:
+                    space = env.observation_space
+                    meta["observation_space"] = str(env.observation_space)
+                    meta["action_space"] = str(env.action_space)
+                    meta["observation_keys"] = list(env.observation_space.spaces)
+                for s in group:
+                    buf = _EpisodeBuffer()
+                    result = run_episode(env, expert, s, on_step=buf)
+                    done.append((result, buf.arrays(space)))
+                    bar.update(1)
+                    bar.set_postfix(success=f"{np.mean([r.success for r, _ in done]):.2f}")
+            finally:
+                env.close()
+    except KeyboardInterrupt:
+        bar.close()
+        if done:
+            _assemble(done, {**meta, "interrupted": True}).save(p)
+        raise
+    bar.close()
+    demos = _assemble(done, {**meta, "interrupted": False})
+    demos.save(p)
+    return demos
+
+
+def _assemble(done: list[tuple[Any, dict[str, Any]]], meta: dict[str, Any]) -> Demonstrations:
+    """One dataset of the finished episodes, in episode-index order."""
+    done = sorted(done, key=lambda d: d[0].index)
+    results = [r for r, _ in done]
+    eps = [a for _, a in done]
+    keys = list(eps[0]["obs"])
+    lengths = np.array([len(a["actions"]) for a in eps], dtype=np.int64)
+
+    def cat(name: str) -> np.ndarray:
+        return np.concatenate([a[name] for a in eps])
+
+    return Demonstrations(
+        observations=MappingProxyType({k: np.concatenate([a["obs"][k] for a in eps]) for k in keys}),
+        actions=cat("actions"),
+        rewards=cat("rewards"),
+        terminations=cat("terminations"),
+        truncations=cat("truncations"),
+        final_observations=MappingProxyType({k: np.stack([a["final_obs"][k] for a in eps]) for k in keys}),
+        episode_starts=np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int64),
+        episode_lengths=lengths,
+        **{k: np.array([getattr(r, k) for r in results], dtype=dt) for k, dt in _EPISODE_FIELDS.items() if k != "episode_index"},
+        episode_index=np.array([r.index for r in results], dtype=np.int64),
+        meta=MappingProxyType({**meta, "episodes": len(results), "steps": int(lengths.sum())}),
+    )
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _package_version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("depthnav")
+    except PackageNotFoundError:
+        return "unknown"
+
+
+def load_demonstrations(path: str | os.PathLike[str]) -> Demonstrations:
+    """Read a dataset written by :func:`record_demonstrations`; a missing, corrupt or
+    other-version file is a one-line :class:`InputError`."""
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"{p}: demonstrations file not found")
+    try:
+        with np.load(p, allow_pickle=False) as z:
+            names = set(z.files)
+            if "meta" not in names:
+                raise InputError(f"{p}: not a depthnav demonstrations file (no 'meta' entry)")
+            meta = json.loads(str(z["meta"]))
+            if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+                raise InputError(f"{p}: not a depthnav demonstrations file (format {meta.get('format') if isinstance(meta, dict) else None!r})")
+            if meta.get("version") != VERSION:
+                raise InputError(f"{p}: demonstrations format version {meta.get('version')!r}; this depthnav reads version {VERSION} (record it again)")
+            arrays = {k: z[k] for k in names}
+    except InputError:
+        raise
+    except Exception as e:  # zip, zlib, npy header, JSON ...
+        raise InputError(f"{p}: not a depthnav demonstrations file ({type(e).__name__}: {e})") from None
+    try:
+        demos = Demonstrations(
+            observations=MappingProxyType({k[4:]: v for k, v in sorted(arrays.items()) if k.startswith("obs/")}),
+            final_observations=MappingProxyType({k[10:]: v for k, v in sorted(arrays.items()) if k.startswith("final_obs/")}),
+            **{k: arrays[k] for k in ("actions", "rewards", "terminations", "truncations", "episode_starts", "episode_lengths", *_EPISODE_FIELDS)},
+            meta=MappingProxyType(meta),
+        )
+    except KeyError as e:
+        raise InputError(f"{p}: not a depthnav demonstrations file (no {e.args[0]!r} entry)") from None
+    problem = _inconsistency(demos)
+    if problem:
+        raise InputError(f"{p}: corrupt demonstrations file ({problem})")
+    return demos
+
+
+def _inconsistency(d: Demonstrations) -> str:
+    """What is wrong with the arrays' shapes and episode boundaries ('' if nothing)."""
+    n, e = d.n_steps, d.n_episodes
+    if d.actions.ndim != 2 or d.actions.shape[1] != 3:
+        return f"actions of shape {d.actions.shape}, expected (N, 3)"
+    if not d.observations or set(d.observations) != set(d.final_observations):
+        return "observation keys of obs/ and final_obs/ differ"
+    for k, v in d.observations.items():
+        if len(v) != n:
+            return f"obs/{k} has {len(v)} rows for {n} steps"
+        f = d.final_observations[k]
+        if f.shape != (e, *v.shape[1:]) or f.dtype != v.dtype:
+            return f"final_obs/{k} of shape {f.shape}, expected {(e, *v.shape[1:])}"
+    for k in ("rewards", "terminations", "truncations"):
+        if getattr(d, k).shape != (n,):
+            return f"{k} of shape {getattr(d, k).shape}, expected ({n},)"
+    for k in ("episode_lengths", *_EPISODE_FIELDS):
+        if getattr(d, k).shape != (e,):
+            return f"{k} of shape {getattr(d, k).shape}, expected ({e},)"
+    starts = np.concatenate([[0], np.cumsum(d.episode_lengths)[:-1]]) if e else np.zeros(0)
+    if e and (np.any(d.episode_lengths < 1) or not np.array_equal(d.episode_starts, starts) or d.episode_lengths.sum() != n):
+        return "episode_starts and episode_lengths do not tile the steps"
+    if n and not e:
+        return "steps without episodes"
+    return ""
+
+
+def _jsonable(o: Any) -> Any:
+    """JSON for the meta record: dataclasses as their fields, tuples as lists, the rest as text."""
+    if is_dataclass(o) and not isinstance(o, type):
+        return {"__type__": type(o).__name__, **{f.name: getattr(o, f.name) for f in fields(o)}}
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, Path):
+        return str(o)
+    return repr(o)

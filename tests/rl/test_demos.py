@@ -1,0 +1,234 @@
+"""Expert demonstrations (sim.rl.demos) and behaviour cloning (sim.rl.bc): the dataset's
+layout, its agreement with an independent replay of the env, the loader's errors, an
+interrupted recording, the CLI, and a behaviour-cloning smoke test that has to beat
+predicting the mean action on held-out episodes."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")  # the rl extra
+
+from autonomy.errors import InputError  # noqa: E402
+from sim.cli import main  # noqa: E402
+from sim.rl.bc import BCPolicy, train_bc  # noqa: E402
+from sim.rl.demos import Demonstrations, load_demonstrations, record_demonstrations  # noqa: E402
+from sim.rl.splits import BENCHMARK_TASK, LEARNER_OBS, SPLITS, episode_specs  # noqa: E402
+from tests.helpers import GL, err_line  # noqa: E402
+
+needs_gl = pytest.mark.skipif(not GL, reason="no OpenGL (EGL/OSMesa) context on this machine")
+
+MAX_STEPS = 40
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory) -> tuple[Path, Demonstrations]:
+    if not GL:
+        pytest.skip("no OpenGL (EGL/OSMesa) context on this machine")
+    out = tmp_path_factory.mktemp("demos") / "two.npz"
+    d = record_demonstrations("train", episodes=2, seed=3, out=out, env_kwargs={"max_steps": MAX_STEPS}, progress=False)
+    return out, d
+
+
+def _env(building_seed: int, max_steps: int = MAX_STEPS):
+    """The recorded episode's env, spelled out here rather than through the recorder."""
+    import gymnasium as gym
+
+    import sim  # noqa: F401
+
+    kw = {**BENCHMARK_TASK, **LEARNER_OBS, "max_steps": max_steps, "stack_policy": True}
+    return gym.make("DepthNav-v0", building="procedural", building_seeds=(building_seed,), **kw)
+
+
+@needs_gl
+def test_the_file_is_plain_numpy_with_the_documented_layout(recorded) -> None:
+    path, rec = recorded
+    with np.load(path, allow_pickle=False) as z:  # no project import needed to read it
+        f = {k: z[k] for k in z.files}
+    n, e = len(f["actions"]), 2
+    assert f["episode_lengths"].tolist() == [MAX_STEPS, MAX_STEPS] and n == 2 * MAX_STEPS
+    assert f["episode_starts"].tolist() == [0, MAX_STEPS] and f["episode_starts"].dtype == np.int64
+    expect = {"depth": ((60, 80, 1), np.uint8), "goal": ((2,), np.float32), "odometry": ((3,), np.float32), "scan": ((40,), np.float32)}
+    for k, (shape, dt) in expect.items():
+        assert f[f"obs/{k}"].shape == (n, *shape) and f[f"obs/{k}"].dtype == dt, k
+        assert f[f"final_obs/{k}"].shape == (e, *shape) and f[f"final_obs/{k}"].dtype == dt, k
+    assert f["actions"].shape == (n, 3) and f["actions"].dtype == np.float32
+    assert np.all(np.abs(f["actions"]) <= 1.0)
+    assert f["rewards"].shape == (n,) and f["rewards"].dtype == np.float32
+    assert f["terminations"].dtype == bool and f["truncations"].dtype == bool
+    # Each episode ends at its last step and nowhere before (40 steps: truncated, not arrived).
+    done = f["terminations"] | f["truncations"]
+    assert np.flatnonzero(done).tolist() == [MAX_STEPS - 1, 2 * MAX_STEPS - 1]
+    specs = episode_specs("train", 2, 3)
+    assert f["building_seed"].tolist() == [SPLITS["train"].building_seeds[0], SPLITS["train"].building_seeds[1]]
+    assert f["reset_seed"].tolist() == [s.reset_seed for s in specs]
+    assert f["success"].dtype == bool and f["spl"].shape == (e,)
+    meta = json.loads(str(f["meta"]))
+    assert meta["format"] == "depthnav-demonstrations" and meta["version"] == 1 and not meta["interrupted"]
+    assert meta["policy"] == "classical" and meta["split"] == "train" and meta["seed"] == 3
+    assert meta["env_kwargs"]["stack_policy"] is True and meta["env_kwargs"]["max_steps"] == MAX_STEPS
+    assert meta["observation_keys"] == ["depth", "goal", "odometry", "scan"] and "uint8" in meta["observation_space"]
+    # The loader gives the same arrays, and episodes() slices them at the boundaries.
+    d = load_demonstrations(path)
+    assert d.n_steps == n and d.n_episodes == e
+    np.testing.assert_array_equal(d.observations["depth"], rec.observations["depth"])
+    eps = list(d.episodes())
+    assert [len(x) for x in eps] == [MAX_STEPS, MAX_STEPS]
+    np.testing.assert_array_equal(eps[1].actions, f["actions"][MAX_STEPS:])
+    np.testing.assert_array_equal(eps[1].final_observation["scan"], f["final_obs/scan"][1])
+
+
+@needs_gl
+def test_a_replay_of_the_actions_reproduces_every_observation(recorded) -> None:
+    """An independent env, reset with the episode's seed and stepped with the stored
+    actions, sees the stored observations bit for bit; each stored action is the stack's
+    action of that step (as float32); rewards and episode ends agree."""
+    _, d = recorded
+    nxt = d.next_observations()
+    for ep in d.episodes():
+        env = _env(ep.building_seed)
+        try:
+            obs, info = env.reset(seed=ep.reset_seed)
+            s = int(d.episode_starts[list(d.reset_seed).index(ep.reset_seed)])
+            for t in range(len(ep)):
+                for k in obs:
+                    np.testing.assert_array_equal(obs[k], ep.observations[k][t], err_msg=f"{k} at step {t}")
+                assert np.array_equal(ep.actions[t], np.asarray(info["stack_action"], dtype=np.float32)), t
+                obs, reward, term, trunc, info = env.step(ep.actions[t])
+                assert np.float32(reward) == ep.rewards[t] and term == ep.terminations[t] and trunc == ep.truncations[t]
+                for k in obs:
+                    np.testing.assert_array_equal(obs[k], nxt[k][s + t], err_msg=f"next {k} at step {t}")
+            for k in obs:
+                np.testing.assert_array_equal(obs[k], ep.final_observation[k])
+            assert info["success"] == ep.success
+        finally:
+            env.close()
+
+
+def _write(path: Path, **arrays) -> Path:
+    with open(path, "wb") as f:
+        np.savez(f, **arrays)
+    return path
+
+
+@needs_gl
+def test_the_loader_names_the_file_and_the_problem(recorded, tmp_path: Path) -> None:
+    path, _ = recorded
+    with np.load(path) as z:
+        good = {k: z[k] for k in z.files}
+    meta = json.loads(str(good["meta"]))
+    garbage = tmp_path / "garbage.npz"
+    garbage.write_bytes(b"\x00not a zip file" * 10)
+    cases = {
+        tmp_path / "missing.npz": "not found",
+        garbage: "not a depthnav demonstrations file",
+        _write(tmp_path / "nometa.npz", actions=good["actions"]): "no 'meta' entry",
+        _write(tmp_path / "other.npz", **{**good, "meta": np.array(json.dumps({**meta, "format": "x"}))}): "not a depthnav demonstrations file",
+        _write(tmp_path / "v99.npz", **{**good, "meta": np.array(json.dumps({**meta, "version": 99}))}): "version 99",
+        _write(tmp_path / "noactions.npz", **{k: v for k, v in good.items() if k != "actions"}): "no 'actions' entry",
+        _write(tmp_path / "tiles.npz", **{**good, "episode_lengths": good["episode_lengths"] + 1}): "do not tile",
+        _write(tmp_path / "short.npz", **{**good, "obs/scan": good["obs/scan"][:-1]}): "obs/scan has",
+    }
+    for p, words in cases.items():
+        with pytest.raises(InputError) as exc:
+            load_demonstrations(p)
+        msg = str(exc.value)
+        assert str(p) in msg and words in msg and "\n" not in msg, msg
+
+
+@needs_gl
+def test_an_interrupted_recording_keeps_the_finished_episodes(tmp_path: Path, monkeypatch) -> None:
+    import sim.rl.evaluate as ev
+
+    real = ev.run_episode
+    calls = []
+
+    def run_episode(env, policy, spec, on_step=None):
+        calls.append(spec.index)
+        if len(calls) == 2:  # a few steps into the second episode, then Ctrl-C
+            def interrupting(*a):
+                on_step(*a)
+                if len(seen) == 5:
+                    raise KeyboardInterrupt
+                seen.append(1)
+            seen: list[int] = []
+            return real(env, policy, spec, interrupting)
+        return real(env, policy, spec, on_step)
+
+    monkeypatch.setattr(ev, "run_episode", run_episode)
+    out = tmp_path / "cut.npz"
+    with pytest.raises(KeyboardInterrupt):
+        record_demonstrations("train", episodes=3, seed=0, out=out, env_kwargs={"max_steps": 15}, progress=False)
+    d = load_demonstrations(out)
+    assert d.meta["interrupted"] is True and d.n_episodes == 1 and d.n_steps == 15
+    assert [p.name for p in tmp_path.iterdir()] == ["cut.npz"]  # no temporary file left
+
+
+def test_demos_cli_errors(tmp_path: Path, capsys) -> None:
+    bad = [
+        (["demos", "record", "--episodes", "0", "--out", str(tmp_path / "a.npz")], "--episodes"),
+        (["demos", "record", "--split", "nope", "--out", str(tmp_path / "a.npz")], "split 'nope'"),
+        (["demos", "record", "--out", str(tmp_path / "a.txt")], ".npz"),
+        (["demos", "record", "--max-steps", "0", "--out", str(tmp_path / "a.npz")], "--max-steps"),
+        (["demos", "bc", str(tmp_path / "none.npz"), "--out", str(tmp_path / "m")], "not found"),
+        (["demos"], "demos"),
+    ]
+    for argv, words in bad:
+        assert main(argv) == 2, argv
+        assert words in err_line(capsys), argv
+    assert not list(tmp_path.iterdir())
+
+
+@needs_gl
+def test_bc_cli_arguments_and_a_saved_policy(recorded, tmp_path: Path, capsys) -> None:
+    path, d = recorded
+    for argv, words in ((["--epochs", "0"], "--epochs"), (["--lr", "-1"], "--lr"), (["--batch-size", "0"], "--batch-size")):
+        assert main(["demos", "bc", str(path), "--out", str(tmp_path / "m"), *argv]) == 2
+        assert words in err_line(capsys)
+    assert main(["demos", "bc", str(path), "--epochs", "2", "--batch-size", "32", "--out", str(tmp_path / "m")]) == 0
+    out = capsys.readouterr().out
+    assert "epoch 2: train loss" in out and "predicting the mean" in out and f"wrote {tmp_path / 'm'}" in out
+    # The saved policy predicts as the trained one (same seed: training is deterministic).
+    pol, hist = train_bc(d, epochs=2, batch_size=32, seed=0, lr=1e-3)
+    loaded = BCPolicy.load(tmp_path / "m")
+    np.testing.assert_array_equal(loaded.predict(d.observations), pol.predict(d.observations))
+    assert json.loads((tmp_path / "m" / "policy.json").read_text())["history"]["train_loss"] == hist["train_loss"]
+    assert loaded.env_kwargs() == dict(LEARNER_OBS) | {"depth_shape": [60, 80]}
+    # A Policy the evaluation runs: a few steps on an env with its observations.
+    from sim.rl.evaluate import run_episode
+
+    env = _env(d.building_seed[0].item(), max_steps=5)
+    try:
+        r = run_episode(env, loaded, episode_specs("train", 1, 3)[0])
+    finally:
+        env.close()
+    assert r.steps == 5
+    with pytest.raises(InputError, match="not a behaviour-cloning model"):
+        BCPolicy.load(tmp_path)
+
+
+@needs_gl
+@pytest.mark.slow
+def test_bc_learns_the_expert_better_than_its_mean_action(tmp_path: Path) -> None:
+    """Trained on 10 short episodes of the stack, the training loss falls to a fraction of
+    its initial value and the held-out episodes' MSE clearly beats predicting the
+    training set's mean action, which a network that learnt nothing would match (as it
+    does on shuffled actions)."""
+    d = record_demonstrations("train", episodes=10, seed=0, out=tmp_path / "ten.npz", env_kwargs={"max_steps": 120}, progress=False)
+    _, h = train_bc(d, epochs=6, batch_size=64, seed=0, lr=1e-3)
+    assert h["train_loss"][-1] < 0.5 * h["train_mse_initial"], h
+    assert h["heldout_episodes"] == 2 and h["train_episodes"] == 8
+    assert min(h["heldout_loss"]) < 0.7 * h["heldout_mean_baseline"], h
+    assert h["heldout_loss"][-1] < h["heldout_mean_baseline"], h
+    _, h2 = train_bc(d, epochs=1, batch_size=64, seed=0, lr=1e-3)
+    assert h2["train_loss"][0] == h["train_loss"][0]  # the same seed, the same run
+    # The control: the same actions shuffled across steps carry no relation to the
+    # observations, and the same training does not beat the mean on held-out episodes.
+    perm = np.random.default_rng(1).permutation(d.n_steps)
+    _, hc = train_bc(dataclasses.replace(d, actions=d.actions[perm]), epochs=6, batch_size=64, seed=0, lr=1e-3)
+    assert min(hc["heldout_loss"]) > 0.9 * hc["heldout_mean_baseline"], hc

@@ -146,7 +146,7 @@ def test_same_missions_for_every_policy() -> None:
                 env.close()
     for runs in seen.values():
         ref = runs[0]
-        assert 3.0 <= ref[2] <= 12.0 + 1e-9
+        assert 0.0 < ref[2] <= 12.0 + 1e-9  # the graph distance is 3-12 m; in sight, a straight line
         for other in runs[1:]:
             np.testing.assert_array_equal(other[0], ref[0])
             np.testing.assert_array_equal(other[1], ref[1])

@@ -337,6 +337,48 @@ def cmd_demos_bc(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_train_ppo(args: argparse.Namespace) -> int:
+    ints = (("--steps", "total_steps", 1), ("--n-envs", "n_envs", 1), ("--seed", "seed", 0),
+            ("--eval-episodes", "eval_episodes", 0), ("--checkpoint-every", "checkpoint_every", 1),
+            ("--n-steps", "n_steps", 2), ("--batch-size", "batch_size", 2), ("--n-epochs", "n_epochs", 1))
+    given = {}
+    for flag, name, low in ints:
+        value = getattr(args, name)
+        if value is not None and value < low:
+            raise InputError(f"{flag}: expected an integer >= {low}, got {value}")
+        if value is not None:
+            given[name] = value
+    if args.learning_rate is not None:
+        if not (math.isfinite(args.learning_rate) and args.learning_rate > 0):
+            raise InputError(f"--learning-rate: expected a positive number, got {args.learning_rate!r}")
+        given["learning_rate"] = args.learning_rate
+    if args.vec is not None:
+        given["vec"] = args.vec
+    from sim.rl.ppo import HYPERPARAMETERS, PPOTrainConfig, resume_config, train_ppo
+
+    if args.resume:
+        kept = [f"--{k.replace('_', '-')}" for k in HYPERPARAMETERS if k in given]
+        if kept:
+            raise InputError(f"{', '.join(kept)}: a resumed run keeps its checkpoint's hyper-parameters; drop them with --resume")
+        cfg = resume_config(args.out, **given)
+    else:
+        cfg = PPOTrainConfig(out=args.out, **given)
+    try:
+        result = train_ppo(cfg, resume=args.resume, progress=not args.no_progress and sys.stderr.isatty(),
+                           log=lambda line: print(line, flush=True))
+    except KeyboardInterrupt:  # before training started, or during the final evaluation
+        print(f"depthnav: train interrupted; the last checkpoint is in {args.out}", file=sys.stderr)
+        return 130
+    print(f"{'interrupted' if result.interrupted else 'trained'}: {result.steps} steps, {result.episodes} episodes, "
+          f"{result.wall_s / 60:.1f} min in all ({result.session_steps} steps at {result.fps:.0f} steps/s in this run); "
+          f"wrote {result.out}/model.zip, policy.json, progress.csv, curve.png")
+    if result.eval_summary is not None:
+        m = result.eval_summary
+        print(f"val ({m['episodes']} episodes): success {m['success']:.3f}, SPL {m['spl']:.3f}, soft-SPL {m['soft_spl']:.3f}, "
+              f"collisions {m['collisions']:.2f} per episode; wrote {result.out}/eval.json")
+    return 130 if result.interrupted else 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="depthnav", description="Depth-camera indoor robot autonomy in simulation.")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
@@ -346,6 +388,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_sweep_command(sub)
     _add_eval_command(sub)
     _add_demos_command(sub)
+    _add_train_command(sub)
     c = sub.add_parser("warmup", help="compile the numba kernels once into the on-disk cache (after pip install)")
     c.set_defaults(func=cmd_warmup)
     c = sub.add_parser("scenarios", help="list the scenario files")
@@ -455,6 +498,27 @@ def _add_demos_command(sub) -> None:
     c.add_argument("--eval-episodes", type=int, default=0, help="then evaluate the policy on this many val episodes")
     c.add_argument("--no-progress", action="store_true", help="no progress bar")
     c.set_defaults(func=cmd_demos_bc)
+
+
+def _add_train_command(sub) -> None:
+    pt = sub.add_parser("train", help="train a policy on the train split's buildings (docs/rl.md)")
+    tsub = pt.add_subparsers(dest="train_command", required=True, parser_class=_Parser)
+    c = tsub.add_parser("ppo", help="PPO (stable-baselines3, CNN on depth), resumable; writes model.zip, policy.json, "
+                        "progress.csv, curve.png and eval.json")
+    c.add_argument("--steps", type=int, required=True, dest="total_steps", help="environment steps in all (with --resume: the new total)")
+    c.add_argument("--out", required=True, help="output directory (a saved policy: evaluate with --policy ppo:DIR)")
+    c.add_argument("--n-envs", type=int, help="environments stepped together (default 2)")
+    c.add_argument("--vec", choices=["subproc", "dummy"], help="subproc: one spawned process per env (default); dummy: in this process")
+    c.add_argument("--seed", type=int, help="seed of the policy and the envs (default 0)")
+    c.add_argument("--resume", action="store_true", help="continue the run in --out up to --steps")
+    c.add_argument("--eval-episodes", type=int, help="episodes of the final evaluation on val (default 50; 0: none)")
+    c.add_argument("--checkpoint-every", type=int, help="save model and curve every N steps (default 20000)")
+    c.add_argument("--n-steps", type=int, help="rollout steps per env (default 1024)")
+    c.add_argument("--batch-size", type=int, help="minibatch size (default 256)")
+    c.add_argument("--n-epochs", type=int, help="passes over each rollout (default 4)")
+    c.add_argument("--learning-rate", type=float, help="Adam step size (default 3e-4)")
+    c.add_argument("--no-progress", action="store_true", help="no progress bar (one line per checkpoint still)")
+    c.set_defaults(func=cmd_train_ppo)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -379,6 +379,16 @@ def cmd_train_ppo(args: argparse.Namespace) -> int:
     return 130 if result.interrupted else 0
 
 
+def cmd_demos_export(args: argparse.Namespace) -> int:
+    from sim.rl.demos import export_minari, load_demonstrations
+
+    demos = load_demonstrations(args.file)
+    ds = export_minari(demos, args.minari, data_format=args.data_format)
+    print(f"wrote Minari dataset {args.minari}: {ds.total_episodes} episodes, {ds.total_steps} steps "
+          f"(minari.load_dataset({args.minari!r}))")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="depthnav", description="Depth-camera indoor robot autonomy in simulation.")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
@@ -498,6 +508,11 @@ def _add_demos_command(sub) -> None:
     c.add_argument("--eval-episodes", type=int, default=0, help="then evaluate the policy on this many val episodes")
     c.add_argument("--no-progress", action="store_true", help="no progress bar")
     c.set_defaults(func=cmd_demos_bc)
+    c = dsub.add_parser("export", help="convert a dataset to another format (Minari, if the minari package is installed)")
+    c.add_argument("file", help="a dataset written by 'depthnav demos record'")
+    c.add_argument("--minari", required=True, metavar="DATASET_ID", help="Minari dataset id, e.g. depthnav/classical-train-v0")
+    c.add_argument("--data-format", default="arrow", choices=["arrow", "hdf5"], help="Minari's storage (default arrow)")
+    c.set_defaults(func=cmd_demos_export)
 
 
 def _add_train_command(sub) -> None:

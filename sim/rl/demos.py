@@ -7,34 +7,20 @@ learned-policy observations (:data:`sim.rl.splits.LEARNER_OBS`), and writes one 
 that plain numpy reads (``np.load(path)``; no project import needed).
 :func:`load_demonstrations` reads it back into a :class:`Demonstrations`.
 
-File layout (format ``depthnav-demonstrations``, version 1; N steps in E episodes, the
-episodes one after another, in order):
-
-| key | shape | dtype | what |
-| --- | --- | --- | --- |
-| ``obs/<key>`` | (N, ...) | the space's | observation the action was chosen on, one array per observation key (``depth``, ``goal``, ``odometry``, ``scan``) |
-| ``actions`` | (N, 3) | float32 | the action the env was stepped with (the stack's ``info["stack_action"]`` as float32) |
-| ``rewards`` | (N,) | float32 | reward of the step |
-| ``terminations``, ``truncations`` | (N,) | bool | the step's ``terminated`` and ``truncated`` |
-| ``final_obs/<key>`` | (E, ...) | the space's | the observation after each episode's last step |
-| ``episode_starts`` | (E,) | int64 | index of each episode's first step |
-| ``episode_lengths`` | (E,) | int64 | steps of each episode |
-| ``episode_index`` | (E,) | int64 | the episode's index in ``episode_specs`` |
-| ``building_seed``, ``reset_seed`` | (E,) | int64 | the procedural building and the ``env.reset`` seed |
-| ``success`` | (E,) | bool | reached the goal |
-| ``spl``, ``soft_spl`` | (E,) | float32 | SPL (Anderson et al. 2018) and soft-SPL (Habitat) |
-| ``collisions`` | (E,) | int64 | new contacts in the episode |
-| ``meta`` | () | str | JSON: format, version, split, seed, policy, env kwargs, observation and action spaces (as text), date, depthnav version, whether the recording was interrupted |
-
-There is no ``next_obs``: within an episode the next observation of step t is
-``obs[t + 1]``; after an episode's last step it is ``final_obs[e]``
-(:meth:`Demonstrations.next_observations` assembles the full array).
+The file (format ``depthnav-demonstrations``, version 1) holds N steps of E episodes one
+after another: ``obs/<key>`` (N, ...) in the observation space's dtypes, ``actions``
+(N, 3) float32, ``rewards``, ``terminations``, ``truncations`` (N,), ``final_obs/<key>``
+(E, ...), the episode boundaries ``episode_starts`` and ``episode_lengths`` (E,), per
+episode ``episode_index``, ``building_seed``, ``reset_seed``, ``success``, ``spl``,
+``soft_spl``, ``collisions``, and a JSON ``meta`` string; docs/rl.md has the table. Within
+an episode the observation after step t is ``obs[t + 1]``, after its last step
+``final_obs[e]``.
 
 The actions are the stack's float64 ``info["stack_action"]`` rounded to float32 (the
 action space's type) *before* the env is stepped, so every stored action is exactly the
-one applied: replaying the actions from the same reset seed reproduces every
-observation bit for bit. (Stepping with the float64 action instead, as
-``depthnav eval --policy classical`` does, differs by less than 1e-7 of the command.)
+one applied and replaying them from the reset seed reproduces every observation bit for
+bit (stepping with the float64 action and storing it rounded does not: the runs part
+within tens of steps).
 """
 
 from __future__ import annotations
@@ -44,6 +30,7 @@ import json
 import os
 import sys
 import tempfile
+import warnings
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field, fields, is_dataclass
 from pathlib import Path
@@ -336,6 +323,52 @@ def _assemble(done: list[tuple[Any, dict[str, Any]]], meta: dict[str, Any]) -> D
         episode_index=np.array([r.index for r in results], dtype=np.int64),
         meta=MappingProxyType({**meta, "episodes": len(results), "steps": int(lengths.sum())}),
     )
+
+
+def export_minari(demos: Demonstrations, dataset_id: str, description: str | None = None, data_format: str = "arrow"):
+    """Write the dataset as a Minari dataset ``dataset_id`` (``namespace/name-vN``, under
+    ``MINARI_DATASETS_PATH`` or ``~/.minari/datasets``) and return it. Needs the optional
+    ``minari`` package (and pyarrow, or h5py for ``data_format="hdf5"``). Images are stored
+    raw (Minari's JPEG encoding is lossy); each episode's observations are its T
+    observations and the final one, Minari's T + 1."""
+    try:
+        import minari
+        from minari.data_collector import EpisodeBuffer
+    except ImportError:
+        raise InputError("Minari export needs the minari package (pip install minari)") from None
+    import gymnasium as gym
+
+    import sim  # noqa: F401  (registers DepthNav-v0)
+
+    kw = {k: tuple(v) if isinstance(v, list) else v for k, v in demos.meta.get("env_kwargs", {}).items()}
+    env = gym.make("DepthNav-v0", **kw, building_seeds=tuple(demos.meta.get("split_building_seeds", ())))
+    buffers = [
+        EpisodeBuffer(
+            id=e,
+            seed=ep.reset_seed,
+            observations={k: np.concatenate([v, ep.final_observation[k][None]]) for k, v in ep.observations.items()},
+            actions=ep.actions,
+            rewards=ep.rewards.tolist(),
+            terminations=ep.terminations.tolist(),
+            truncations=ep.truncations.tolist(),
+        )
+        for e, ep in enumerate(demos.episodes())
+    ]
+    desc = description or (
+        f"depthnav: the classical stack (FSPF, CGR, avoidance, navigator) on {demos.n_episodes} episodes of the "
+        f"{demos.meta.get('split')!r} split (seed {demos.meta.get('seed')}), DepthNav-v0 with the learned-policy observations"
+    )
+    try:
+        with warnings.catch_warnings():  # Minari's advice to name an author, a permalink, an eval env
+            warnings.filterwarnings("ignore", message=r"`\w+` is set to None", category=UserWarning)
+            return minari.create_dataset_from_buffers(
+                dataset_id, buffers, env=env, algorithm_name=f"depthnav {demos.meta.get('policy', 'classical')}",
+                description=desc, data_format=data_format, jpeg_encoding=False,
+            )
+    except ValueError as e:  # an existing or malformed id, an unknown data format
+        raise InputError(f"Minari dataset {dataset_id!r}: {e}") from None
+    finally:
+        env.close()
 
 
 def _umask() -> int:

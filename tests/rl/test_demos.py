@@ -6,6 +6,7 @@ predicting the mean action on held-out episodes."""
 from __future__ import annotations
 
 import dataclasses
+import importlib.util
 import json
 from pathlib import Path
 
@@ -232,3 +233,27 @@ def test_bc_learns_the_expert_better_than_its_mean_action(tmp_path: Path) -> Non
     perm = np.random.default_rng(1).permutation(d.n_steps)
     _, hc = train_bc(dataclasses.replace(d, actions=d.actions[perm]), epochs=6, batch_size=64, seed=0, lr=1e-3)
     assert min(hc["heldout_loss"]) > 0.9 * hc["heldout_mean_baseline"], hc
+
+
+@needs_gl
+@pytest.mark.skipif(importlib.util.find_spec("minari") is None, reason="minari (optional) not installed")
+def test_minari_export_round_trip(recorded, tmp_path: Path, monkeypatch) -> None:
+    """Minari (optional) gets every episode's T + 1 observations, actions and ends, raw."""
+    import minari
+
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path))
+    from sim.rl.demos import export_minari
+
+    _, d = recorded
+    export_minari(d, "depthnav/test-v0")
+    ds = minari.load_dataset("depthnav/test-v0")
+    assert ds.total_episodes == 2 and ds.total_steps == d.n_steps
+    for mep, ep in zip(ds.iterate_episodes(), d.episodes(), strict=True):
+        for k, v in ep.observations.items():
+            np.testing.assert_array_equal(mep.observations[k][:-1], v)
+            np.testing.assert_array_equal(mep.observations[k][-1], ep.final_observation[k])
+        np.testing.assert_array_equal(mep.actions, ep.actions)
+        np.testing.assert_array_equal(mep.truncations, ep.truncations)
+    assert ds.recover_environment().unwrapped.config.depth_shape == (60, 80)
+    with pytest.raises(InputError, match="already exists"):
+        export_minari(d, "depthnav/test-v0")

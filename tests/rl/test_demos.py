@@ -186,6 +186,16 @@ def test_demos_cli_errors(tmp_path: Path, capsys) -> None:
 
 
 @needs_gl
+def test_demos_record_cli(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "sub" / "one.npz"
+    assert main(["demos", "record", "--split", "val", "--episodes", "1", "--seed", "2", "--max-steps", "8", "--out", str(out), "--no-progress"]) == 0
+    assert f"wrote {out}: 1 episodes, 8 steps" in capsys.readouterr().out
+    d = load_demonstrations(out)
+    assert d.meta["split"] == "val" and d.building_seed.tolist() == [SPLITS["val"].building_seeds[0]]
+    assert d.reset_seed.tolist() == [episode_specs("val", 1, 2)[0].reset_seed]
+
+
+@needs_gl
 def test_bc_cli_arguments_and_a_saved_policy(recorded, tmp_path: Path, capsys) -> None:
     path, d = recorded
     for argv, words in ((["--epochs", "0"], "--epochs"), (["--lr", "-1"], "--lr"), (["--batch-size", "0"], "--batch-size")):

@@ -189,7 +189,7 @@ def train_bc(
     ``heldout_mse_initial`` (before training), ``heldout_mean_baseline`` (the MSE of
     predicting the training set's mean action on the held-out steps), the episodes and
     steps on each side. The held-out set is a ``heldout_fraction`` of the episodes
-    (at least one), drawn with ``seed``; whole episodes, so no near-duplicate frame of a
+    (at least one, at most all but one), drawn with ``seed``; whole episodes, so no near-duplicate frame of a
     training step is held out."""
     def need(ok: bool, name: str, what: str, v: Any) -> None:
         if not ok or isinstance(v, bool):
@@ -207,7 +207,7 @@ def train_bc(
         raise InputError(f"demonstrations: behaviour cloning needs at least 2 episodes (one held out), got {demos.n_episodes}")
 
     rng = np.random.default_rng(seed)
-    n_held = max(1, round(demos.n_episodes * heldout_fraction))
+    n_held = min(max(1, round(demos.n_episodes * heldout_fraction)), demos.n_episodes - 1)
     held_eps = np.sort(rng.permutation(demos.n_episodes)[:n_held])
     held = np.zeros(demos.n_steps, dtype=bool)
     for e in held_eps:

@@ -79,7 +79,7 @@ class Episode:
 @dataclass(frozen=True)
 class Demonstrations:
     """A demonstration dataset: step arrays (N, ...) and per-episode arrays (E,)
-    as laid out in this module's docstring."""
+    as the table in docs/rl.md lays them out."""
 
     observations: Mapping[str, np.ndarray]
     actions: np.ndarray

@@ -520,7 +520,7 @@ def _add_train_command(sub) -> None:
     tsub = pt.add_subparsers(dest="train_command", required=True, parser_class=_Parser)
     c = tsub.add_parser("ppo", help="PPO (stable-baselines3, CNN on depth), resumable; writes model.zip, policy.json, "
                         "progress.csv, curve.png and eval.json")
-    c.add_argument("--steps", type=int, required=True, dest="total_steps", help="environment steps in all (with --resume: the new total)")
+    c.add_argument("--steps", type=int, required=True, dest="total_steps", metavar="N", help="environment steps in all (with --resume: the new total)")
     c.add_argument("--out", required=True, help="output directory (a saved policy: evaluate with --policy ppo:DIR)")
     c.add_argument("--n-envs", type=int, help="environments stepped together (default 2)")
     c.add_argument("--vec", choices=["subproc", "dummy"], help="subproc: one spawned process per env (default); dummy: in this process")

@@ -7,6 +7,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+
 def user_cache_dir() -> Path:
     """``~/.cache/depthnav`` (looked up at each call, so a changed HOME is honoured)."""
     return Path.home() / ".cache" / "depthnav"

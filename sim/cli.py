@@ -478,7 +478,7 @@ def _add_sweep_command(sub) -> None:
 def _add_eval_command(sub) -> None:
     c = sub.add_parser("eval", help="evaluate policies on a building split: success, SPL, soft-SPL, collisions (docs/rl.md)")
     c.add_argument("--policy", nargs="+", required=True, metavar="SPEC",
-                   help="random, random:SEED, classical or ppo:PATH; several: the same episodes each, and a table")
+                   help="random, random:SEED, classical, ppo:PATH or bc:PATH; several: the same episodes each, and a table")
     c.add_argument("--split", default="val", help="train, val (default) or test")
     c.add_argument("--episodes", type=int, default=50, help="number of episodes (default 50)")
     c.add_argument("--seed", type=int, default=0, help="episode seed: which starts and goals (default 0)")

@@ -65,12 +65,13 @@ class ClassicalPolicy:
         return info["stack_action"]
 
 
-POLICY_SPECS = "'random', 'random:SEED', 'classical' or 'ppo:PATH' (a saved model directory)"
+POLICY_SPECS = "'random', 'random:SEED', 'classical', 'ppo:PATH' or 'bc:PATH' (a saved model directory)"
 
 
 def make_policy(spec: str) -> Policy:
-    """A policy from its spec: 'random' (or 'random:SEED'), 'classical', or 'ppo:PATH'
-    (``sim.rl.sb3.SB3Policy.load(PATH)``, imported only then)."""
+    """A policy from its spec: 'random' (or 'random:SEED'), 'classical', 'ppo:PATH'
+    (``sim.rl.sb3.SB3Policy.load(PATH)``) or 'bc:PATH' (``sim.rl.bc.BCPolicy.load(PATH)``),
+    the last two imported only then."""
     kind, _, arg = str(spec).partition(":")
     if kind == "random":
         if not arg:
@@ -84,11 +85,15 @@ def make_policy(spec: str) -> Policy:
         return RandomPolicy(seed)
     if kind == "classical" and not arg:
         return ClassicalPolicy()
-    if kind == "ppo":
+    if kind in ("ppo", "bc"):
         if not arg:
-            raise InputError(f"policy {spec!r}: expected ppo:PATH, the directory of a saved model")
+            raise InputError(f"policy {spec!r}: expected {kind}:PATH, the directory of a saved model")
         if not Path(arg).exists():
             raise InputError(f"policy {spec!r}: {arg} not found (expected the directory of a saved model)")
+        if kind == "bc":
+            from sim.rl.bc import BCPolicy
+
+            return BCPolicy.load(arg)
         from sim.rl.sb3 import SB3Policy
 
         return SB3Policy.load(arg)

@@ -208,6 +208,10 @@ def test_bc_cli_arguments_and_a_saved_policy(recorded, tmp_path: Path, capsys) -
     pol, hist = train_bc(d, epochs=2, batch_size=32, seed=0, lr=1e-3)
     loaded = BCPolicy.load(tmp_path / "m")
     np.testing.assert_array_equal(loaded.predict(d.observations), pol.predict(d.observations))
+    from sim.rl.policies import make_policy
+
+    by_spec = make_policy(f"bc:{tmp_path / 'm'}")
+    np.testing.assert_array_equal(by_spec.predict(d.observations), pol.predict(d.observations))
     assert json.loads((tmp_path / "m" / "policy.json").read_text())["history"]["train_loss"] == hist["train_loss"]
     assert loaded.env_kwargs() == dict(LEARNER_OBS) | {"depth_shape": [60, 80]}
     # A Policy the evaluation runs: a few steps on an env with its observations.

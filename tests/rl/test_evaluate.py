@@ -78,7 +78,7 @@ def test_make_policy() -> None:
     assert isinstance(make_policy("random"), RandomPolicy) and make_policy("random:3").seed == 3
     assert isinstance(make_policy("classical"), ClassicalPolicy)
     assert make_policy("classical").env_kwargs() == {"stack_policy": True}
-    for bad in ("greedy", "classical:1", "random:x", "ppo:", "ppo:/no/such/model"):
+    for bad in ("greedy", "classical:1", "random:x", "ppo:", "ppo:/no/such/model", "bc:", "bc:/no/such/model"):
         with pytest.raises(InputError, match="policy"):
             make_policy(bad)
 

@@ -47,7 +47,6 @@ from __future__ import annotations
 import hashlib
 import math
 import os
-import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -57,6 +56,7 @@ import numpy as np
 
 from autonomy.cache import cache_paths
 from autonomy.errors import InputError
+from autonomy.files import atomic_write
 from autonomy.vectormap import VectorMap
 
 __all__ = [
@@ -961,20 +961,9 @@ class VisibilityGrid:
             "key": np.array(self.key),
         }
         try:
-            fd, tmp = tempfile.mkstemp(prefix=p.name + ".", suffix=".tmp", dir=p.parent)
+            return atomic_write(p, lambda f: np.savez_compressed(f, **arrays))
         except OSError as e:
             raise InputError(f"{p}: cannot write visibility grid ({e.strerror or e})") from None
-        try:
-            with os.fdopen(fd, "wb") as f:
-                np.savez_compressed(f, **arrays)
-            os.replace(tmp, p)
-        except BaseException:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
-            raise
-        return p
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> VisibilityGrid:

@@ -28,8 +28,6 @@ from __future__ import annotations
 import datetime as _dt
 import json
 import os
-import sys
-import tempfile
 import warnings
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field, fields, is_dataclass
@@ -40,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from autonomy.errors import InputError
+from autonomy.files import atomic_write
 
 FORMAT = "depthnav-demonstrations"
 VERSION = 1
@@ -149,21 +148,9 @@ class Demonstrations:
         arrays.update({k: getattr(self, k) for k in _EPISODE_FIELDS})
         arrays["meta"] = np.array(json.dumps(dict(self.meta), default=_jsonable))
         try:
-            fd, tmp = tempfile.mkstemp(prefix=p.name + ".", suffix=".tmp", dir=p.parent)
+            return atomic_write(p, lambda f: np.savez_compressed(f, **arrays))
         except OSError as e:
             raise InputError(f"{p}: cannot write the demonstrations ({e.strerror or e})") from None
-        try:
-            with os.fdopen(fd, "wb") as f:
-                np.savez_compressed(f, **arrays)
-            os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes it private; a dataset is for sharing
-            os.replace(tmp, p)
-        except BaseException:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
-            raise
-        return p
 
 
 class _Expert:
@@ -236,10 +223,7 @@ def record_demonstrations(
     On a KeyboardInterrupt the finished episodes are written (``meta["interrupted"]``
     true; nothing is written when none finished) and the interrupt goes on.
     Returns the dataset as written."""
-    import gymnasium as gym
-
-    import sim  # noqa: F401  (registers DepthNav-v0)
-    from sim.rl.evaluate import episode_env_kwargs, run_episode
+    from sim.rl.evaluate import episode_env_kwargs, run_episode, run_episodes
     from sim.rl.splits import episode_specs, get_split
 
     sp = get_split(split)
@@ -249,9 +233,6 @@ def record_demonstrations(
         raise InputError(f"out: expected a file name ending in .npz, got {str(out)!r}")
     p.parent.mkdir(parents=True, exist_ok=True)
     expert = _Expert()
-    groups: dict[int, list] = {}
-    for s in specs:
-        groups.setdefault(s.building_seed, []).append(s)
     shown = {k: v for k, v in episode_env_kwargs(expert, specs[0].building_seed, env_kwargs).items() if k != "building_seeds"}
     meta: dict[str, Any] = {
         "format": FORMAT,
@@ -266,34 +247,24 @@ def record_demonstrations(
         "depthnav_version": _package_version(),
     }
     done: list[tuple[Any, dict[str, Any]]] = []  # (EpisodeResult, arrays)
-    space = None
 
-    from tqdm import tqdm
+    def record(env: Any, s: Any) -> Any:
+        if "observation_space" not in meta:
+            meta["observation_space"] = str(env.observation_space)
+            meta["action_space"] = str(env.action_space)
+            meta["observation_keys"] = list(env.observation_space.spaces)
+        buf = _EpisodeBuffer()
+        result = run_episode(env, expert, s, on_step=buf)
+        done.append((result, buf.arrays(env.observation_space)))
+        return result
 
-    bar = tqdm(total=len(specs), desc=f"demos on {sp.name}", unit="ep", disable=not progress, file=sys.stderr, leave=False)
     try:
-        for b, group in groups.items():
-            env = gym.make("DepthNav-v0", **episode_env_kwargs(expert, b, env_kwargs))
-            try:
-                if space is None:
-                    space = env.observation_space
-                    meta["observation_space"] = str(env.observation_space)
-                    meta["action_space"] = str(env.action_space)
-                    meta["observation_keys"] = list(env.observation_space.spaces)
-                for s in group:
-                    buf = _EpisodeBuffer()
-                    result = run_episode(env, expert, s, on_step=buf)
-                    done.append((result, buf.arrays(space)))
-                    bar.update(1)
-                    bar.set_postfix(success=f"{np.mean([r.success for r, _ in done]):.2f}")
-            finally:
-                env.close()
+        for _ in run_episodes(expert, specs, env_kwargs, episode=record, progress=progress, desc=f"demos on {sp.name}"):
+            pass  # record() keeps each episode
     except KeyboardInterrupt:
-        bar.close()
         if done:
             _assemble(done, {**meta, "interrupted": True}).save(p)
         raise
-    bar.close()
     demos = _assemble(done, {**meta, "interrupted": False})
     demos.save(p)
     return demos
@@ -369,12 +340,6 @@ def export_minari(demos: Demonstrations, dataset_id: str, description: str | Non
         raise InputError(f"Minari dataset {dataset_id!r}: {e}") from None
     finally:
         env.close()
-
-
-def _umask() -> int:
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
 
 
 def _package_version() -> str:

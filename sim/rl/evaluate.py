@@ -16,17 +16,17 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import os
 import sys
 import time
 import warnings
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from autonomy.files import atomic_write_text
 from sim.rl.policies import Policy, make_policy
 from sim.rl.splits import BENCHMARK_TASK, TASK_KEYS, EpisodeSpec, Split, episode_specs, get_split
 
@@ -322,6 +322,50 @@ def compare(
     return done
 
 
+def run_episodes(
+    policy: Policy,
+    specs: Sequence[EpisodeSpec],
+    env_kwargs: Mapping[str, Any] | None = None,
+    *,
+    episode: Callable[[Any, EpisodeSpec], EpisodeResult] | None = None,
+    progress: bool = False,
+    desc: str = "episodes",
+) -> Iterator[EpisodeResult]:
+    """Run the episodes of ``specs`` and yield their results as they finish: grouped by
+    building (in order of first appearance), one env per building made with
+    :func:`episode_env_kwargs` and closed after its episodes (also on an exception, a
+    KeyboardInterrupt included), counted on a tqdm bar (stderr) with the success rate so
+    far. ``episode(env, spec)`` runs one episode (default :func:`run_episode` with
+    ``policy``)."""
+    import gymnasium as gym
+    from tqdm import tqdm
+
+    import sim  # noqa: F401  (registers DepthNav-v0)
+
+    if episode is None:
+
+        def episode(env: Any, spec: EpisodeSpec) -> EpisodeResult:
+            return run_episode(env, policy, spec)
+
+    groups: dict[int, list[EpisodeSpec]] = {}
+    for s in specs:
+        groups.setdefault(s.building_seed, []).append(s)
+    n = successes = 0
+    with tqdm(total=len(specs), desc=desc, unit="ep", disable=not progress, file=sys.stderr, leave=False) as bar:
+        for b, group in groups.items():
+            env = gym.make("DepthNav-v0", **episode_env_kwargs(policy, b, env_kwargs))
+            try:
+                for s in group:
+                    r = episode(env, s)
+                    n += 1
+                    successes += bool(r.success)
+                    bar.update(1)
+                    bar.set_postfix(success=f"{successes / n:.2f}")
+                    yield r
+            finally:
+                env.close()
+
+
 def _evaluate(
     policy: Policy | str,
     split: str | Split,
@@ -331,16 +375,9 @@ def _evaluate(
     progress: bool,
     sink: Callable[[EvalReport], None] | None,
 ) -> EvalReport:
-    import gymnasium as gym
-
-    import sim  # noqa: F401  (registers DepthNav-v0)
-
     sp = get_split(split)
     specs = episode_specs(sp, episodes, seed)
     pol = make_policy(policy) if isinstance(policy, str) else policy
-    groups: dict[int, list[EpisodeSpec]] = {}
-    for s in specs:
-        groups.setdefault(s.building_seed, []).append(s)
     shown = {k: v for k, v in episode_env_kwargs(pol, specs[0].building_seed, env_kwargs).items() if k != "building_seeds"}
     results: list[EpisodeResult] = []
 
@@ -348,26 +385,14 @@ def _evaluate(
         rs = sorted(results, key=lambda r: r.index)
         return EvalReport(pol.name, sp.name, int(seed), int(episodes), rs, summarize(rs, time.perf_counter() - t0), shown, interrupted)
 
-    from tqdm import tqdm
-
     t0 = time.perf_counter()
-    bar = tqdm(total=len(specs), desc=f"{pol.name} on {sp.name}", unit="ep", disable=not progress, file=sys.stderr, leave=False)
     try:
-        for b, group in groups.items():
-            env = gym.make("DepthNav-v0", **episode_env_kwargs(pol, b, env_kwargs))
-            try:
-                for s in group:
-                    results.append(run_episode(env, pol, s))
-                    bar.update(1)
-                    bar.set_postfix(success=f"{np.mean([r.success for r in results]):.2f}")
-            finally:
-                env.close()
+        for r in run_episodes(pol, specs, env_kwargs, progress=progress, desc=f"{pol.name} on {sp.name}"):
+            results.append(r)
     except KeyboardInterrupt:
-        bar.close()
         if sink is not None:
             sink(report(True))
         raise
-    bar.close()
     rep = report(False)
     if sink is not None:
         sink(rep)
@@ -376,13 +401,11 @@ def _evaluate(
 
 # -- helpers -------------------------------------------------------------------------------
 def write_json(path: str | Path, doc: Any) -> Path:
-    """Write JSON atomically (a temporary file beside it, then a rename)."""
+    """Write JSON atomically (:func:`autonomy.files.atomic_write_text`), making the
+    directory."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps(_jsonable(doc), indent=2) + "\n", encoding="utf-8")
-    os.replace(tmp, path)
-    return path
+    return atomic_write_text(path, json.dumps(_jsonable(doc), indent=2) + "\n")
 
 
 def _jsonable(x: Any) -> Any:

@@ -17,7 +17,6 @@ benchmark task over the train split's buildings, and writes to ``cfg.out``:
 from __future__ import annotations
 
 import csv
-import io
 import json
 import math
 import os
@@ -37,6 +36,7 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecNormalize
 
 from autonomy.errors import InputError
+from autonomy.files import atomic_write, atomic_write_text
 from sim.rl.sb3 import (
     FORMAT,
     FORMAT_VERSION,
@@ -348,30 +348,19 @@ def plot_curve(progress_csv: str | Path, png: str | Path, title: str = "PPO on D
         wall = c["wall_s"][-1]
         title += f": {int(x[-1]):,} steps, {int(c['episodes'][-1]):,} episodes, {wall / 60:.1f} min"
     fig.suptitle(title)
-    png = Path(png)
-    tmp = png.with_name(png.name + ".tmp.png")
-    fig.savefig(tmp, dpi=100)
+    png = atomic_write(png, lambda f: fig.savefig(f, format="png", dpi=100))
     plt.close(fig)
-    os.replace(tmp, png)
     return png
-
-
-def _atomic_write(path: Path, data: bytes) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_bytes(data)
-    os.replace(tmp, path)
 
 
 def save_policy(model: PPO, cfg: PPOTrainConfig, out: Path, *, episodes: int, wall_s: float,
                 interrupted: bool = False, venv: VecEnv | None = None, recent: Mapping[str, list] | None = None) -> None:
     """model.zip and policy.json (and the reward statistics), each replaced atomically."""
-    buf = io.BytesIO()
-    model.save(buf)
-    _atomic_write(out / MODEL_FILE, buf.getvalue())
+    atomic_write(out / MODEL_FILE, model.save)
     if isinstance(venv, VecNormalize):
         import pickle
 
-        _atomic_write(out / VECNORM_FILE, pickle.dumps(venv))
+        atomic_write(out / VECNORM_FILE, lambda f: pickle.dump(venv, f))
     meta = {
         "format": FORMAT,
         "version": FORMAT_VERSION,
@@ -387,7 +376,7 @@ def save_policy(model: PPO, cfg: PPOTrainConfig, out: Path, *, episodes: int, wa
         "saved": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         "recent_episodes": dict(recent or {}),
     }
-    _atomic_write(out / POLICY_FILE, (json.dumps(meta, indent=2) + "\n").encode("utf-8"))
+    atomic_write_text(out / POLICY_FILE, json.dumps(meta, indent=2) + "\n")
 
 
 def train_ppo(cfg: PPOTrainConfig, resume: bool = False, progress: bool = False,

@@ -39,6 +39,7 @@ import numpy as np
 from autonomy.avoidance import AvoidanceConfig
 from autonomy.camera import CameraIntrinsics, CameraMount
 from autonomy.errors import InputError
+from autonomy.files import atomic_path
 from autonomy.fspf import FSPFConfig
 from autonomy.geometry import relative_pose
 from autonomy.navigator import NavigatorConfig
@@ -197,8 +198,7 @@ def ensure_log(cfg: RecordingConfig, cache_dir: str | Path | None, name: str = "
 
 def _unpack_depth(path: Path, out: Path) -> None:
     """Stream the compressed depth of a log into an uncompressed .npy (atomically)."""
-    tmp = out.with_name(f"{out.name}.{os.getpid()}.tmp")
-    with zipfile.ZipFile(path) as z, z.open("depth_mm.npy") as f:
+    with zipfile.ZipFile(path) as z, z.open("depth_mm.npy") as f, atomic_path(out) as tmp:
         version = np.lib.format.read_magic(f)
         read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
         shape, fortran, dtype = read_header(f)
@@ -210,7 +210,6 @@ def _unpack_depth(path: Path, out: Path) -> None:
             mm[k] = np.frombuffer(f.read(frame_bytes), dtype=np.uint16).reshape(shape[1:])
         mm.flush()
         del mm
-    os.replace(tmp, out)
 
 
 def load_log(path: str | Path, mmap: bool = True) -> DriveLog:
@@ -436,5 +435,7 @@ def _write_log(cfg: RecordingConfig, path: Path, rec: _Recording, nodes: list[in
     del depth
     rec.depth = None  # close the memory map before the file is truncated
     _truncate_npy(rec.tmp, n)
+    # Not autonomy.files.atomic_path: the working copy, recorded into since the start (its
+    # temporary removed by ensure_log on failure), goes into place before the log does.
     os.replace(rec.tmp, _working_copy(path))
     os.replace(tmp, path)

@@ -26,7 +26,6 @@ import dataclasses
 import hashlib
 import json
 import math
-import os
 import sys
 import time
 from dataclasses import dataclass, field
@@ -38,6 +37,7 @@ import numpy as np
 from autonomy.camera import DepthCamera
 from autonomy.cgr import CGRConfig, CGRLocalizer
 from autonomy.errors import InputError
+from autonomy.files import atomic_write
 from autonomy.fspf import FSPFConfig, project_to_floor
 from autonomy.observation import ObservationConfig
 from autonomy.raycast import SceneQuery, VisibilityGridConfig, load_or_build
@@ -207,9 +207,7 @@ def _deterministic_scans(log: DriveLog, scfg: ScanConfig, path: Path, progress: 
                 t0 = time.thread_time()
                 out[a][k] = fn(d, log.intrinsics, log.mount, scfg)
                 secs[a][k] = time.thread_time() - t0
-        tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp.npz")
-        np.savez(tmp, kr=out["kr"], kc=out["kc"], kr_s=secs["kr"], kc_s=secs["kc"])
-        os.replace(tmp, path)
+        atomic_write(path, lambda f: np.savez(f, kr=out["kr"], kc=out["kc"], kr_s=secs["kr"], kc_s=secs["kc"]))
     return out, secs
 
 

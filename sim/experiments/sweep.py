@@ -43,6 +43,7 @@ from pathlib import Path
 from typing import Any
 
 from autonomy.errors import InputError
+from autonomy.files import atomic_write_text
 from sim.config import to_dict
 from sim.experiments.kinds import KINDS, Experiment, experiment, load_experiment
 
@@ -144,13 +145,7 @@ def read_trials(path: Path, ids: set[str] | None = None) -> tuple[dict[str, dict
 
 
 def _rewrite(path: Path, records: list[dict]) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", encoding="utf-8") as f:
-        for r in records:
-            f.write(json.dumps(r) + "\n")
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    atomic_write_text(path, "".join(json.dumps(r) + "\n" for r in records))
 
 
 class _Appender:

@@ -354,15 +354,24 @@ def cmd_train_ppo(args: argparse.Namespace) -> int:
         given["learning_rate"] = args.learning_rate
     if args.vec is not None:
         given["vec"] = args.vec
-    from sim.rl.ppo import HYPERPARAMETERS, PPOTrainConfig, resume_config, train_ppo
+    if args.log_std_init is not None and not math.isfinite(args.log_std_init):
+        raise InputError(f"--log-std-init: expected a finite number, got {args.log_std_init!r}")
+    from sim.rl import ppo
+    from sim.rl.ppo import HYPERPARAMETERS, PPOTrainConfig, config_with, resume_config
 
     if args.resume:
         kept = [f"--{k.replace('_', '-')}" for k in HYPERPARAMETERS if k in given]
+        kept += [f for f, v in (("--end-on-collision", args.end_on_collision), ("--log-std-init", args.log_std_init)) if v]
         if kept:
             raise InputError(f"{', '.join(kept)}: a resumed run keeps its checkpoint's hyper-parameters; drop them with --resume")
         cfg = resume_config(args.out, **given)
     else:
+        if args.log_std_init is not None:
+            given["policy_kwargs"] = {"log_std_init": float(args.log_std_init)}
         cfg = PPOTrainConfig(out=args.out, **given)
+        if args.end_on_collision:
+            cfg = config_with(cfg, terminate_on_collision=True)
+    train_ppo = ppo.train_ppo
     try:
         result = train_ppo(cfg, resume=args.resume, progress=not args.no_progress and sys.stderr.isatty(),
                            log=lambda line: print(line, flush=True))
@@ -532,6 +541,10 @@ def _add_train_command(sub) -> None:
     c.add_argument("--batch-size", type=int, help="minibatch size (default 256)")
     c.add_argument("--n-epochs", type=int, help="passes over each rollout (default 4)")
     c.add_argument("--learning-rate", type=float, help="Adam step size (default 3e-4)")
+    c.add_argument("--log-std-init", type=float, metavar="X",
+                   help="initial log standard deviation of the Gaussian policy (SB3's default: 0, a spread of 1)")
+    c.add_argument("--end-on-collision", action="store_true",
+                   help="training episodes end at the first collision (the evaluation still counts them)")
     c.add_argument("--no-progress", action="store_true", help="no progress bar (one line per checkpoint still)")
     c.set_defaults(func=cmd_train_ppo)
 

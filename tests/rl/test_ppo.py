@@ -179,11 +179,36 @@ def test_load_errors(tmp_path: Path) -> None:
         (["--out", "{tmp}/a"], "--steps"),
         (["--steps", "10", "--out", "{tmp}/a", "--resume"], "nothing to resume"),
         (["--steps", "10", "--out", "{tmp}/a", "--resume", "--n-epochs", "3"], "--n-epochs: a resumed run keeps"),
+        (["--steps", "10", "--out", "{tmp}/a", "--log-std-init", "inf"], "--log-std-init: expected a finite number"),
+        (["--steps", "10", "--out", "{tmp}/a", "--resume", "--end-on-collision"], "--end-on-collision: a resumed run keeps"),
     ],
 )
 def test_cli_errors(tmp_path: Path, capsys, argv, pattern) -> None:
     assert main(["train", "ppo", *(a.replace("{tmp}", str(tmp_path)) for a in argv)]) == 2
     assert pattern in err_line(capsys)
+
+
+def test_cli_training_choices_reach_the_config(tmp_path: Path, monkeypatch, capsys) -> None:
+    """--end-on-collision ends the training env's episodes at a collision and --log-std-init
+    sets the policy's initial spread; without them, the benchmark task and SB3's default."""
+    import sim.rl.ppo as ppo
+
+    seen = []
+
+    def fake(cfg, **kw):
+        seen.append(cfg)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(ppo, "train_ppo", fake)
+    argv = ["train", "ppo", "--steps", "10", "--out", str(tmp_path / "a")]
+    assert main([*argv, "--end-on-collision", "--log-std-init", "-1"]) == 130
+    assert main(argv) == 130
+    chosen, plain = seen
+    assert chosen.env_kwargs["terminate_on_collision"] is True and chosen.policy_kwargs == {"log_std_init": -1.0}
+    assert plain.env_kwargs["terminate_on_collision"] is False and plain.policy_kwargs == {}
+    assert {k: v for k, v in chosen.env_kwargs.items() if k != "terminate_on_collision"} == {
+        k: v for k, v in plain.env_kwargs.items() if k != "terminate_on_collision"
+    }
 
 
 def test_cli_help_defaults_are_the_config_defaults() -> None:

@@ -52,7 +52,8 @@ class KinectConfig:
     render_process: bool = True
     """GL renders in a render server process, so Mesa (and its LLVM) never loads into
     this one: safe with PyTorch and triton imported before or after. False renders in
-    this process (about 0.1 ms a frame less; a later ``import triton`` then crashes)."""
+    this process (about 0.25 ms less a 640 x 480 frame; a later ``import triton`` then
+    crashes, see docs/env.md)."""
     render_far_m: float = 0.0
     """Nothing farther than this is rendered: the clean depth is 0 beyond it. 0 = the noise
     model's ``max_range_m`` plus ``RENDER_FAR_MARGIN_M`` (the noise model returns nothing

@@ -63,6 +63,8 @@ def _create_beside(p: Path) -> tuple[Path, int]:
             return tmp, os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
         except FileExistsError:
             continue
+        except OSError as e:  # named for the file the caller asked for, not the temporary one
+            raise OSError(e.errno, e.strerror, str(p)) from None
 
 
 def _fsync(path: Path) -> None:

@@ -116,3 +116,22 @@ def test_console_script_exit_code_and_no_traceback(tmp_path: Path) -> None:
     r = subprocess.run([sys.executable, "-m", "sim.cli", "scenarios"], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     json.dumps(r.stdout)
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["eval", "--policy", "random", "--episodes", "1", "--out", "{dir}"],
+        ["eval", "--policy", "random", "--episodes", "1", "--out", "{file}/r.json"],
+        ["demos", "record", "--episodes", "1", "--out", "{file}/d.npz"],
+        ["train", "ppo", "--steps", "10", "--out", "{file}/ppo"],
+    ],
+)
+def test_an_unusable_output_path_is_refused_before_any_episode(tmp_path: Path, capsys, argv) -> None:
+    """A directory given as the output file, or a path under a file: one line naming
+    --out, at once (an evaluation or a training run would otherwise end in a failed write)."""
+    (tmp_path / "f").write_text("x")
+    argv = [a.replace("{dir}", str(tmp_path)).replace("{file}", str(tmp_path / "f")) for a in argv]
+    assert main(argv) == 2
+    line = err_line(capsys)
+    assert line.startswith("depthnav: error: --out ") and ("is a directory" in line or "cannot make the directory" in line)

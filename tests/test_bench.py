@@ -11,14 +11,18 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def test_bench_harness_writes_results(tmp_path: Path) -> None:
-    out = tmp_path / "results.json"
+def _bench_group(group: str, out: Path) -> tuple[subprocess.CompletedProcess, dict]:
+    """``bench/run.py --quick --only GROUP``: the finished process and the results it wrote."""
     p = subprocess.run(
-        [sys.executable, str(ROOT / "bench" / "run.py"), "--quick", "--only", "maps", "--out", str(out)],
-        capture_output=True, text=True, timeout=300, cwd=ROOT,
+        [sys.executable, str(ROOT / "bench" / "run.py"), "--quick", "--only", group, "--out", str(out)],
+        capture_output=True, text=True, timeout=600, cwd=ROOT,
     )
     assert p.returncode == 0, p.stderr
-    res = json.loads(out.read_text())
+    return p, json.loads(out.read_text())
+
+
+def test_bench_harness_writes_results(tmp_path: Path) -> None:
+    p, res = _bench_group("maps", tmp_path / "results.json")
     assert {"map_load_9000", "world_compile_9000", "map_graph_9000"} <= set(res)
     assert res["map_graph_9000"]["coverage"] >= 0.95 and res["map_graph_9000"]["min_clearance_m"] >= 0.35
     for row in res.values():
@@ -36,13 +40,7 @@ def test_every_group_is_registered() -> None:
 
 def test_the_open3d_group_is_optional(tmp_path: Path) -> None:
     """Without open3d the group says it is skipped and writes nothing; with it, its rows."""
-    out = tmp_path / "results.json"
-    p = subprocess.run(
-        [sys.executable, str(ROOT / "bench" / "run.py"), "--quick", "--only", "open3d", "--out", str(out)],
-        capture_output=True, text=True, timeout=600, cwd=ROOT,
-    )
-    assert p.returncode == 0, p.stderr
-    res = json.loads(out.read_text())
+    p, res = _bench_group("open3d", tmp_path / "results.json")
     try:
         import open3d  # noqa: F401
     except ImportError:

@@ -14,6 +14,9 @@ from pathlib import Path
 
 from autonomy.errors import InputError
 
+#: Packages of the ``rl`` extra that policy-research commands import on demand.
+RL_PACKAGES = frozenset({"torch", "stable_baselines3", "triton"})
+
 
 class _Parser(argparse.ArgumentParser):
     """argparse with one-line errors (exit 2), as the CLI contract asks."""
@@ -579,6 +582,13 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except BrokenPipeError:
         return 1
+    except ModuleNotFoundError as exc:
+        top = (exc.name or "").split(".")[0]
+        if top not in RL_PACKAGES:
+            raise
+        print(f"depthnav: error: this command needs {top}, from the rl extra: pip install -e '.[rl]' "
+              "(PyTorch's CPU build first: pip install torch --index-url https://download.pytorch.org/whl/cpu)", file=sys.stderr)
+        return 2
     except OSError as exc:
         # Paths given on the command line that cannot be read or written.
         where = f"{exc.filename}: " if exc.filename else ""

@@ -135,3 +135,20 @@ def test_an_unusable_output_path_is_refused_before_any_episode(tmp_path: Path, c
     assert main(argv) == 2
     line = err_line(capsys)
     assert line.startswith("depthnav: error: --out ") and ("is a directory" in line or "cannot make the directory" in line)
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [["train", "ppo", "--steps", "10", "--out", "{tmp}/ppo"], ["eval", "--policy", "ppo:{tmp}", "--episodes", "1"]],
+)
+def test_without_pytorch_the_rl_commands_name_the_extra(tmp_path: Path, argv) -> None:
+    """Where the rl extra is not installed (as after `make demo`), one line names it."""
+    argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
+    code = (
+        "import sys; sys.modules['torch'] = None; sys.modules['stable_baselines3'] = None\n"
+        f"from sim.cli import main; sys.exit(main({argv!r}))"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=Path(__file__).resolve().parents[2])
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2, r.stderr
+    assert len(lines) == 1 and "needs torch" in lines[0] and "'.[rl]'" in lines[0], r.stderr

@@ -144,7 +144,8 @@ class PPOTrainConfig:
             need(is_int(getattr(self, name)) and getattr(self, name) >= 1, name, "an integer >= 1")
         need(is_int(self.seed) and self.seed >= 0, "seed", "an integer >= 0")
         need(is_int(self.eval_episodes) and self.eval_episodes >= 0, "eval_episodes", "an integer >= 0 (0: no evaluation)")
-        need(self.vec in VEC_KINDS, "vec", "'dummy' or 'subproc'")
+        need(isinstance(self.vec, str) and self.vec in VEC_KINDS, "vec", "'dummy' or 'subproc'")
+        need(isinstance(self.normalize_reward, bool | np.bool_), "normalize_reward", "True or False")
         need(self.n_steps >= 2, "n_steps", "an integer >= 2")
         need(1 < self.batch_size <= self.n_steps * self.n_envs, "batch_size", f"an integer in [2, n_steps * n_envs = {self.n_steps * self.n_envs}]")
         need(is_num(self.learning_rate) and self.learning_rate > 0, "learning_rate", "a positive number")
@@ -388,7 +389,7 @@ def train_ppo(cfg: PPOTrainConfig, resume: bool = False, progress: bool = False,
     """
     from sim.envs.config import EnvConfig
 
-    EnvConfig(**cfg.env_kwargs)  # a bad env argument fails here, before any worker starts
+    EnvConfig().replace(**cfg.env_kwargs)  # a bad env argument fails here, before any worker starts
     out = Path(cfg.out)
     steps0, episodes0, wall0 = 0, 0, 0.0
     recent: dict[str, list] = {}
@@ -410,7 +411,10 @@ def train_ppo(cfg: PPOTrainConfig, resume: bool = False, progress: bool = False,
             raise InputError(f"{out}: already {steps0} steps; give more total steps than that to resume")
     elif (out / MODEL_FILE).exists() or (out / PROGRESS_FILE).exists():
         raise InputError(f"{out}: holds a training run already; resume it (--resume) or choose another --out")
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise InputError(f"PPOTrainConfig: 'out' {out}: cannot make the directory ({e.strerror or e})") from None
     torch.set_num_threads(cfg.torch_threads)
 
     venv: VecEnv = make_vec_env(cfg)
@@ -426,12 +430,15 @@ def train_ppo(cfg: PPOTrainConfig, resume: bool = False, progress: bool = False,
         else:
             if cfg.normalize_reward:
                 venv = VecNormalize(venv, norm_obs=False, norm_reward=True, gamma=cfg.gamma)
-            model = PPO(
-                "MultiInputPolicy", venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
-                learning_rate=cfg.learning_rate, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda, clip_range=cfg.clip_range,
-                ent_coef=cfg.ent_coef, vf_coef=cfg.vf_coef, max_grad_norm=cfg.max_grad_norm,
-                policy_kwargs=dict(cfg.policy_kwargs) or None, seed=cfg.seed, device="cpu", verbose=0,
-            )
+            try:
+                model = PPO(
+                    "MultiInputPolicy", venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size, n_epochs=cfg.n_epochs,
+                    learning_rate=cfg.learning_rate, gamma=cfg.gamma, gae_lambda=cfg.gae_lambda, clip_range=cfg.clip_range,
+                    ent_coef=cfg.ent_coef, vf_coef=cfg.vf_coef, max_grad_norm=cfg.max_grad_norm,
+                    policy_kwargs=dict(cfg.policy_kwargs) or None, seed=cfg.seed, device="cpu", verbose=0,
+                )
+            except TypeError as e:  # the one free-form argument: an unknown or mistyped policy keyword
+                raise InputError(f"PPOTrainConfig: 'policy_kwargs' {cfg.policy_kwargs!r} rejected by SB3's MultiInputPolicy ({e})") from None
         # policy.json always records this run's configuration (resume: its total_steps).
         cb: _Curve
 

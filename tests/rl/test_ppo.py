@@ -127,6 +127,8 @@ def test_train_load_act_resume(tmp_path: Path, monkeypatch) -> None:
         (dict(gamma=1.5), "gamma"),
         (dict(eval_episodes=-1), "eval_episodes"),
         (dict(seed=True), "seed"),
+        (dict(normalize_reward="no"), "normalize_reward"),
+        (dict(n_steps="64"), "n_steps"),
     ],
 )
 def test_config_errors(changes, name) -> None:
@@ -141,7 +143,18 @@ def test_default_env_is_the_train_split_with_learner_observations() -> None:
 def test_bad_env_kwarg_fails_before_training(tmp_path: Path) -> None:
     with pytest.raises(InputError, match="max_steps"):
         train_ppo(config_with(PPOTrainConfig(out=str(tmp_path / "x")), max_steps=0))
+    with pytest.raises(InputError, match="unknown argument 'nope'"):
+        train_ppo(config_with(PPOTrainConfig(out=str(tmp_path / "x")), nope=1))
     assert not (tmp_path / "x").exists()
+    (tmp_path / "file").write_text("")
+    with pytest.raises(InputError, match="'out'.*cannot make the directory"):
+        train_ppo(PPOTrainConfig(out=str(tmp_path / "file" / "run")))
+
+
+@needs_gl
+def test_bad_policy_kwargs_are_an_input_error(tmp_path: Path) -> None:
+    with pytest.raises(InputError, match="'policy_kwargs'.*nope"):
+        train_ppo(tiny(tmp_path / "x", n_envs=1, policy_kwargs={"nope": 1}))
 
 
 def test_load_errors(tmp_path: Path) -> None:

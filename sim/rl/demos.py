@@ -223,15 +223,14 @@ def record_demonstrations(
     On a KeyboardInterrupt the finished episodes are written (``meta["interrupted"]``
     true; nothing is written when none finished) and the interrupt goes on.
     Returns the dataset as written."""
-    from sim.rl.evaluate import episode_env_kwargs, run_episode, run_episodes
+    from sim.rl.evaluate import episode_env_kwargs, output_file, run_episode, run_episodes
     from sim.rl.splits import episode_specs, get_split
 
     sp = get_split(split)
     specs = episode_specs(sp, episodes, seed)
-    p = Path(out)
-    if p.suffix != ".npz":
+    if Path(out).suffix != ".npz":
         raise InputError(f"out: expected a file name ending in .npz, got {str(out)!r}")
-    p.parent.mkdir(parents=True, exist_ok=True)
+    p = output_file(out)
     expert = _Expert()
     shown = {k: v for k, v in episode_env_kwargs(expert, specs[0].building_seed, env_kwargs).items() if k != "building_seeds"}
     meta: dict[str, Any] = {
@@ -305,8 +304,14 @@ def export_minari(demos: Demonstrations, dataset_id: str, description: str | Non
     try:
         import minari
         from minari.data_collector import EpisodeBuffer
+        from minari.dataset.minari_dataset import parse_dataset_id
     except ImportError:
         raise InputError("Minari export needs the minari package (pip install minari)") from None
+    try:  # before Minari makes any directory for it
+        parse_dataset_id(str(dataset_id))
+    except (ValueError, TypeError):  # TypeError: no -vN version
+        raise InputError(f"Minari dataset {dataset_id!r}: expected an id (namespace/)name-vN, "
+                         "e.g. depthnav/classical-train-v0 (a namespace has at least two characters)") from None
     import gymnasium as gym
 
     import sim  # noqa: F401  (registers DepthNav-v0)

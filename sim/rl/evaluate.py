@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from autonomy.errors import InputError
 from autonomy.files import atomic_write_text
 from sim.rl.policies import Policy, make_policy
 from sim.rl.splits import BENCHMARK_TASK, TASK_KEYS, EpisodeSpec, Split, episode_specs, get_split
@@ -289,6 +290,8 @@ def evaluate(
     ``episodes`` episodes of :func:`episode_specs` (split, seed), one building's env at a
     time, and summarise. ``out``: write the report's JSON there (atomically), also when
     interrupted (``"interrupted": true``, then the KeyboardInterrupt goes on)."""
+    if out is not None:
+        output_file(out)
     sink = None if out is None else (lambda report: write_json(out, report.to_dict()))
     return _evaluate(policy, split, episodes, seed, env_kwargs, progress, sink)
 
@@ -307,6 +310,8 @@ def compare(
     policy (and on an interrupt, with the unfinished report marked)."""
     sp = get_split(split)
     episode_specs(sp, episodes, seed)  # bad arguments fail before any policy is made
+    if out is not None:
+        output_file(out)
     made = [make_policy(p) if isinstance(p, str) else p for p in policies]
     done: list[EvalReport] = []
 
@@ -400,6 +405,19 @@ def _evaluate(
 
 
 # -- helpers -------------------------------------------------------------------------------
+def output_file(path: str | Path, name: str = "out") -> Path:
+    """``path`` ready to be written, checked before any episode runs: its directory made;
+    a directory at ``path`` or a path under a file is an InputError naming ``name``."""
+    p = Path(path)
+    if p.is_dir():
+        raise InputError(f"{name} {p}: is a directory (expected a file name)")
+    try:
+        p.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise InputError(f"{name} {p}: cannot make the directory {p.parent} ({e.strerror or e})") from None
+    return p
+
+
 def write_json(path: str | Path, doc: Any) -> Path:
     """Write JSON atomically (:func:`autonomy.files.atomic_write_text`), making the
     directory."""

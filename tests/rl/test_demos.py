@@ -185,6 +185,15 @@ def test_demos_cli_errors(tmp_path: Path, capsys) -> None:
     assert not list(tmp_path.iterdir())
 
 
+def test_record_output_errors_come_before_any_episode(tmp_path: Path) -> None:
+    (tmp_path / "file").write_text("")
+    (tmp_path / "dir.npz").mkdir()
+    for out, words in ((tmp_path / "file" / "a.npz", "cannot make the directory"), (tmp_path / "dir.npz", "is a directory")):
+        with pytest.raises(InputError, match=words) as exc:
+            record_demonstrations("train", episodes=1, out=out, progress=False)
+        assert str(out) in str(exc.value)
+
+
 @needs_gl
 def test_demos_record_cli(tmp_path: Path, capsys) -> None:
     out = tmp_path / "sub" / "one.npz"
@@ -271,3 +280,7 @@ def test_minari_export_round_trip(recorded, tmp_path: Path, monkeypatch) -> None
     assert ds.recover_environment().unwrapped.config.depth_shape == (60, 80)
     with pytest.raises(InputError, match="already exists"):
         export_minari(d, "depthnav/test-v0")
+    for bad in ("noversion", "a/b-v0", "x/y z-v1"):
+        with pytest.raises(InputError, match="expected an id"):
+            export_minari(d, bad)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["depthnav"]  # nothing made for them

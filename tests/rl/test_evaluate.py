@@ -250,6 +250,15 @@ def test_eval_cli_errors(capsys, argv, pattern) -> None:
     assert pattern in err_line(capsys)
 
 
+def test_output_errors_come_before_any_episode(tmp_path: Path) -> None:
+    (tmp_path / "file").write_text("")
+    for out, words in ((tmp_path, "is a directory"), (tmp_path / "file" / "r.json", "cannot make the directory")):
+        with pytest.raises(InputError, match=words):
+            evaluate("random", "val", episodes=1, out=out, progress=False)
+        with pytest.raises(InputError, match=words):
+            compare(["random"], "val", episodes=1, out=out, progress=False)
+
+
 @needs_gl
 def test_eval_cli_table(tmp_path: Path, capsys, monkeypatch) -> None:
     monkeypatch.setattr("sim.rl.evaluate.BENCHMARK_TASK", {**BENCHMARK_TASK, "max_steps": 30})

@@ -29,11 +29,15 @@ import torch
 from torch import nn
 
 from autonomy.errors import InputError
+from autonomy.files import atomic_write, atomic_write_text
 from sim.rl.demos import Demonstrations
+from sim.rl.sb3 import FORMAT as SB3_FORMAT
+from sim.rl.sb3 import MODEL_FILE as SB3_MODEL_FILE
+from sim.rl.sb3 import POLICY_FILE, env_value, observation_kwargs
 
 #: Observation settings BC needs (the learned-policy ones); checked against the dataset.
 REQUIRED_OBS = {"depth_dtype": "uint8", "goal_format": "polar"}
-OBS_KEYS = ("depth_shape", "depth_dtype", "depth_layout", "goal_format", "observe_scan")
+MODEL_FILE = "model.pt"
 
 
 def goal_features(goal: np.ndarray) -> np.ndarray:
@@ -119,7 +123,7 @@ class BCPolicy:
 
     def __init__(self, net: BCNet, obs_kwargs: Mapping[str, Any], name: str = "bc") -> None:
         self.net = net.eval()
-        self.obs_kwargs = dict(obs_kwargs)
+        self.obs_kwargs = {k: env_value(v) for k, v in obs_kwargs.items()}
         self.name = name
         self._layout = self.obs_kwargs.get("depth_layout", "hwc")
 
@@ -142,8 +146,13 @@ class BCPolicy:
         """Write ``model.pt`` (the weights) and ``policy.json`` (observation settings,
         network shape, training history) into ``directory``."""
         d = Path(directory)
-        d.mkdir(parents=True, exist_ok=True)
-        torch.save(self.net.state_dict(), d / "model.pt")
+        if (d / SB3_MODEL_FILE).exists():
+            raise InputError(f"{d}: holds a stable-baselines3 policy ({SB3_MODEL_FILE}); save the behaviour-cloning model elsewhere")
+        try:
+            d.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise InputError(f"{d}: cannot make the directory ({e.strerror or e})") from None
+        atomic_write(d / MODEL_FILE, lambda f: torch.save(self.net.state_dict(), f))
         doc = {
             "kind": "bc",
             "env_kwargs": self.obs_kwargs,
@@ -151,28 +160,33 @@ class BCPolicy:
             "n_vec": self.net.n_vec,
             "history": dict(history or {}),
         }
-        (d / "policy.json").write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+        atomic_write_text(d / POLICY_FILE, json.dumps(doc, indent=2) + "\n")
         return d
 
     @classmethod
     def load(cls, directory: str | Path) -> BCPolicy:
         """Read a directory written by :meth:`save`; a missing or malformed one is an InputError."""
         d = Path(directory)
+        if not d.is_dir():
+            raise InputError(f"{d}: no such behaviour-cloning model directory (expected one with {MODEL_FILE} and {POLICY_FILE}, as `depthnav demos bc` writes)")
         try:
-            doc = json.loads((d / "policy.json").read_text(encoding="utf-8"))
+            doc = json.loads((d / POLICY_FILE).read_text(encoding="utf-8"))
+            if doc.get("format") == SB3_FORMAT:
+                raise InputError(f"{d}: a stable-baselines3 policy, not a behaviour-cloning model (evaluate it as ppo:{d})")
             if doc.get("kind") != "bc":
                 raise InputError(f"{d}: not a behaviour-cloning model (policy.json kind {doc.get('kind')!r})")
-            state = torch.load(d / "model.pt", map_location="cpu", weights_only=True)
+            state = torch.load(d / MODEL_FILE, map_location="cpu", weights_only=True)
             n = int(doc["n_vec"])
             net = BCNet(tuple(doc["depth_hw"]), n, np.zeros(n), np.ones(n))
             net.load_state_dict(state)
+            obs_kwargs = dict(doc["env_kwargs"])
         except InputError:
             raise
         except FileNotFoundError as e:
             raise InputError(f"{d}: not a behaviour-cloning model directory ({Path(e.filename).name} missing)") from None
         except Exception as e:
             raise InputError(f"{d}: not a behaviour-cloning model directory ({type(e).__name__}: {e})") from None
-        return cls(net, doc["env_kwargs"], name=f"bc:{d}")
+        return cls(net, obs_kwargs, name=f"bc:{d}")
 
 
 def train_bc(
@@ -195,13 +209,15 @@ def train_bc(
         if not ok or isinstance(v, bool):
             raise InputError(f"{name}: expected {what}, got {v!r}")
 
-    need(isinstance(epochs, int) and epochs >= 1, "epochs", "an integer >= 1", epochs)
-    need(isinstance(batch_size, int) and batch_size >= 1, "batch_size", "an integer >= 1", batch_size)
-    need(isinstance(seed, int) and seed >= 0, "seed", "an integer >= 0", seed)
+    if not isinstance(demos, Demonstrations):
+        raise InputError(f"demos: expected a Demonstrations (sim.rl.demos.load_demonstrations), got {type(demos).__name__}")
+    need(isinstance(epochs, int | np.integer) and epochs >= 1, "epochs", "an integer >= 1", epochs)
+    need(isinstance(batch_size, int | np.integer) and batch_size >= 1, "batch_size", "an integer >= 1", batch_size)
+    need(isinstance(seed, int | np.integer) and seed >= 0, "seed", "an integer >= 0", seed)
     need(isinstance(lr, int | float) and math.isfinite(lr) and lr > 0, "lr", "a positive number", lr)
     need(isinstance(heldout_fraction, int | float) and 0 < heldout_fraction < 1, "heldout_fraction", "a number in (0, 1)", heldout_fraction)
-    env_kw = demos.meta.get("env_kwargs", {})
-    obs_kwargs = {k: env_kw[k] for k in OBS_KEYS if k in env_kw}
+    epochs, batch_size, seed = int(epochs), int(batch_size), int(seed)
+    obs_kwargs = observation_kwargs(demos.meta.get("env_kwargs", {}))
     _check_obs(obs_kwargs, "demonstrations")
     if demos.n_episodes < 2:
         raise InputError(f"demonstrations: behaviour cloning needs at least 2 episodes (one held out), got {demos.n_episodes}")

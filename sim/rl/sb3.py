@@ -93,6 +93,10 @@ class SB3Policy:
         d = Path(path)
         if not d.is_dir():
             raise InputError(f"{d}: no such policy directory (expected one with {MODEL_FILE} and {POLICY_FILE}, as `depthnav train ppo` writes)")
+        from sim.rl.bc import MODEL_FILE as BC_MODEL_FILE
+
+        if not (d / MODEL_FILE).exists() and (d / BC_MODEL_FILE).is_file():
+            raise InputError(f"{d}: a behaviour-cloning model, not a stable-baselines3 policy (evaluate it as bc:{d})")
         for name in (POLICY_FILE, MODEL_FILE):
             if not (d / name).is_file():
                 raise InputError(f"{d}: no {name} (a saved policy directory holds {MODEL_FILE} and {POLICY_FILE}, as `depthnav train ppo` writes)")

@@ -222,7 +222,7 @@ def test_bc_cli_arguments_and_a_saved_policy(recorded, tmp_path: Path, capsys) -
     by_spec = make_policy(f"bc:{tmp_path / 'm'}")
     np.testing.assert_array_equal(by_spec.predict(d.observations), pol.predict(d.observations))
     assert json.loads((tmp_path / "m" / "policy.json").read_text())["history"]["train_loss"] == hist["train_loss"]
-    assert loaded.env_kwargs() == dict(LEARNER_OBS) | {"depth_shape": [60, 80]}
+    assert loaded.env_kwargs() == dict(LEARNER_OBS)  # the tuples EnvConfig has, not JSON's lists
     # A Policy the evaluation runs: a few steps on an env with its observations.
     from sim.rl.evaluate import run_episode
 
@@ -234,6 +234,33 @@ def test_bc_cli_arguments_and_a_saved_policy(recorded, tmp_path: Path, capsys) -
     assert r.steps == 5
     with pytest.raises(InputError, match="not a behaviour-cloning model"):
         BCPolicy.load(tmp_path)
+
+
+def test_bc_files_of_the_wrong_kind(tmp_path: Path) -> None:
+    """A PPO directory given to BCPolicy (and a BC one to SB3Policy) says which it is; a
+    save over a PPO run or under a file is refused by name; train_bc wants a dataset."""
+    from sim.rl.bc import BCNet
+    from sim.rl.sb3 import SB3Policy
+
+    pol = BCPolicy(BCNet((60, 80), 46, np.zeros(46), np.ones(46)), dict(LEARNER_OBS))
+    bc_dir = pol.save(tmp_path / "bc")
+    assert sorted(p.name for p in bc_dir.iterdir()) == ["model.pt", "policy.json"]  # no temporary file left
+    with pytest.raises(InputError, match=f"behaviour-cloning model.*bc:{bc_dir}"):
+        SB3Policy.load(bc_dir)
+    ppo_dir = tmp_path / "ppo"
+    ppo_dir.mkdir()
+    (ppo_dir / "model.zip").write_bytes(b"")
+    (ppo_dir / "policy.json").write_text(json.dumps({"format": "depthnav-sb3-policy", "version": 1}))
+    with pytest.raises(InputError, match=f"stable-baselines3 policy.*ppo:{ppo_dir}"):
+        BCPolicy.load(ppo_dir)
+    with pytest.raises(InputError, match="holds a stable-baselines3 policy"):
+        pol.save(ppo_dir)
+    with pytest.raises(InputError, match="no such behaviour-cloning model directory"):
+        BCPolicy.load(bc_dir / "model.pt")
+    with pytest.raises(InputError, match="cannot make the directory"):
+        pol.save(bc_dir / "model.pt" / "x")
+    with pytest.raises(InputError, match="demos: expected a Demonstrations"):
+        train_bc(str(tmp_path / "d.npz"))
 
 
 @needs_gl

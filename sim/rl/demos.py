@@ -29,6 +29,7 @@ import datetime as _dt
 import json
 import os
 import warnings
+import zipfile
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field, fields, is_dataclass
 from pathlib import Path
@@ -360,8 +361,12 @@ def load_demonstrations(path: str | os.PathLike[str]) -> Demonstrations:
     """Read a dataset written by :func:`record_demonstrations`; a missing, corrupt or
     other-version file is a one-line :class:`InputError`."""
     p = Path(path)
+    if p.is_dir():
+        raise InputError(f"{p}: a directory, not a demonstrations file (expected the .npz of `depthnav demos record`)")
     if not p.is_file():
         raise InputError(f"{p}: demonstrations file not found")
+    if not zipfile.is_zipfile(p):  # np.load would try it as a pickle and say so
+        raise InputError(f"{p}: not a depthnav demonstrations file (not an .npz archive)")
     try:
         with np.load(p, allow_pickle=False) as z:
             names = set(z.files)

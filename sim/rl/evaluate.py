@@ -269,7 +269,7 @@ def episode_env_kwargs(policy: Policy, building_seed: int, env_kwargs: Mapping[s
     own = dict(policy.env_kwargs())
     for k in sorted(TASK_KEYS & own.keys()):
         v = own.pop(k)
-        if k in BENCHMARK_TASK and _normalise(v) != _normalise(BENCHMARK_TASK[k]):
+        if k in BENCHMARK_TASK and _jsonable(v) != _jsonable(BENCHMARK_TASK[k]):
             warnings.warn(
                 f"policy {policy.name}: env argument {k}={v!r} ignored; the benchmark task sets {BENCHMARK_TASK[k]!r}",
                 stacklevel=3,
@@ -439,6 +439,3 @@ def _jsonable(x: Any) -> Any:
         return None
     return x
 
-
-def _normalise(v: Any) -> Any:
-    return _jsonable(v)

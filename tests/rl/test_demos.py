@@ -127,7 +127,8 @@ def test_the_loader_names_the_file_and_the_problem(recorded, tmp_path: Path) -> 
     garbage.write_bytes(b"\x00not a zip file" * 10)
     cases = {
         tmp_path / "missing.npz": "not found",
-        garbage: "not a depthnav demonstrations file",
+        garbage: "not an .npz archive",
+        tmp_path: "a directory, not a demonstrations file",
         _write(tmp_path / "nometa.npz", actions=good["actions"]): "no 'meta' entry",
         _write(tmp_path / "other.npz", **{**good, "meta": np.array(json.dumps({**meta, "format": "x"}))}): "not a depthnav demonstrations file",
         _write(tmp_path / "v99.npz", **{**good, "meta": np.array(json.dumps({**meta, "version": 99}))}): "version 99",

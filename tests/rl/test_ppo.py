@@ -20,7 +20,7 @@ from sim.cli import build_parser, main
 from sim.rl.policies import Policy, make_policy
 from sim.rl.ppo import PPOTrainConfig, config_with, resume_config, train_ppo
 from sim.rl.sb3 import SB3Policy
-from sim.rl.splits import LEARNER_OBS, split_env_kwargs
+from sim.rl.splits import BENCHMARK_TASK, LEARNER_OBS, SPLITS, split_env_kwargs
 from tests.helpers import GL, err_line
 
 needs_gl = pytest.mark.skipif(not GL, reason="no OpenGL (EGL/OSMesa) context on this machine")
@@ -137,7 +137,12 @@ def test_config_errors(changes, name) -> None:
 
 
 def test_default_env_is_the_train_split_with_learner_observations() -> None:
-    assert PPOTrainConfig().env_kwargs == split_env_kwargs("train", **LEARNER_OBS)
+    """Spelled out rather than through split_env_kwargs, the default factory's own call."""
+    kw = PPOTrainConfig().env_kwargs
+    assert kw["building"] == "procedural" and kw["building_seeds"] == SPLITS["train"].building_seeds
+    assert not set(kw["building_seeds"]) & (set(SPLITS["val"].building_seeds) | set(SPLITS["test"].building_seeds))
+    assert {k: kw[k] for k in BENCHMARK_TASK} == dict(BENCHMARK_TASK)
+    assert (kw["depth_shape"], kw["depth_dtype"], kw["goal_format"], kw["observe_scan"]) == ((60, 80), "uint8", "polar", 40)
 
 
 def test_bad_env_kwarg_fails_before_training(tmp_path: Path) -> None:

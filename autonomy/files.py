@@ -18,6 +18,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import BinaryIO
 
+from autonomy.errors import InputError
+
 
 @contextmanager
 def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
@@ -52,6 +54,24 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[BinaryIO], objec
 def atomic_write_text(path: str | os.PathLike[str], text: str, encoding: str = "utf-8") -> Path:
     """Write ``text`` to ``path`` atomically (see the module docstring)."""
     return atomic_write(path, lambda f: f.write(text.encode(encoding)))
+
+
+def output_path(path: str | os.PathLike[str], name: str = "out", directory: bool = False) -> Path:
+    """``path`` ready to be written (a file, or with ``directory`` a directory), checked
+    before long work that ends in writing it: the directory made, and a directory given
+    for a file, a path under a file or a directory that cannot be written is a one-line
+    :class:`InputError` naming ``name`` (the argument or option)."""
+    p = Path(path)
+    d = p if directory else p.parent
+    if not directory and p.is_dir():
+        raise InputError(f"{name} {p}: is a directory (expected a file name)")
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise InputError(f"{name} {p}: cannot make the directory {d} ({e.strerror or e})") from None
+    if not os.access(d, os.W_OK | os.X_OK):
+        raise InputError(f"{name} {p}: the directory {d} is not writable")
+    return p
 
 
 def _create_beside(p: Path) -> tuple[Path, int]:

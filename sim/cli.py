@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import sys
 from pathlib import Path
 
@@ -264,23 +263,8 @@ def cmd_scenarios(args: argparse.Namespace) -> int:
     return 0
 
 
-def _output_ready(flag: str, path: str, directory: bool = False) -> Path:
-    """Make ``path``'s directory (or ``path`` itself, a directory) and check it can be
-    written, before hours of episodes or training would end in a failed write."""
-    p = Path(path)
-    d = p if directory else p.parent
-    if not directory and p.is_dir():
-        raise InputError(f"{flag} {path}: is a directory (expected a file name)")
-    try:
-        d.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise InputError(f"{flag} {path}: cannot make the directory {d} ({e.strerror or e})") from None
-    if not os.access(d, os.W_OK | os.X_OK):
-        raise InputError(f"{flag} {path}: the directory {d} is not writable")
-    return p
-
-
 def cmd_eval(args: argparse.Namespace) -> int:
+    from autonomy.files import output_path
     from sim.rl.evaluate import compare, comparison_table
     from sim.rl.policies import make_policy
     from sim.rl.splits import get_split
@@ -292,7 +276,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
         raise InputError(f"--seed: expected an integer >= 0, got {args.seed}")
     policies = [make_policy(spec) for spec in args.policy]  # every spec checked before any episode
     if args.out:
-        _output_ready("--out", args.out)
+        output_path(args.out, "--out")
     try:
         reports = compare(policies, split, args.episodes, args.seed, progress=not args.no_progress, out=args.out)
     except KeyboardInterrupt:
@@ -305,6 +289,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 
 def cmd_demos_record(args: argparse.Namespace) -> int:
+    from autonomy.files import output_path
     from sim.rl.demos import record_demonstrations
     from sim.rl.splits import get_split
 
@@ -317,7 +302,7 @@ def cmd_demos_record(args: argparse.Namespace) -> int:
         raise InputError(f"--max-steps: expected an integer >= 1, got {args.max_steps}")
     if not args.out.endswith(".npz"):
         raise InputError(f"--out: expected a file name ending in .npz, got {args.out!r}")
-    _output_ready("--out", args.out)
+    output_path(args.out, "--out")
     env_kwargs = None if args.max_steps is None else {"max_steps": args.max_steps}
     try:
         d = record_demonstrations(args.split, args.episodes, args.seed, args.out, env_kwargs, progress=not args.no_progress)
@@ -330,6 +315,7 @@ def cmd_demos_record(args: argparse.Namespace) -> int:
 
 
 def cmd_demos_bc(args: argparse.Namespace) -> int:
+    from autonomy.files import output_path
     from sim.rl.demos import load_demonstrations
 
     demos = load_demonstrations(args.file)  # a bad file fails before torch is imported
@@ -342,7 +328,9 @@ def cmd_demos_bc(args: argparse.Namespace) -> int:
         raise InputError(f"--lr: expected a positive number, got {args.lr}")
     if args.eval_episodes < 0:
         raise InputError(f"--eval-episodes: expected an integer >= 0, got {args.eval_episodes}")
-    _output_ready("--out", args.out, directory=True)
+    output_path(args.out, "--out", directory=True)
+    if (Path(args.out) / "model.zip").exists():  # checked before training, not when saving after it
+        raise InputError(f"--out {args.out}: holds a stable-baselines3 policy (model.zip); save the behaviour-cloning model elsewhere")
     from sim.rl.bc import train_bc
 
     policy, hist = train_bc(demos, args.epochs, args.batch_size, args.seed, args.lr)
@@ -361,6 +349,8 @@ def cmd_demos_bc(args: argparse.Namespace) -> int:
 
 
 def cmd_train_ppo(args: argparse.Namespace) -> int:
+    from autonomy.files import output_path
+
     ints = (("--steps", "total_steps", 1), ("--n-envs", "n_envs", 1), ("--seed", "seed", 0),
             ("--eval-episodes", "eval_episodes", 0), ("--checkpoint-every", "checkpoint_every", 1),
             ("--n-steps", "n_steps", 2), ("--batch-size", "batch_size", 2), ("--n-epochs", "n_epochs", 1))
@@ -391,7 +381,7 @@ def cmd_train_ppo(args: argparse.Namespace) -> int:
     else:
         if args.log_std_init is not None:
             given["policy_kwargs"] = {"log_std_init": float(args.log_std_init)}
-        _output_ready("--out", args.out, directory=True)
+        output_path(args.out, "--out", directory=True)
         cfg = PPOTrainConfig(out=args.out, **given)
         if args.end_on_collision:
             cfg = config_with(cfg, terminate_on_collision=True)

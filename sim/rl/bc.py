@@ -29,7 +29,7 @@ import torch
 from torch import nn
 
 from autonomy.errors import InputError
-from autonomy.files import atomic_write, atomic_write_text
+from autonomy.files import atomic_write, atomic_write_text, output_path
 from sim.rl.demos import Demonstrations
 from sim.rl.sb3 import FORMAT as SB3_FORMAT
 from sim.rl.sb3 import MODEL_FILE as SB3_MODEL_FILE
@@ -148,10 +148,7 @@ class BCPolicy:
         d = Path(directory)
         if (d / SB3_MODEL_FILE).exists():
             raise InputError(f"{d}: holds a stable-baselines3 policy ({SB3_MODEL_FILE}); save the behaviour-cloning model elsewhere")
-        try:
-            d.mkdir(parents=True, exist_ok=True)
-        except OSError as e:
-            raise InputError(f"{d}: cannot make the directory ({e.strerror or e})") from None
+        output_path(d, "directory", directory=True)
         atomic_write(d / MODEL_FILE, lambda f: torch.save(self.net.state_dict(), f))
         doc = {
             "kind": "bc",

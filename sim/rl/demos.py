@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from autonomy.errors import InputError
-from autonomy.files import atomic_write
+from autonomy.files import atomic_write, output_path
 
 FORMAT = "depthnav-demonstrations"
 VERSION = 1
@@ -224,14 +224,14 @@ def record_demonstrations(
     On a KeyboardInterrupt the finished episodes are written (``meta["interrupted"]``
     true; nothing is written when none finished) and the interrupt goes on.
     Returns the dataset as written."""
-    from sim.rl.evaluate import episode_env_kwargs, output_file, run_episode, run_episodes
+    from sim.rl.evaluate import episode_env_kwargs, run_episode, run_episodes
     from sim.rl.splits import episode_specs, get_split
 
     sp = get_split(split)
     specs = episode_specs(sp, episodes, seed)
     if Path(out).suffix != ".npz":
         raise InputError(f"out: expected a file name ending in .npz, got {str(out)!r}")
-    p = output_file(out)
+    p = output_path(out)
     expert = _Expert()
     shown = {k: v for k, v in episode_env_kwargs(expert, specs[0].building_seed, env_kwargs).items() if k != "building_seeds"}
     meta: dict[str, Any] = {

@@ -26,8 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from autonomy.errors import InputError
-from autonomy.files import atomic_write_text
+from autonomy.files import atomic_write_text, output_path
 from sim.rl.policies import Policy, make_policy
 from sim.rl.splits import BENCHMARK_TASK, TASK_KEYS, EpisodeSpec, Split, episode_specs, get_split
 
@@ -291,7 +290,7 @@ def evaluate(
     time, and summarise. ``out``: write the report's JSON there (atomically), also when
     interrupted (``"interrupted": true``, then the KeyboardInterrupt goes on)."""
     if out is not None:
-        output_file(out)
+        output_path(out)
     sink = None if out is None else (lambda report: write_json(out, report.to_dict()))
     return _evaluate(policy, split, episodes, seed, env_kwargs, progress, sink)
 
@@ -311,7 +310,7 @@ def compare(
     sp = get_split(split)
     episode_specs(sp, episodes, seed)  # bad arguments fail before any policy is made
     if out is not None:
-        output_file(out)
+        output_path(out)
     made = [make_policy(p) if isinstance(p, str) else p for p in policies]
     done: list[EvalReport] = []
 
@@ -405,19 +404,6 @@ def _evaluate(
 
 
 # -- helpers -------------------------------------------------------------------------------
-def output_file(path: str | Path, name: str = "out") -> Path:
-    """``path`` ready to be written, checked before any episode runs: its directory made;
-    a directory at ``path`` or a path under a file is an InputError naming ``name``."""
-    p = Path(path)
-    if p.is_dir():
-        raise InputError(f"{name} {p}: is a directory (expected a file name)")
-    try:
-        p.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise InputError(f"{name} {p}: cannot make the directory {p.parent} ({e.strerror or e})") from None
-    return p
-
-
 def write_json(path: str | Path, doc: Any) -> Path:
     """Write JSON atomically (:func:`autonomy.files.atomic_write_text`), making the
     directory."""

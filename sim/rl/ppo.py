@@ -36,7 +36,7 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecNormalize
 
 from autonomy.errors import InputError
-from autonomy.files import atomic_write, atomic_write_text
+from autonomy.files import atomic_write, atomic_write_text, output_path
 from sim.rl.sb3 import (
     FORMAT,
     FORMAT_VERSION,
@@ -411,10 +411,7 @@ def train_ppo(cfg: PPOTrainConfig, resume: bool = False, progress: bool = False,
             raise InputError(f"{out}: already {steps0} steps; give more total steps than that to resume")
     elif (out / MODEL_FILE).exists() or (out / PROGRESS_FILE).exists():
         raise InputError(f"{out}: holds a training run already; resume it (--resume) or choose another --out")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise InputError(f"PPOTrainConfig: 'out' {out}: cannot make the directory ({e.strerror or e})") from None
+    output_path(out, "PPOTrainConfig: 'out'", directory=True)
     torch.set_num_threads(cfg.torch_threads)
 
     venv: VecEnv = make_vec_env(cfg)

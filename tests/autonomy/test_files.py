@@ -92,3 +92,18 @@ def test_mode_is_that_of_a_plain_new_file(tmp_path, umask) -> None:
     mode = stat.S_IMODE(p.stat().st_mode)
     assert mode == 0o666 & ~umask
     assert mode == stat.S_IMODE((tmp_path / "plain.txt").stat().st_mode)
+
+
+def test_output_path_makes_the_directory_and_refuses_what_cannot_be_written(tmp_path) -> None:
+    from autonomy.errors import InputError
+    from autonomy.files import output_path
+
+    assert output_path(tmp_path / "a" / "b.json") == tmp_path / "a" / "b.json" and (tmp_path / "a").is_dir()
+    assert output_path(tmp_path / "run", directory=True).is_dir()
+    (tmp_path / "f").write_text("x")
+    with pytest.raises(InputError, match=r"^--out .*: is a directory"):
+        output_path(tmp_path / "run", "--out")
+    with pytest.raises(InputError, match=r"^out .*: cannot make the directory"):
+        output_path(tmp_path / "f" / "x.json")
+    with pytest.raises(InputError, match="cannot make the directory"):
+        output_path(tmp_path / "f" / "d", directory=True)

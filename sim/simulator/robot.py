@@ -257,6 +257,11 @@ class Odometry:
         self._last_true = np.asarray(true_pose, dtype=np.float64).copy()
         self.pose = self._last_true.copy()
 
+    def rebase(self, true_pose: np.ndarray) -> None:
+        """The robot was moved without its wheels turning (carried, bumped): the next
+        increment starts from ``true_pose``; the dead-reckoned pose is kept."""
+        self._last_true = np.asarray(true_pose, dtype=np.float64).copy()
+
     def update(self, true_pose: np.ndarray) -> np.ndarray:
         """Noisy increment since the last call."""
         inc = relative_pose(self._last_true, true_pose)

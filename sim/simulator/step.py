@@ -51,9 +51,10 @@ class SimFrame:
 
     t: float
     """Simulated time of the frame (s)."""
-    depth: np.ndarray
+    depth: np.ndarray | None
     """The Kinect frame: float32 planar depth in metres, 0 = invalid (a new array every
-    frame)."""
+    frame); None where a fault dropped the frame (:mod:`sim.simulator.faults`; a step
+    always captures one)."""
     increment: np.ndarray | None
     """Noisy odometry increment (dx, dy, dtheta) since the previous frame, robot frame;
     None for the first frame."""

@@ -20,7 +20,7 @@ from autonomy.raycast import SceneQuery, VisibilityGrid, load_or_build
 from autonomy.vectormap import load_navgraph, load_vectormap
 from sim.envs.config import EnvConfig
 from sim.simulator import blueprints
-from sim.simulator.actors import Furniture, PeopleController, Person
+from sim.simulator.actors import PARK_XY, Furniture, PeopleController, Person, parked_person
 from sim.simulator.blueprints import ASSETS_DIR
 from sim.simulator.building import (
     FURNITURE_KINDS,
@@ -32,8 +32,6 @@ from sim.simulator.building import (
 from sim.simulator.kinect import KinectCamera, KinectConfig
 from sim.simulator.world import World, build_world
 
-#: Where unused furniture and people are parked (outside any building).
-PARK_XY = (-1.0e4, -1.0e4)
 #: A random person starts at least this far beyond both radii from the robot's start.
 START_CLEARANCE_M = 0.5
 
@@ -89,10 +87,6 @@ def _yaw_quat(yaw: float) -> np.ndarray:
     return np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
 
 
-def _parked_person() -> Person:
-    return Person(route=(PARK_XY, (PARK_XY[0] + 1.0, PARK_XY[1])), speed_mps=0.0)
-
-
 @dataclass
 class Site:
     """A compiled building: the world, its camera, and what the episodes reuse."""
@@ -121,7 +115,7 @@ class Site:
             Furniture(kind=str(FURNITURE_KINDS[rng.integers(len(FURNITURE_KINDS))]), x=PARK_XY[0] - 10.0 * i, y=PARK_XY[1])
             for i in range(cfg.n_furniture)
         ]
-        people = list(cfg.people) + [_parked_person() for _ in range(cfg.n_people)]
+        people = list(cfg.people) + [parked_person() for _ in range(cfg.n_people)]
         world = build_world(
             building.vectormap, world=cfg.world, robot=cfg.robot, intrinsics=kinect.intrinsics, mount=kinect.mount,
             furniture=tuple(furniture), people=tuple(people),
@@ -166,7 +160,7 @@ class Site:
         """New routes for the random people, drawn as the scenario runner draws them."""
         b = self.building
         routes = list(random_people(b.navgraph, cfg.n_people, rng, b.main_node_ids)) if cfg.n_people else []
-        routes += [_parked_person() for _ in range(cfg.n_people - len(routes))]
+        routes += [parked_person() for _ in range(cfg.n_people - len(routes))]
         self.people = list(cfg.people) + routes
         self._restart_people(cfg)
 

@@ -19,6 +19,9 @@ from sim.simulator.robot import COLL_PEOPLE, COLL_ROBOT, COLL_STATIC
 
 FURNITURE_KINDS = ("table", "chair", "box", "cabinet")
 
+#: Where unused furniture and people are parked (outside any building).
+PARK_XY = (-1.0e4, -1.0e4)
+
 _FURNITURE_DEFAULT_SIZE = {
     # (length x, width y, height z) in metres
     "table": (1.2, 0.7, 0.74),
@@ -80,6 +83,11 @@ class Person:
                 raise InputError(f"person route point {p!r}: expected two finite numbers")
         if not self.speed_mps >= 0:
             raise InputError(f"person speed_mps {self.speed_mps!r}: expected a number >= 0")
+
+
+def parked_person() -> Person:
+    """A person standing still at ``PARK_XY``: a body compiled into the world for later use."""
+    return Person(route=(PARK_XY, (PARK_XY[0] + 1.0, PARK_XY[1])), speed_mps=0.0)
 
 
 def _yaw_quat(yaw: float) -> list[float]:
@@ -252,13 +260,28 @@ class PeopleController:
         self._pts: list[np.ndarray] = []
         self._cum: list[np.ndarray] = []
         for p in people:
-            pts = np.asarray(p.route, dtype=np.float64)
-            if p.loop:
-                pts = np.vstack([pts, pts[:1]])
-            seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+            pts, cum = self._route_arrays(p)
             self._pts.append(pts)
-            self._cum.append(np.concatenate([[0.0], np.cumsum(seg)]))
+            self._cum.append(cum)
         self.reset()
+
+    @staticmethod
+    def _route_arrays(p: Person) -> tuple[np.ndarray, np.ndarray]:
+        """A route's points (closed for a loop) and the arc length at each."""
+        pts = np.asarray(p.route, dtype=np.float64)
+        if p.loop:
+            pts = np.vstack([pts, pts[:1]])
+        seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+        return pts, np.concatenate([[0.0], np.cumsum(seg)])
+
+    def reroute(self, i: int, person: Person) -> None:
+        """Person ``i`` walks ``person``'s route from its ``start_offset_m`` on (a parked
+        person called in, or sent away); everyone else walks on as they were."""
+        self.people = (*self.people[:i], person, *self.people[i + 1 :])
+        self._pts[i], self._cum[i] = self._route_arrays(person)
+        self._s[i] = person.start_offset_m
+        self._side[i] = self._waited[i] = self._blocked[i] = 0.0
+        self._state[i] = self._place(i)
 
     def reset(self) -> None:
         """People back at their start offsets."""

@@ -26,8 +26,8 @@ from BV2012 or the plane-mapping paper):
    wall filling the view) change nothing. Because the moments live in the optical frame,
    a correction of the believed mount does not invalidate them.
 3. The mount the floor implies. The optical-frame up ``u``, expressed in the level
-   camera frame (``ROBOT_FROM_OPTICAL_LEVEL @ u`` = (-sin p, sin r cos p, cos r cos p)),
-   gives the pitch ``p`` and the roll ``r`` about the optical axis of
+   camera frame (``ROBOT_FROM_OPTICAL_LEVEL @ u`` = (-sin p cos r, sin r, cos p cos r)),
+   gives the pitch ``p`` and the roll ``r`` (about the robot's forward axis) of
    :class:`TiltedCameraMount`, and ``h`` its height. Yaw does not change the floor and
    is not observable this way; forward and lateral offsets stay as believed.
 4. Decision. The error of the believed mount is the angle between its up and the
@@ -60,22 +60,22 @@ from autonomy.fspf import FSPFResult, smallest_eigvec3
 
 @dataclass(frozen=True)
 class TiltedCameraMount(CameraMount):
-    """A :class:`CameraMount` that may also be rolled about the camera's optical axis.
+    """A :class:`CameraMount` that may also be rolled: leaned sideways about the robot's
+    forward axis.
 
-    ``rotation()`` is the plain mount's pitch rotation after the roll:
-    R_y(pitch) R_x(roll) ROBOT_FROM_OPTICAL_LEVEL, where R_x is about the robot's forward
-    axis. Positive roll turns the camera clockwise as seen from behind (its right side
-    down). With ``roll_rad`` 0 it is the plain mount.
+    ``rotation()`` is R_x(roll) times the plain mount's rotation (R_y(pitch)
+    ROBOT_FROM_OPTICAL_LEVEL): the pitched camera turned about the robot's x axis.
+    Positive roll raises the camera's left side (right-handed about x). With
+    ``roll_rad`` 0 it is the plain mount.
     """
 
     roll_rad: float = 0.0
-    """Roll about the optical axis (before the pitch)."""
+    """Roll about the robot's forward axis (after the pitch)."""
 
     def rotation(self) -> np.ndarray:
         """Rotation robot_from_optical (3 x 3)."""
         c, s = math.cos(self.roll_rad), math.sin(self.roll_rad)
-        # R_y R_x L = (R_y L)(L^T R_x L), and L^T R_x(r) L is a rotation by r about the optical z axis.
-        return super().rotation() @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]]) @ super().rotation()
 
 
 def mount_roll_rad(mount: CameraMount) -> float:
@@ -83,17 +83,26 @@ def mount_roll_rad(mount: CameraMount) -> float:
     return float(mount.roll_rad) if isinstance(mount, TiltedCameraMount) else 0.0
 
 
+def pitch_roll_from_up(up_optical: np.ndarray) -> np.ndarray:
+    """Pitch and roll of :class:`TiltedCameraMount` that make the floor with optical-frame
+    up ``up_optical`` (unit, (..., 3)) level: (..., 2) radians.
+
+    In the level camera frame that up is R^T e_z = (-sin p cos r, sin r, cos p cos r).
+    """
+    g = np.asarray(up_optical, dtype=np.float64) @ ROBOT_FROM_OPTICAL_LEVEL.T
+    g = g / np.linalg.norm(g, axis=-1, keepdims=True)
+    return np.stack([np.arctan2(-g[..., 0], g[..., 2]), np.arcsin(np.clip(g[..., 1], -1.0, 1.0))], axis=-1)
+
+
 def mount_from_floor(mount: CameraMount, up_optical: np.ndarray, height_m: float | None = None) -> TiltedCameraMount:
     """The mount with the pitch and roll (and, if given, the height) that put the floor
     with optical-frame unit normal ``up_optical`` level; offsets as in ``mount``."""
-    g = ROBOT_FROM_OPTICAL_LEVEL @ (np.asarray(up_optical, dtype=np.float64) / np.linalg.norm(up_optical))
-    pitch = math.atan2(-g[0], math.hypot(g[1], g[2]))
-    roll = math.atan2(g[1], g[2])
+    pitch, roll = pitch_roll_from_up(up_optical)
     base = {f.name: getattr(mount, f.name) for f in fields(CameraMount)}
-    base["pitch_down_rad"] = pitch
+    base["pitch_down_rad"] = float(pitch)
     if height_m is not None:
         base["height_m"] = float(height_m)
-    return TiltedCameraMount(**base, roll_rad=roll)
+    return TiltedCameraMount(**base, roll_rad=float(roll))
 
 
 @dataclass(frozen=True)
@@ -324,8 +333,7 @@ class MountCheck:
         if self._frames_total < w:
             return False
         order = (np.arange(w) + self._frames_total) % w  # oldest first
-        g = self._ring[order, :3] @ ROBOT_FROM_OPTICAL_LEVEL.T  # level-frame ups: (-sin p, sin r cos p, cos r cos p)
-        pr = np.column_stack([np.arctan2(-g[:, 0], np.hypot(g[:, 1], g[:, 2])), np.arctan2(g[:, 1], g[:, 2])])
+        pr = pitch_roll_from_up(self._ring[order, :3])
         med = np.median(pr, axis=0)
         mad = np.median(np.abs(pr - med), axis=0)
         drift = np.abs(np.median(pr[: w // 2], axis=0) - np.median(pr[w // 2 :], axis=0))

@@ -19,6 +19,7 @@ from autonomy.errors import InputError
 from autonomy.fspf import FSPFConfig, fspf
 from autonomy.mount_check import MountCheck, MountCheckConfig, TiltedCameraMount, floor_fit
 from sim.simulator.kinect_noise import KinectNoiseConfig, apply_kinect_noise
+from tests.helpers import GL
 
 INTR = CameraIntrinsics()
 NOMINAL = CameraMount()
@@ -40,13 +41,14 @@ class Scene:
 
 def camera_axes(pitch_rad: float, roll_rad: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Optical x (right), y (down), z (forward) in the robot frame: pitched down, then
-    turned by the roll about the forward axis (positive: right side down)."""
+    the whole camera turned by the roll about the robot's forward axis (positive: its
+    left side up), by Rodrigues' formula."""
     f = np.array([math.cos(pitch_rad), 0.0, -math.sin(pitch_rad)])
     right = np.array([0.0, -1.0, 0.0])
-    down = np.cross(f, right)
-    # Rodrigues about f (right is orthogonal to f): right cos r + (f x right) sin r.
-    right_r = right * math.cos(roll_rad) + down * math.sin(roll_rad)
-    return right_r, np.cross(f, right_r), f
+    axes = (right, np.cross(f, right), f)
+    k = np.array([1.0, 0.0, 0.0])
+    c, s = math.cos(roll_rad), math.sin(roll_rad)
+    return tuple(a * c + np.cross(k, a) * s + k * (k @ a) * (1.0 - c) for a in axes)  # type: ignore[return-value]
 
 
 def render(scene: Scene, pitch_rad: float, roll_rad: float, height_m: float = NOMINAL.height_m, intr: CameraIntrinsics = INTR) -> np.ndarray:
@@ -219,3 +221,49 @@ def test_config_errors_name_the_argument() -> None:
         MountCheckConfig(window_frames=0)
     with pytest.raises(InputError, match="mount: expected a CameraMount"):
         MountCheck("nominal")  # type: ignore[arg-type]
+
+
+def _mujoco_run(mount: CameraMount, poses, frames_per_pose: int = 4) -> MountCheck:
+    """The check fed FSPF (nominal mount) on noisy frames of the real renderer: a room
+    with furniture, the robot at ``poses``, the camera really on ``mount``."""
+    from sim.simulator.actors import Furniture
+    from sim.simulator.kinect import KinectCamera, KinectConfig
+    from sim.simulator.world import build_world
+    from tests.helpers import box_room
+
+    furniture = (
+        Furniture("table", 6.0, 1.5), Furniture("chair", 4.5, 4.0), Furniture("box", 7.5, 4.5),
+        Furniture("chair", 2.5, 1.2, 0.5), Furniture("cabinet", 9.3, 3.0),
+    )
+    w = build_world(box_room(), mount=mount, furniture=furniture)
+    cam = KinectCamera(w.model, w.camera_id, KinectConfig(mount=mount))
+    check = MountCheck(NOMINAL)
+    try:
+        k = 0
+        for pose in poses:
+            w.reset(pose)
+            for _ in range(frames_per_pose):
+                check.update(fspf(cam.capture(w.data, seed=k), INTR, FSPFConfig(), seed=k, mount=check.mount))
+                k += 1
+    finally:
+        cam.close()
+    return check
+
+
+MUJOCO_POSES = [(x, y, th) for x, y in ((2.0, 3.0), (4.0, 2.0), (6.5, 3.5), (8.0, 1.5)) for th in (-2.0, -0.3, 0.6, 2.4)]
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not GL, reason="no EGL/OSMesa context on this machine")
+def test_real_renderer_tilt_found_and_correct_mount_left_alone() -> None:
+    """The same through MuJoCo's depth and the Kinect model, furniture included."""
+    tilted = TiltedCameraMount(pitch_down_rad=NOMINAL.pitch_down_rad + math.radians(2.5), roll_rad=math.radians(-2.0))
+    check = _mujoco_run(tilted, MUJOCO_POSES)
+    ev = check.evidence()
+    assert ev.corrections == 1 and isinstance(check.mount, TiltedCameraMount)
+    assert math.degrees(abs(check.mount.pitch_down_rad - tilted.pitch_down_rad)) < 0.3
+    assert math.degrees(abs(check.mount.roll_rad - tilted.roll_rad)) < 0.3
+    assert abs(check.mount.height_m - tilted.height_m) < 0.02
+    level = _mujoco_run(NOMINAL, MUJOCO_POSES)
+    ev = level.evidence()
+    assert ev.corrections == 0 and ev.frames_total > 40 and ev.tilt_deg < 0.3

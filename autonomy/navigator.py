@@ -13,7 +13,13 @@ Per frame it:
    the graph edge's ``max_speed``; map walls in the camera's blind spots count as
    obstacles, ``map_blind_spots_m``);
 4. watches progress: no progress for ``stuck_time_s`` triggers a recovery (back off
-   briefly, then re-plan from the nearest reachable node).
+   briefly, then re-plan from the nearest reachable node); the graph edges where what
+   blocks the robot stands are left out of the plans for ``blocked_edge_s``, so the
+   re-plan goes round a corridor that a box or a closed door (not in the map) blocks.
+
+A back-off (the camera does not look behind the robot) goes only over the robot's own
+recent trail, where it has been (``trail_s``); else the robot turns in place towards its
+plan, so that the camera looks before the robot drives.
 
 Obstacles are remembered for ``memory_s`` in the world frame (through the pose
 estimate) while they are out of the camera's view: with a 58 degree field of view and
@@ -32,14 +38,26 @@ import numpy as np
 from autonomy.avoidance import AvoidanceConfig, AvoidanceResult, choose_direction
 from autonomy.camera import KINECT_V1, DepthCamera
 from autonomy.errors import InputError, require_non_negative, require_positive
-from autonomy.geometry import crosses_any, point_segment_projection, wrap_angle, wrap_angles
+from autonomy.geometry import (
+    crosses_any,
+    point_segment_distance,
+    point_segment_projection,
+    wrap_angle,
+    wrap_angles,
+)
 from autonomy.nearfield import line_points
 from autonomy.obstacle_memory import update_memory
-from autonomy.planner import astar, path_points
+from autonomy.planner import NoPathError, astar, edge_key, path_points
 from autonomy.vectormap import NavGraph
 
 _MEMORY_KEEP_MARGIN_M = 0.5
 """Remembered points are dropped beyond memory_radius_m plus this (the robot moves on)."""
+_TRAIL_STEP_M = 0.05
+"""The trail keeps a footprint each time the robot has moved this far (``trail_s``)."""
+_TRAIL_SAMPLE_M = 0.025
+"""A back-off's sweep is checked against the trail at points this far apart."""
+_BLOCKED_POINTS_KEPT = 64
+"""At most this many of the points that blocked an edge are kept with its mark."""
 
 
 @dataclass(frozen=True)
@@ -78,6 +96,33 @@ class NavigatorConfig:
     """The way back is checked this far against map walls and remembered obstacles."""
     backoff_clearance_m: float = 0.03
     """... and must keep this clearance (beyond the robot radius) from them."""
+    trail_s: float = 30.0
+    """A back-off needs the evidence driving forward has, that the space is free: the
+    camera never saw the way back, and no remembered obstacle there is no proof that
+    nothing stands there (furniture the camera could not see). So the robot backs off
+    only along its own trail, the footprints (pose estimates) of the last ``trail_s``:
+    the whole back-off (``backoff_check_m``) must stay within ``trail_tolerance_m`` of
+    them; else it turns in place towards its plan (turning is always safe for a round
+    robot) and drives forward once it looks. 0 = off (back off wherever the map and the
+    memory leave room)."""
+    trail_tolerance_m: float = 0.1
+    """... this far off the trail's footprints at most."""
+    blocked_edge_s: float = 120.0
+    """A stuck robot (``stuck_time_s``), or one Eq. 5 finds blocked after
+    ``blocked_wait_s`` without progress, marks the plan's navigation-graph edges that
+    the blocking obstacle stands on (sensed points on the plan's line ahead, placed
+    through the pose estimate, within the avoidance radius of the edge) as blocked and
+    re-plans without them (a box or a closed door across a corridor is not in the map:
+    re-planning the same way would lead back into it). A mark lasts this long (a person
+    who stood there moves on); all are forgotten when no path is left without them.
+    0 = off (re-plan on the whole graph)."""
+    blocked_wait_s: float = 3.0
+    """... blocked this long without progress (a person walking past blocks briefly) ..."""
+    blocked_check_m: float = 1.5
+    """... with the obstacle on the plan's line no farther ahead than this."""
+    look_turn_rate_rad_s: float = 0.6
+    """Yaw rate of :meth:`Navigator.look_around` (turning in place so that the camera
+    sweeps the walls, e.g. while the localization searches for the robot)."""
     exclude_stairs: bool = True
     """Plans avoid edges flagged has_stairs."""
     memory_s: float = 2.0
@@ -168,8 +213,9 @@ class NavigatorConfig:
             "backoff_check_m", "backoff_clearance_m", "corner_speed_mps", "corner_angle_rad", "corner_before_m",
             "map_blind_spots_m", "map_clearance_m", "proximity_speed_mps", "proximity_gap_m", "proximity_range_m",
             "corner_after_m", "corner_ramp_m", "near_wall_tol_m", "backoff_memory_s", "lane_shift_m", "lane_check_m",
+            "trail_s", "trail_tolerance_m", "blocked_edge_s", "blocked_wait_s", "blocked_check_m",
         )
-        require_positive(self, "navigator.", "memory_cell_m", "memory_radius_m")
+        require_positive(self, "navigator.", "memory_cell_m", "memory_radius_m", "look_turn_rate_rad_s")
         # The memory merges cells on a dense grid over memory_radius_m + 0.5 (obstacle_memory.py).
         finest = (self.memory_radius_m + _MEMORY_KEEP_MARGIN_M) / 250
         if self.memory_cell_m < finest:
@@ -186,7 +232,7 @@ class NavCommand:
     velocity: np.ndarray
     """Body-frame command (vx, vy, omega)."""
     state: str
-    """idle, turning, driving, blocked, recovering or arrived."""
+    """idle, turning, driving, blocked, recovering, looking or arrived."""
     carrot: np.ndarray = field(default_factory=lambda: np.zeros(2))
     """Carrot in the world frame."""
     desired_rad: float = 0.0
@@ -238,6 +284,27 @@ class Navigator:
         self._stuck_backoff = False
         self.replans = 0
         self.recoveries = 0
+        self.blocked_edges = 0
+        """Edges marked blocked so far (``blocked_edge_s``; a mark renewed is not counted)."""
+        self.blocked: dict[tuple[int, int], float] = {}
+        """The edges marked blocked now (node ids, the smaller first) and when each mark
+        expires; the plans leave them out."""
+        self._blocked_pts: dict[tuple[int, int], np.ndarray] = {}
+        """World points of the obstacle that blocked each marked edge (the start of a
+        re-plan is not taken through them)."""
+        self.plan_nodes: list[int] = []
+        """The plan's graph nodes (the plan runs from the pose to the first of them, then on)."""
+        self._waited_since: float | None = None
+        """The stuck clock's start when a blocked wait last re-planned to no avail."""
+        self._t = 0.0
+        """Time of the last frame (``command``)."""
+        # The trail (trail_s): a ring of footprints every _TRAIL_STEP_M, with their times,
+        # big enough for trail_s at twice the cruise speed.
+        cap = int(math.ceil(2.0 * cfg.trail_s * max(cfg.cruise_speed_mps, cfg.backoff_speed_mps) / _TRAIL_STEP_M)) + 16
+        self._trail = np.zeros((cap, 2))
+        self._trail_t = np.full(cap, -np.inf)
+        self._trail_next = 0
+        self._trail_last: np.ndarray | None = None
         self._mem = np.zeros((0, 2))
         self._mem_t = np.zeros(0)
         self._mem_all = np.zeros((0, 2))
@@ -252,10 +319,19 @@ class Navigator:
                 self._edge_speed[(e.s1_id, e.s0_id)] = float(e.max_speed)
 
     # -- planning ----------------------------------------------------------------------
-    def nearest_reachable_node(self, xy: np.ndarray) -> int:
-        """The closest node that can be reached in a straight line (no wall in between)."""
+    def nearest_reachable_node(self, xy: np.ndarray, avoid: np.ndarray | None = None) -> int:
+        """The closest node that can be reached in a straight line (no wall in between).
+
+        ``avoid``: world points (an obstacle that blocked an edge) the straight line must
+        not run into (none within the avoidance radius of it, ahead); when every nearby
+        node's line does, as if there were none."""
         nodes = self.graph.node_xy()
         order = np.argsort(np.hypot(nodes[:, 0] - xy[0], nodes[:, 1] - xy[1]))
+        if avoid is not None and len(avoid):
+            walls = self.walls if self.walls is not None and len(self.walls) else None
+            for k in order[:30]:
+                if (walls is None or not crosses_any(xy, nodes[k], walls)) and not self._line_runs_into(xy, nodes[k], avoid):
+                    return int(self.graph.nodes[int(k)].id)
         if self.walls is None or not len(self.walls):
             return int(self.graph.nodes[int(order[0])].id)
         for k in order[:30]:
@@ -263,10 +339,42 @@ class Navigator:
                 return int(self.graph.nodes[int(k)].id)
         return int(self.graph.nodes[int(order[0])].id)
 
+    def _line_runs_into(self, p: np.ndarray, q: np.ndarray, pts: np.ndarray) -> bool:
+        """Whether a robot driving straight from ``p`` to ``q`` meets one of the points
+        (ahead of ``p``, within the avoidance radius of the line, up to that radius past ``q``)."""
+        r = self.avoid.radius_m
+        u = np.asarray(q, dtype=np.float64) - p
+        L = math.hypot(u[0], u[1])
+        if L < 1e-9:
+            return False
+        u = u / L
+        rel = pts - p
+        along = rel @ u
+        lateral = np.abs(rel[:, 1] * u[0] - rel[:, 0] * u[1])
+        return bool(np.any((along > 0.0) & (along < L + r) & (lateral < r)))
+
     def set_goal(self, goal_id: int, pose: np.ndarray, t: float = 0.0) -> float:
-        """Plan from the pose to a node; returns the plan's length in metres."""
-        start = self.nearest_reachable_node(np.asarray(pose[:2]))
-        nodes = astar(self.graph, start, goal_id, exclude_stairs=self.cfg.exclude_stairs)
+        """Plan from the pose to a node; returns the plan's length in metres.
+
+        The plan leaves out the edges marked blocked (``blocked``), and does not start
+        through what blocked them; when that leaves no path, the marks are forgotten and
+        the plan uses the whole graph (:class:`autonomy.planner.NoPathError` when even
+        that has none)."""
+        xy = np.asarray(pose[:2])
+        self._prune_blocked(t)
+        excluded = tuple(self.blocked)
+        if excluded:
+            avoid = np.vstack([self._blocked_pts.get(e, np.zeros((0, 2))) for e in excluded])
+            start = self.nearest_reachable_node(xy, avoid)
+            try:
+                nodes = astar(self.graph, start, goal_id, exclude_stairs=self.cfg.exclude_stairs, excluded=excluded)
+            except NoPathError:
+                self.forget_blocked()
+                excluded = ()
+        if not excluded:
+            start = self.nearest_reachable_node(xy)
+            nodes = astar(self.graph, start, goal_id, exclude_stairs=self.cfg.exclude_stairs)
+        self.plan_nodes = list(nodes)
         pts = np.vstack([np.asarray(pose[:2], dtype=np.float64)[None, :], path_points(self.graph, nodes)])
         # Speed limit of each segment: the edge's max_speed; none from the pose to the plan.
         speeds = np.array([math.inf] + [self._edge_speed.get((a, b), math.inf) for a, b in zip(nodes[:-1], nodes[1:], strict=True)])
@@ -427,18 +535,24 @@ class Navigator:
     def _backoff_velocity(self, pose: np.ndarray, obstacles: np.ndarray) -> np.ndarray:
         """Recovery motion: back off along the clearest direction behind the robot.
 
-        Behind the robot the camera sees nothing, so the way back is checked against the
-        map's walls and the remembered obstacles: straight back if that is clear for
-        ``backoff_check_m``, else the nearest clear direction within 75 degrees of it,
-        else no translation (the robot re-plans where it stands). Straight back would run
-        into door frames and walls it cannot see (ours).
+        Behind the robot the camera sees nothing, so a direction is taken only where the
+        robot has been (its trail, :meth:`trail_allows`; ``trail_s``) and where the map's
+        walls and the remembered obstacles leave room (someone may have stepped in since):
+        straight back if that holds for ``backoff_check_m``, else the nearest such
+        direction within 75 degrees of it, else no translation (the robot re-plans where
+        it stands). Straight back would run into door frames and walls it cannot see
+        (ours), and off the trail into furniture the camera never saw.
         """
         cfg = self.cfg
         pts = np.asarray(obstacles, dtype=np.float64).reshape(-1, 2)
         walls = self.map_points(pose, cfg.backoff_check_m + self.avoid.robot_radius_m + 0.2)
         pts = np.vstack([pts, walls, self._mem_all])
         clear = self.avoid.robot_radius_m + cfg.backoff_clearance_m
-        for k in (0, 1, -1, 2, -2, 3, -3, 4, -4, 5, -5):
+        steps = (0, 1, -1, 2, -2, 3, -3, 4, -4, 5, -5)
+        on_trail = self.trail_allows(pose, float(pose[2]) + math.pi + np.radians(15.0) * np.array(steps, dtype=np.float64))
+        for j, k in enumerate(steps):
+            if not on_trail[j]:
+                continue
             phi = math.pi + k * math.radians(15.0)
             u = np.array([math.cos(phi), math.sin(phi)])
             ahead = pts[pts @ u > 0.0] if len(pts) else pts  # what lies the other way never blocks
@@ -448,6 +562,168 @@ class Navigator:
                     continue
             return np.array([cfg.backoff_speed_mps * u[0], cfg.backoff_speed_mps * u[1], 0.0])
         return np.zeros(3)
+
+    # -- the trail, blocked edges, looking round, pose jumps ----------------------------
+    def _record_trail(self, pose: np.ndarray, t: float) -> None:
+        """Add the pose to the trail once it is ``_TRAIL_STEP_M`` from the last footprint."""
+        if self.cfg.trail_s <= 0:
+            return
+        x, y = float(pose[0]), float(pose[1])
+        last = self._trail_last
+        if last is not None and (x - last[0]) ** 2 + (y - last[1]) ** 2 < _TRAIL_STEP_M * _TRAIL_STEP_M:
+            return
+        k = self._trail_next % len(self._trail)
+        self._trail[k] = (x, y)
+        self._trail_t[k] = t
+        self._trail_next += 1
+        self._trail_last = self._trail[k].copy()
+
+    def trail_points(self, t: float | None = None) -> np.ndarray:
+        """The trail: the robot's footprints (pose estimates, world frame, about
+        ``_TRAIL_STEP_M`` apart, oldest first) of the ``trail_s`` before ``t`` (default:
+        the last frame's time)."""
+        t = self._t if t is None else float(t)
+        cap = len(self._trail)
+        n = min(self._trail_next, cap)
+        order = np.arange(self._trail_next - n, self._trail_next) % cap
+        return self._trail[order][t - self._trail_t[order] <= self.cfg.trail_s]
+
+    def trail_allows(self, pose: np.ndarray, angles: np.ndarray) -> np.ndarray:
+        """For each world-frame direction in ``angles``: whether a straight move of
+        ``backoff_check_m`` that way from the pose stays on the trail, i.e. every point of
+        it (every ``_TRAIL_SAMPLE_M``) lies within ``trail_tolerance_m`` of a footprint of
+        the trail or of the pose itself (then the robot's disc there lies within that
+        tolerance of the footprint's disc). All True when the trail is off."""
+        cfg = self.cfg
+        angles = np.asarray(angles, dtype=np.float64).reshape(-1)
+        if cfg.trail_s <= 0:
+            return np.ones(len(angles), dtype=bool)
+        xy = np.asarray(pose[:2], dtype=np.float64)
+        tr = self.trail_points()
+        reach = cfg.backoff_check_m + cfg.trail_tolerance_m
+        tr = np.vstack([tr[(tr[:, 0] - xy[0]) ** 2 + (tr[:, 1] - xy[1]) ** 2 <= reach * reach], xy[None, :]])
+        d = np.linspace(0.0, cfg.backoff_check_m, int(math.ceil(cfg.backoff_check_m / _TRAIL_SAMPLE_M)) + 1)
+        u = np.column_stack([np.cos(angles), np.sin(angles)])
+        q = xy + d[None, :, None] * u[:, None, :]  # (directions, samples, 2)
+        gap2 = ((q[:, :, None, :] - tr[None, None, :, :]) ** 2).sum(axis=-1).min(axis=-1)
+        return (gap2 <= cfg.trail_tolerance_m**2).all(axis=1)
+
+    def _plan_direction(self, pose: np.ndarray) -> tuple[np.ndarray, float, float]:
+        """The carrot on the plan (no lane shift), its direction in the robot frame and
+        the yaw rate turning towards it."""
+        cfg = self.cfg
+        xy = np.asarray(pose[:2], dtype=np.float64)
+        if len(self.path) < 2:
+            return xy, 0.0, 0.0
+        carrot = self._point_at(self._project(xy) + cfg.lookahead_m)
+        d = carrot - xy
+        desired = wrap_angle(math.atan2(d[1], d[0]) - float(pose[2]))
+        return carrot, desired, float(np.clip(cfg.heading_gain * desired, -cfg.max_turn_rate_rad_s, cfg.max_turn_rate_rad_s))
+
+    def _turn_to_plan(self, pose: np.ndarray) -> np.ndarray:
+        """Turning in place towards the plan (a round robot can always turn)."""
+        return np.array([0.0, 0.0, self._plan_direction(pose)[2]])
+
+    def _prune_blocked(self, t: float) -> None:
+        """Forget the marks that expired by ``t``."""
+        for e in [e for e, until in self.blocked.items() if until <= t]:
+            del self.blocked[e]
+            self._blocked_pts.pop(e, None)
+
+    def forget_blocked(self) -> None:
+        """Forget every blocked edge (the next plan uses the whole graph)."""
+        self.blocked.clear()
+        self._blocked_pts.clear()
+
+    def blocking_points(self, pose: np.ndarray, located: np.ndarray) -> np.ndarray:
+        """The ``located`` obstacles (robot frame) on the plan's line ahead, in the world
+        frame (through the pose): within the avoidance radius of the plan between that
+        radius behind the robot's place on it and ``blocked_check_m`` ahead, and not
+        explained by a map wall (none within ``near_wall_tol_m``)."""
+        cfg, r = self.cfg, self.avoid.radius_m
+        obs = np.asarray(located, dtype=np.float64).reshape(-1, 2)
+        if not len(obs) or not len(self._segments):
+            return np.zeros((0, 2))
+        xy = np.asarray(pose[:2], dtype=np.float64)
+        c, sn = math.cos(float(pose[2])), math.sin(float(pose[2]))
+        rel = np.column_stack([c * obs[:, 0] - sn * obs[:, 1], sn * obs[:, 0] + c * obs[:, 1]])  # world axes
+        w = rel + xy
+        s0 = self._project(xy)
+        a, d = self._segments[:, :2], self._segments[:, 2:] - self._segments[:, :2]
+        L2 = np.einsum("ij,ij->i", d, d)
+        f = np.clip(np.einsum("mkj,kj->mk", w[:, None, :] - a[None], d) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
+        gap = np.hypot(w[:, None, 0] - a[None, :, 0] - f * d[None, :, 0], w[:, None, 1] - a[None, :, 1] - f * d[None, :, 1])
+        arc = self._cum[None, :-1] + f * self._seg_len[None, :]
+        on = ((gap < r) & (arc > s0 - r) & (arc < s0 + cfg.blocked_check_m)).any(axis=1)
+        rel, w = rel[on], w[on]
+        if len(rel):
+            walls = self._near_walls(pose, float(np.max(np.hypot(rel[:, 0], rel[:, 1]))) + cfg.near_wall_tol_m)
+            if len(walls):
+                d2 = ((rel[:, None, :] - walls[None, :, :]) ** 2).sum(axis=-1).min(axis=1)
+                w = w[d2 >= cfg.near_wall_tol_m**2]
+        return w
+
+    def _mark_blocked(self, pose: np.ndarray, located: np.ndarray, t: float) -> bool:
+        """Mark blocked (until ``t + blocked_edge_s``) the graph edges within the avoidance
+        radius of the obstacle on the plan's line ahead (:meth:`blocking_points`): the
+        plan's edges and those of its first node (the robot may stand on one of them,
+        short of that node). True when an edge was not marked before."""
+        cfg = self.cfg
+        if cfg.blocked_edge_s <= 0 or not self.plan_nodes:
+            return False
+        pts = self.blocking_points(pose, located)
+        if not len(pts):
+            return False
+        first = self.plan_nodes[0]
+        cand = {edge_key(a, b) for a, b in zip(self.plan_nodes[:-1], self.plan_nodes[1:], strict=True)}
+        cand |= {edge_key(e.s0_id, e.s1_id) for e in self.graph.edges if first in (e.s0_id, e.s1_id)}
+        edges = sorted(cand)
+        if not edges:
+            return False
+        nodes = self.graph.node_xy()
+        segs = np.array([[*nodes[self.graph.index_of(a)], *nodes[self.graph.index_of(b)]] for a, b in edges], dtype=np.float64)
+        near = point_segment_distance(pts, segs) < self.avoid.radius_m  # (points, edges)
+        new = False
+        for j in np.flatnonzero(near.any(axis=0)):
+            e = edges[int(j)]
+            if e not in self.blocked:
+                new = True
+                self.blocked_edges += 1
+            self.blocked[e] = t + cfg.blocked_edge_s
+            on = pts[near[:, j]]
+            self._blocked_pts[e] = on[:: max(1, int(math.ceil(len(on) / _BLOCKED_POINTS_KEPT)))]
+        return new
+
+    def look_around(self, t: float) -> NavCommand:
+        """Turn in place at ``look_turn_rate_rad_s`` (state "looking"), no translation:
+        the camera sweeps the walls round the robot (while the localization searches
+        for it). The stuck clock holds and a back-off under way ends."""
+        self._t = float(t)
+        self._progress_t = float(t)
+        self._backoff_until = -1.0
+        self._backoff_started = -np.inf
+        return NavCommand(np.array([0.0, 0.0, self.cfg.look_turn_rate_rad_s]), "looking")
+
+    def pose_jumped(self, pose: np.ndarray | None = None, t: float | None = None) -> None:
+        """The pose estimate jumped (the robot was re-localized elsewhere): forget what
+        was placed through the old estimate -- the obstacle memory, the trail, the lane
+        and side chosen -- and a back-off under way; given the new ``pose`` and with a
+        goal set, re-plan from it (at ``t``, default the last frame's time). Blocked
+        edges stay marked (they expire, and are forgotten when they leave no path)."""
+        self._mem = np.zeros((0, 2))
+        self._mem_t = np.zeros(0)
+        self._mem_all = np.zeros((0, 2))
+        self._trail_t[:] = -np.inf
+        self._trail_next = 0
+        self._trail_last = None
+        self._lane = 0.0
+        self._side = 0
+        self._backoff_until = -1.0
+        self._backoff_started = -np.inf
+        self._stuck_backoff = False
+        if pose is not None and self.goal is not None:
+            self.replans += 1
+            self.set_goal(self.goal, pose, self._t if t is None else float(t))
 
     def lane_offset(self, pose: np.ndarray, obstacles: np.ndarray, s: float) -> float:
         """Sideways shift (m, left of the plan positive) of the carrot (``lane_shift_m``).
@@ -596,6 +872,10 @@ class Navigator:
         obstacles closer than the camera's minimum range; they join the obstacles for this
         frame only (the next frame tells again whether they are still there).
         """
+        self._t = float(t)
+        self._record_trail(pose, t)
+        if self.blocked:
+            self._prune_blocked(t)
         obstacles = self.remember(pose, obstacles, t)
         located = obstacles
         near = self.near_points(pose, near_lines)
@@ -617,12 +897,12 @@ class Navigator:
         to_goal = float(np.hypot(*(goal_xy - xy)))
         if to_goal < cfg.arrival_radius_m:
             return NavCommand(np.zeros(3), "arrived", carrot=goal_xy)
-        backing = self._continue_backoff(pose, obstacles, t)
+        backing = self._continue_backoff(pose, obstacles, t, obstacles if located is None else located)
         if backing is not None:
             return backing
         s = self._project(xy)
         if self._stuck(s, t):
-            return self._start_recovery(pose, obstacles, t)
+            return self._start_recovery(pose, obstacles, t, located)
         carrot = self._carrot(pose, s, obstacles if located is None else located)
         d = carrot - xy
         desired = wrap_angle(math.atan2(d[1], d[0]) - float(pose[2]))
@@ -631,11 +911,11 @@ class Navigator:
             return NavCommand(np.array([0.0, 0.0, turn]), "turning", carrot=carrot, desired_rad=desired)
         res = self._choose_direction(pose, obstacles, desired)
         if res.blocked:
-            return self._when_blocked(pose, obstacles, t, carrot, desired, turn, res)
+            return self._when_blocked(pose, obstacles, t, carrot, desired, turn, res, located)
         speed = min(cfg.cruise_speed_mps, res.safe_speed_mps, 0.8 * to_goal + 0.05, self.corner_speed_limit(s), self.edge_speed_limit(s))
         return self._drive(obstacles, carrot, desired, speed, res)
 
-    def _continue_backoff(self, pose: np.ndarray, obstacles: np.ndarray, t: float) -> NavCommand | None:
+    def _continue_backoff(self, pose: np.ndarray, obstacles: np.ndarray, t: float, located: np.ndarray) -> NavCommand | None:
         """The back-off's command while it goes on; None once it is over.
 
         Back off at least backoff_time_s, and on until what blocked the way is in the
@@ -643,15 +923,26 @@ class Navigator:
         After a stuck recovery's back-off the stuck clock starts again (run on through a
         long back-off, it would send the robot from one recovery straight into the next,
         for ever, where it cannot back off); a back-off from a blind block counts as no
-        progress."""
+        progress. Where it may not back off (:meth:`_backoff_velocity`), the robot turns
+        in place towards its plan until ``backoff_time_s`` is over. A back-off from a
+        blind block that goes on without progress re-plans round the block
+        (:meth:`_replan_round_block`; ``located``: the obstacles whose place is known)
+        and ends."""
         cfg = self.cfg
         if not (t < self._backoff_until or (t - self._backoff_started < cfg.max_backoff_s and self._blind_blocked(obstacles))):
             return None
+        if not self._stuck_backoff and self._replan_round_block(pose, located, t):
+            self._backoff_until = -1.0
+            self._backoff_started = -np.inf
+            carrot, desired, omega = self._plan_direction(pose)
+            return NavCommand(np.array([0.0, 0.0, omega]), "turning", carrot, desired)
         v = self._backoff_velocity(pose, obstacles)
         if self._stuck_backoff:
             self._progress_t = t
-        if t < self._backoff_until or v.any():
+        if v.any():
             return NavCommand(v, "recovering")
+        if t < self._backoff_until:
+            return NavCommand(self._turn_to_plan(pose), "recovering")
         self._backoff_started = -np.inf
         return None
 
@@ -665,8 +956,10 @@ class Navigator:
             return False
         return t - self._progress_t > cfg.stuck_time_s
 
-    def _start_recovery(self, pose: np.ndarray, obstacles: np.ndarray, t: float) -> NavCommand:
-        """Recovery: back off, then re-plan from wherever the robot then is."""
+    def _start_recovery(self, pose: np.ndarray, obstacles: np.ndarray, t: float, located: np.ndarray | None = None) -> NavCommand:
+        """Recovery: mark the edges what blocks the robot stands on (``located``, the
+        obstacles whose place is known; :meth:`_mark_blocked`), re-plan without them,
+        and back off (or, where the robot may not, turn in place towards the plan)."""
         cfg = self.cfg
         self.recoveries += 1
         self._backoff_until = t + cfg.backoff_time_s
@@ -674,8 +967,10 @@ class Navigator:
         self._stuck_backoff = True
         self.replans += 1
         assert self.goal is not None
+        self._mark_blocked(pose, obstacles if located is None else located, t)
         self.set_goal(self.goal, pose, t + cfg.backoff_time_s)
-        return NavCommand(self._backoff_velocity(pose, obstacles), "recovering")
+        v = self._backoff_velocity(pose, obstacles)
+        return NavCommand(v if v.any() else self._turn_to_plan(pose), "recovering")
 
     def _carrot(self, pose: np.ndarray, s: float, located: np.ndarray) -> np.ndarray:
         """The carrot: ``lookahead_m`` ahead of arc length ``s`` on the plan, shifted
@@ -703,11 +998,24 @@ class Navigator:
         return self._keep_side(res, desired)
 
     def _when_blocked(
-        self, pose: np.ndarray, obstacles: np.ndarray, t: float, carrot: np.ndarray, desired: float, turn: float, res: AvoidanceResult
+        self,
+        pose: np.ndarray,
+        obstacles: np.ndarray,
+        t: float,
+        carrot: np.ndarray,
+        desired: float,
+        turn: float,
+        res: AvoidanceResult,
+        located: np.ndarray | None = None,
     ) -> NavCommand:
-        """No direction is open: back off if what blocks is too close for the camera to
-        see, else wait turning towards the carrot."""
+        """No direction is open: after ``blocked_wait_s`` without progress with the
+        obstacle on the plan's line (``located``), mark its edges blocked and re-plan;
+        else back off if what blocks is too close for the camera to see, else wait
+        turning towards the carrot."""
         fan = (res.angles, res.lengths)
+        if self._replan_round_block(pose, obstacles if located is None else located, t):
+            carrot, desired, omega = self._plan_direction(pose)
+            return NavCommand(np.array([0.0, 0.0, omega]), "blocked", carrot, desired, res.theta_star, res.open_length_m, fan)
         back = self._backoff_velocity(pose, obstacles) if self._blind_blocked(obstacles) else np.zeros(3)
         if back.any():
             # What blocks is too close for the camera to see: back off until it can
@@ -718,6 +1026,30 @@ class Navigator:
             return NavCommand(back, "recovering", carrot, desired, res.theta_star, res.open_length_m, fan)
         # Wait (turning towards the carrot): people step aside; stuck detection recovers.
         return NavCommand(np.array([0.0, 0.0, turn]), "blocked", carrot, desired, res.theta_star, res.open_length_m, fan)
+
+    def _replan_round_block(self, pose: np.ndarray, located: np.ndarray, t: float) -> bool:
+        """Blocked (Eq. 5 finds no open direction, or a back-off from what blocks is under
+        way) without progress for ``blocked_wait_s``: mark the edges the obstacle stands
+        on (:meth:`_mark_blocked`) and re-plan. True when the plan changed; when it did
+        not (no other way), the robot waits as before, the stuck clock running on, and
+        tries again only after some progress."""
+        cfg = self.cfg
+        if not (
+            cfg.blocked_edge_s > 0
+            and self.goal is not None
+            and t - self._progress_t >= cfg.blocked_wait_s
+            and self._progress_t != self._waited_since
+            and self._mark_blocked(pose, located, t)
+        ):
+            return False
+        before, since = list(self.plan_nodes), self._progress_t
+        self.replans += 1
+        self.set_goal(self.goal, pose, t)
+        if self.plan_nodes != before:
+            return True
+        self._progress_t = self._waited_since = since
+        self._best_s = self._project(np.asarray(pose[:2], dtype=np.float64))
+        return False
 
     def _drive(self, obstacles: np.ndarray, carrot: np.ndarray, desired: float, speed: float, res: AvoidanceResult) -> NavCommand:
         """Drive along theta* at ``speed``, turning towards it (look where the robot goes);

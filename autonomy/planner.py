@@ -2,13 +2,15 @@
 
 Edge costs are Euclidean lengths; the heuristic is the straight-line distance to the goal
 (admissible, so A* returns a shortest path). Edges flagged ``has_stairs`` are excluded by
-default (a wheeled base cannot take them).
+default (a wheeled base cannot take them), and so are the edges given as ``excluded``
+(node id pairs, either direction: the navigator's edges found blocked).
 """
 
 from __future__ import annotations
 
 import heapq
 import math
+from collections.abc import Collection
 
 import numpy as np
 
@@ -20,12 +22,23 @@ class NoPathError(InputError):
     """Start and goal are not connected in the (filtered) graph."""
 
 
-def adjacency(graph: NavGraph, exclude_stairs: bool = True) -> list[list[tuple[int, float]]]:
-    """Adjacency lists by node index: (neighbour index, edge length)."""
+def edge_key(a: int, b: int) -> tuple[int, int]:
+    """An undirected edge's key: its two node ids, the smaller first."""
+    return (a, b) if a <= b else (b, a)
+
+
+def adjacency(
+    graph: NavGraph, exclude_stairs: bool = True, excluded: Collection[tuple[int, int]] = ()
+) -> list[list[tuple[int, float]]]:
+    """Adjacency lists by node index: (neighbour index, edge length). ``excluded``: edges
+    (node id pairs, either direction) left out."""
     xy = graph.node_xy()
     adj: list[list[tuple[int, float]]] = [[] for _ in range(len(xy))]
+    skip = {edge_key(int(a), int(b)) for a, b in excluded}
     for e in graph.edges:
         if exclude_stairs and e.has_stairs:
+            continue
+        if skip and edge_key(e.s0_id, e.s1_id) in skip:
             continue
         a, b = graph.index_of(e.s0_id), graph.index_of(e.s1_id)
         d = float(math.hypot(*(xy[a] - xy[b])))
@@ -34,11 +47,14 @@ def adjacency(graph: NavGraph, exclude_stairs: bool = True) -> list[list[tuple[i
     return adj
 
 
-def astar(graph: NavGraph, start_id: int, goal_id: int, *, exclude_stairs: bool = True) -> list[int]:
-    """Node ids of a shortest path from start to goal (both included)."""
+def astar(
+    graph: NavGraph, start_id: int, goal_id: int, *, exclude_stairs: bool = True, excluded: Collection[tuple[int, int]] = ()
+) -> list[int]:
+    """Node ids of a shortest path from start to goal (both included), not using the
+    ``excluded`` edges (node id pairs, both directions)."""
     xy = graph.node_xy()
     s, g = graph.index_of(start_id), graph.index_of(goal_id)
-    adj = adjacency(graph, exclude_stairs)
+    adj = adjacency(graph, exclude_stairs, excluded)
     gx, gy = xy[g]
     cost = {s: 0.0}
     parent = {s: -1}

@@ -82,21 +82,32 @@ def test_steers_around_an_obstacle_and_stops_for_a_wall() -> None:
     assert cmd.state == "blocked" and np.hypot(*cmd.velocity[:2]) == 0.0
 
 
+def drive_in(nav: Navigator, x0: float, x1: float, t0: float = 0.0) -> float:
+    """Feed the navigator poses along y = 0 from x0 to x1 (0.75 m/s, 30 Hz, nothing
+    sensed): the trail a back-off may use. Returns the time after the last frame."""
+    t = t0
+    for x in np.arange(x0, x1, 0.025):
+        nav.command(np.array([x, 0.0, 0.0]), np.zeros((0, 2)), t)
+        t += 1 / 30
+    return t
+
+
 def test_backs_off_until_a_remembered_obstacle_in_the_blind_zone_is_in_view() -> None:
     nav = Navigator(line_graph(), NavigatorConfig(backoff_time_s=0.5))
-    nav.set_goal(5, np.zeros(3))
+    nav.set_goal(5, np.array([-1.5, 0.0, 0.0]))
+    t = drive_in(nav, -1.5, 0.0)  # it came from there: the way back is its trail
     # Seen 0.4 m ahead (closer than the camera's 0.8 m minimum range: the next frames see nothing).
     wall = np.array([[0.4, y] for y in np.linspace(-1, 1, 41)])
-    cmd = nav.command(np.zeros(3), wall, 0.0)
+    cmd = nav.command(np.zeros(3), wall, t)
     assert cmd.state == "recovering" and cmd.velocity[0] < 0
-    x, t = 0.0, 0.0
+    x, t0 = 0.0, t
     while cmd.state == "recovering" and t < 20:
         t += 1 / 30
         x += cmd.velocity[0] / 30
         cmd = nav.command(np.array([x, 0.0, 0.0]), np.zeros((0, 2)), t)
     # It backed off past backoff_time_s, until the wall's place came into view (and was
     # seen empty), then drove on.
-    assert t > 0.5 and 0.4 - x > DepthCamera().min_range_m + DepthCamera().forward_m
+    assert t - t0 > 0.5 and 0.4 - x > DepthCamera().min_range_m + DepthCamera().forward_m
     assert cmd.state == "driving"
 
 
@@ -184,8 +195,10 @@ def test_map_points_are_the_walls_near_the_robot_in_the_robot_frame() -> None:
 
 def test_backs_off_away_from_a_wall_behind_it_and_not_into_one() -> None:
     """Recovery backs off straight back when that is clear, sideways-back when a wall is
-    right behind one side, and not at all when boxed in (walls from the map, unseen)."""
-    cfg = NavigatorConfig(stuck_time_s=0.5)
+    right behind one side, and not at all when boxed in (walls from the map, unseen).
+    (The map's check alone: no trail, ``trail_s = 0``; tests/test_navigator_recovery.py
+    has the trail.)"""
+    cfg = NavigatorConfig(stuck_time_s=0.5, trail_s=0.0)
     clear = Navigator(line_graph(), cfg, walls=np.zeros((0, 4)))
     v = clear._backoff_velocity(np.zeros(3), np.zeros((0, 2)))
     np.testing.assert_allclose(v, [-cfg.backoff_speed_mps, 0.0, 0.0], atol=1e-12)
@@ -357,9 +370,10 @@ def test_after_a_long_back_off_the_stuck_clock_starts_again() -> None:
     clock had run on through the back-off."""
     nav = Navigator(line_graph())
     pose = np.zeros(3)
-    nav.set_goal(5, pose)
+    nav.set_goal(5, np.array([-1.5, 0.0, 0.0]))
+    t = drive_in(nav, -1.5, 0.0)  # the trail it may back off along
     blocker = np.array([[0.5, y] for y in np.linspace(-0.35, 0.35, 15)])  # robot frame, every frame
-    k = 0
+    k = int(round(t * 30))
     while nav.recoveries == 0:
         nav.command(pose, blocker, k / 30.0)
         k += 1
@@ -376,7 +390,8 @@ def test_backs_off_clear_of_furniture_seen_long_before() -> None:
     go straight into it; with a 2 s back-off memory it does."""
     box = np.array([[0.6, y] for y in np.linspace(-0.2, 0.2, 9)])
     for backoff_memory_s, straight in ((30.0, False), (2.0, True)):
-        nav = Navigator(line_graph(), NavigatorConfig(backoff_memory_s=backoff_memory_s))
+        # The memory's check alone (no trail: trail_s = 0; it would not back off there either).
+        nav = Navigator(line_graph(), NavigatorConfig(backoff_memory_s=backoff_memory_s, trail_s=0.0))
         nav.set_goal(5, np.zeros(3))
         nav.remember(np.zeros(3), box, 0.0)
         turned = np.array([0.0, 0.0, math.pi])

@@ -1,0 +1,255 @@
+"""The navigator's recovery: re-planning round a blocked corridor, back-offs only along
+the robot's own trail, looking round, pose jumps.
+
+A kinematic robot (the command integrated exactly, the estimate is the truth) on a
+hand-made ring of corridors; the depth camera is stood in for by the points of the walls
+and of a hand-placed box that lie in the camera's view (no occlusion).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from autonomy.camera import KINECT_V1
+from autonomy.errors import InputError
+from autonomy.navigator import Navigator, NavigatorConfig, in_camera_view, wall_points
+from autonomy.planner import NoPathError, astar, edge_key
+from autonomy.vectormap import NavEdge, NavGraph, NavNode
+
+RATE_HZ = 30.0
+ROBOT_R = 0.3
+
+# A ring of 2 m corridors round a block: the bottom corridor (y in [-1, 1]) from A to C
+# is 8 m; the way round by the top corridor (y in [2, 4]) 14 m.
+A, B, C, D, E = 0, 1, 2, 3, 4
+NODES = {A: (0.0, 0.0), B: (4.0, 0.0), C: (8.0, 0.0), D: (0.0, 3.0), E: (8.0, 3.0)}
+WALLS = np.array(
+    [
+        [-1.0, -1.0, 9.0, -1.0], [9.0, -1.0, 9.0, 4.0], [9.0, 4.0, -1.0, 4.0], [-1.0, 4.0, -1.0, -1.0],  # outside
+        [1.0, 1.0, 7.0, 1.0], [7.0, 1.0, 7.0, 2.0], [7.0, 2.0, 1.0, 2.0], [1.0, 2.0, 1.0, 1.0],  # the block
+    ]
+)
+BOX = (2.6, 3.0, -1.0, 1.0)
+"""A box (x0, x1, y0, y1) right across the bottom corridor, not in the map."""
+
+
+def ring_graph() -> NavGraph:
+    nodes = tuple(NavNode(id=i, x=x, y=y) for i, (x, y) in NODES.items())
+    edges = tuple(NavEdge(s0_id=a, s1_id=b) for a, b in ((A, B), (B, C), (A, D), (D, E), (E, C)))
+    return NavGraph(nodes=nodes, edges=edges)
+
+
+def box_outline(box: tuple[float, float, float, float], step: float = 0.02) -> np.ndarray:
+    x0, x1, y0, y1 = box
+    return wall_points(np.array([[x0, y0, x1, y0], [x1, y0, x1, y1], [x1, y1, x0, y1], [x0, y1, x0, y0]]), step)
+
+
+def box_gap(xy: np.ndarray, box: tuple[float, float, float, float]) -> float:
+    """Distance from a point to the box (0 inside)."""
+    x0, x1, y0, y1 = box
+    return math.hypot(max(x0 - xy[0], 0.0, xy[0] - x1), max(y0 - xy[1], 0.0, xy[1] - y1))
+
+
+def sense(pose: np.ndarray, world_pts: np.ndarray) -> np.ndarray:
+    """The world points the camera sees from the pose, robot frame."""
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    rx, ry = world_pts[:, 0] - pose[0], world_pts[:, 1] - pose[1]
+    bx, by = c * rx + s * ry, -s * rx + c * ry
+    keep = in_camera_view(bx - KINECT_V1.forward_m, by, KINECT_V1)
+    return np.column_stack([bx[keep], by[keep]])
+
+
+def step(pose: np.ndarray, v: np.ndarray) -> np.ndarray:
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    dt = 1.0 / RATE_HZ
+    return np.array([pose[0] + dt * (c * v[0] - s * v[1]), pose[1] + dt * (s * v[0] + c * v[1]), pose[2] + dt * v[2]])
+
+
+def drive(nav: Navigator, pose: np.ndarray, goal: int, seconds: float, box=BOX, t0: float = 0.0):
+    """Drive to ``goal``; returns (final pose, time, arrived, nodes of every plan, closest
+    approach of the robot's edge to the box)."""
+    world_pts = np.vstack([wall_points(WALLS, 0.03), box_outline(box)]) if box is not None else wall_points(WALLS, 0.03)
+    nav.set_goal(goal, pose, t0)
+    plans = {tuple(nav.plan_nodes)}
+    closest = math.inf
+    t = t0
+    while t < t0 + seconds:
+        cmd = nav.command(pose, sense(pose, world_pts), t)
+        plans.add(tuple(nav.plan_nodes))
+        if cmd.state == "arrived":
+            return pose, t, True, plans, closest
+        pose = step(pose, cmd.velocity)
+        if box is not None:
+            closest = min(closest, box_gap(pose[:2], box) - ROBOT_R)
+        t += 1.0 / RATE_HZ
+    return pose, t, False, plans, closest
+
+
+def test_astar_leaves_out_excluded_edges_either_way_round() -> None:
+    g = ring_graph()
+    assert astar(g, A, C) == [A, B, C]
+    assert astar(g, A, C, excluded=[(B, A)]) == [A, D, E, C]  # given either way round
+    assert astar(g, A, C, excluded={edge_key(B, C)}) == [A, D, E, C]
+    with pytest.raises(NoPathError):
+        astar(g, A, C, excluded=[(A, B), (D, E)])
+
+
+@pytest.mark.parametrize("blocked_wait_s", [3.0, 100.0])
+def test_a_box_across_the_corridor_is_passed_the_other_way_round(blocked_wait_s: float) -> None:
+    """Blocked by the box on the short way, the robot marks the bottom corridor's edge
+    blocked and reaches the goal the long way round, without touching the box: after
+    blocked_wait_s without progress (re-planning at once, no recovery), or, with that
+    wait longer than stuck_time_s, at the stuck recovery. With the blocked edges off it
+    re-plans the same way for ever (its plans never leave the bottom corridor) and does
+    not arrive."""
+    start = np.array([0.0, 0.0, 0.0])
+    nav = Navigator(ring_graph(), NavigatorConfig(blocked_wait_s=blocked_wait_s), walls=WALLS)
+    pose, t, arrived, plans, closest = drive(nav, start, C, 90.0)
+    assert arrived and np.hypot(*(pose[:2] - NODES[C])) < nav.cfg.arrival_radius_m
+    assert closest > 0.0  # never touched the box
+    assert edge_key(A, B) in nav.blocked and nav.blocked_edges == 1
+    assert nav.recoveries == (0 if blocked_wait_s < nav.cfg.stuck_time_s else 1)
+    assert edge_key(D, E) not in nav.blocked and edge_key(B, C) not in nav.blocked  # the box is on A-B only
+    assert any(D in p and E in p for p in plans)
+    assert nav.plan_nodes[-3:] == [D, E, C]
+    assert t > 14.0 / nav.cfg.cruise_speed_mps  # it went the long way
+    if blocked_wait_s > nav.cfg.stuck_time_s:
+        return
+    off = Navigator(ring_graph(), NavigatorConfig(blocked_edge_s=0.0), walls=WALLS)
+    pose, _, arrived, plans, closest = drive(off, start, C, 60.0)
+    assert not arrived and off.recoveries >= 3 and off.blocked_edges == 0 and not off.blocked
+    assert all(D not in p and E not in p for p in plans)
+    assert closest > 0.0 and pose[0] < BOX[0]
+
+
+def test_blocked_edges_expire_and_are_forgotten_when_they_leave_no_path() -> None:
+    cfg = NavigatorConfig(blocked_edge_s=60.0)
+    nav = Navigator(ring_graph(), cfg, walls=WALLS)
+    pose, t, arrived, _, _ = drive(nav, np.array([0.0, 0.0, 0.0]), C, 90.0)
+    assert arrived
+    marked = dict(nav.blocked)
+    assert edge_key(A, B) in marked
+    t_mark = marked[edge_key(A, B)] - cfg.blocked_edge_s
+    # Back to A: still blocked before the mark expires, the plan goes round by the top ...
+    nav.set_goal(A, pose, t_mark + cfg.blocked_edge_s - 0.5)
+    assert nav.plan_nodes == [C, E, D, A]
+    # ... and after it expired the bottom corridor is planned again (the box was taken away).
+    nav.set_goal(A, pose, t_mark + cfg.blocked_edge_s + 0.5)
+    assert nav.plan_nodes == [C, B, A] and not nav.blocked
+    # Marks that leave no path at all are forgotten: plan with the whole graph and wait.
+    nav.blocked.update({edge_key(B, C): math.inf, edge_key(E, C): math.inf})
+    nav.set_goal(C, np.array([0.0, 0.0, 0.0]), 0.0)
+    assert nav.plan_nodes == [A, B, C] and not nav.blocked
+    # Expired marks also leave the set viewers read as frames go by.
+    nav.blocked[edge_key(D, E)] = 1.0
+    nav.command(np.array([0.0, 0.0, 0.0]), np.zeros((0, 2)), 1.5)
+    assert not nav.blocked
+
+
+def corner_graph() -> NavGraph:
+    """East along y = 0 to the origin, then a 110 degree turn to the left."""
+    turn = math.radians(110.0)
+    pts = [(-4.0, 0.0), (0.0, 0.0), (4.0 * math.cos(turn), 4.0 * math.sin(turn))]
+    nodes = tuple(NavNode(id=i, x=x, y=y) for i, (x, y) in enumerate(pts))
+    return NavGraph(nodes=nodes, edges=(NavEdge(s0_id=0, s1_id=1), NavEdge(s0_id=1, s1_id=2)))
+
+
+def _corner_then_blocked(cfg: NavigatorConfig, box: tuple[float, float, float, float], seconds: float = 10.0):
+    """Drive east along y = 0 to the corner (the trail), turn 110 degrees left, and feed a
+    blocker right in front, too close for the camera, every frame; returns the distance
+    translated, the closest approach to ``box`` and the positions."""
+    blocker = np.array([[0.45, y] for y in np.linspace(-0.3, 0.3, 13)])  # robot frame
+    nav = Navigator(corner_graph(), cfg)
+    nav.set_goal(2, np.array([-3.0, 0.0, 0.0]))
+    t = 0.0
+    for x in np.arange(-3.0, 0.0, 0.025):  # the way in: its trail
+        nav.command(np.array([x, 0.0, 0.0]), np.zeros((0, 2)), t)
+        t += 1.0 / RATE_HZ
+    pose = np.array([0.0, 0.0, math.radians(110.0)])
+    closest, moved, track = math.inf, 0.0, []
+    for _ in range(int(seconds * RATE_HZ)):
+        cmd = nav.command(pose, blocker, t)
+        moved += math.hypot(cmd.velocity[0], cmd.velocity[1]) / RATE_HZ
+        pose = step(pose, cmd.velocity)
+        closest = min(closest, box_gap(pose[:2], box) - ROBOT_R)
+        track.append(pose[:2].copy())
+        t += 1.0 / RATE_HZ
+    return moved, closest, np.array(track)
+
+
+def test_backs_off_only_along_its_trail() -> None:
+    """The robot drove east to a corner and turned 110 degrees left; then something
+    stands right in front of it, too close for the camera. Behind it now lies space it
+    never saw nor drove through, where a box stands that no memory holds. The old rule
+    (trail_s = 0: map walls and memory only) backs straight into the box; with the trail
+    the robot does not translate at all (it waits turning towards its plan). With the
+    lane shift on, the robot turns a little towards a shifted carrot, until a direction
+    within 75 degrees of its back runs along the trail: it backs off that way only (if
+    at all: here a few centimetres, until the next step would leave the trail's band)."""
+    back = math.radians(110.0) + math.pi
+    centre = np.array([0.6 * math.cos(back), 0.6 * math.sin(back)])  # 0.6 m behind the robot
+    box = (centre[0] - 0.2, centre[0] + 0.2, centre[1] - 0.2, centre[1] + 0.2)
+    assert box_gap(np.zeros(2), box) > ROBOT_R + 0.05
+    moved, closest, _ = _corner_then_blocked(NavigatorConfig(trail_s=0.0, lane_shift_m=0.0), box)
+    assert closest < 0.0, "the old rule was expected to back into the box"
+    moved, closest, _ = _corner_then_blocked(NavigatorConfig(lane_shift_m=0.0), box)
+    assert moved == 0.0 and closest > 0.05
+    moved, closest, track = _corner_then_blocked(NavigatorConfig(), box)
+    assert closest > 0.05
+    assert np.all(np.abs(track[:, 1]) < NavigatorConfig().trail_tolerance_m) and np.all(track[:, 0] <= 1e-9)
+
+
+def test_the_trail_allows_the_way_the_robot_came_within_the_tolerance() -> None:
+    """Trail along y = 0 behind the robot: straight back is allowed, and so is a direction
+    whose sweep of backoff_check_m (0.4 m) ends less than trail_tolerance_m (0.1 m) off
+    it (10 degrees: 0.069 m), not one that ends farther (20 degrees: 0.137 m); a trail
+    older than trail_s counts no more."""
+    nav = Navigator(corner_graph(), NavigatorConfig(trail_s=5.0))
+    nav.set_goal(2, np.array([-3.0, 0.0, 0.0]))
+    t = 0.0
+    for x in np.arange(-2.0, 0.0, 0.025):
+        nav.command(np.array([x, 0.0, 0.0]), np.zeros((0, 2)), t)
+        t += 1.0 / RATE_HZ
+    pose = np.array([0.0, 0.0, 0.0])
+    nav.command(pose, np.zeros((0, 2)), t)
+    pts = nav.trail_points()
+    assert len(pts) > 20 and np.all(np.abs(pts[:, 1]) < 1e-12)
+    assert np.max(np.hypot(*np.diff(pts, axis=0).T)) < 0.08
+    ok = nav.trail_allows(pose, np.radians([180.0, 170.0, 190.0, 160.0, 200.0, 90.0, 0.0]))
+    assert ok.tolist() == [True, True, True, False, False, False, False]
+    nav.command(pose, np.zeros((0, 2)), t + 6.0)  # standing still: the trail ages out
+    assert len(nav.trail_points()) <= 1 and not nav.trail_allows(pose, np.radians([180.0]))[0]
+
+
+def test_look_around_turns_in_place_and_a_pose_jump_clears_what_the_old_estimate_placed() -> None:
+    cfg = NavigatorConfig(look_turn_rate_rad_s=0.6)
+    nav = Navigator(ring_graph(), cfg, walls=WALLS)
+    nav.set_goal(C, np.array([0.0, 0.0, 0.0]))
+    cmd = nav.look_around(3.0)
+    assert cmd.state == "looking" and cmd.velocity.tolist() == [0.0, 0.0, 0.6]
+    # After looking for longer than stuck_time_s, no recovery on the next frame.
+    assert nav.command(np.array([0.0, 0.0, 0.0]), np.zeros((0, 2)), 3.0 + 0.1).state != "recovering"
+    t = 4.0
+    for x in np.arange(0.0, 1.0, 0.025):
+        nav.command(np.array([x, 0.0, 0.0]), np.array([[0.2, 0.7], [1.5, 0.0]]), t)
+        t += 1.0 / RATE_HZ
+    nav._lane, nav._side = 0.5, 1
+    assert len(nav.trail_points()) > 10 and len(nav._mem) > 0
+    nav.blocked[edge_key(D, E)] = t + 100.0
+    replans = nav.replans
+    nav.pose_jumped(np.array([8.0, 3.0, 0.0]), t)
+    assert len(nav.trail_points()) == 0 and len(nav._mem) == 0 and len(nav._mem_all) == 0
+    assert nav._lane == 0.0 and nav._side == 0
+    assert nav.replans == replans + 1 and nav.plan_nodes[0] == E and nav.plan_nodes[-1] == C
+    assert edge_key(D, E) in nav.blocked  # marks stay (they expire)
+    nav.pose_jumped()  # without a pose: clears only
+    assert nav.replans == replans + 1
+    with pytest.raises(InputError, match="look_turn_rate_rad_s"):
+        NavigatorConfig(look_turn_rate_rad_s=0.0)
+    with pytest.raises(InputError, match="trail_tolerance_m"):
+        NavigatorConfig(trail_tolerance_m=-0.1)
+    with pytest.raises(InputError, match="blocked_edge_s"):
+        NavigatorConfig(blocked_edge_s=float("nan"))

@@ -30,13 +30,17 @@ import numpy as np
 from autonomy.avoidance import AvoidanceConfig, obstacle_points
 from autonomy.camera import DepthCamera
 from autonomy.cgr import CGRConfig, CGRLocalizer
-from autonomy.errors import InputError
+from autonomy.errors import InputError, require_non_negative, require_positive
+from autonomy.freespace import FreeSpaceConfig, build_free_space
 from autonomy.fspf import FSPFConfig, FSPFResult, fspf
-from autonomy.geometry import compose_pose
+from autonomy.geometry import compose_pose, relative_pose
+from autonomy.health import HealthConfig, HealthMonitor, HealthSample, explain_points
 from autonomy.navigator import NavCommand, Navigator, NavigatorConfig
 from autonomy.nearfield import NearField
 from autonomy.observation import ObservationConfig, correspond
+from autonomy.planner import astar, path_points
 from autonomy.raycast import SceneQuery, VisibilityGridConfig, load_or_build
+from autonomy.relocalization import GlobalLocalizer, Mode, RelocalizationConfig, Scan
 from autonomy.vectormap import NavGraph, VectorMap
 
 #: The visibility grid the stack localizes with: 0.5 m cells, scene lines to 6 m (the
@@ -44,6 +48,14 @@ from autonomy.vectormap import NavGraph, VectorMap
 LOCALIZATION_GRID = VisibilityGridConfig(cell_m=0.5, max_range_m=6.0)
 #: Seeds of the FSPF sampling stream stay below this (the kernel's xorshift seed range).
 FSPF_SEED_MODULUS = 2**31
+#: Stale frames are told by comparing every this-many-th pixel with the last frame's.
+STALE_SAMPLE_STRIDE = 7
+#: ... while the odometry says the robot moved more than this (a still scene may repeat).
+STALE_MOTION_M = 1e-3
+STALE_MOTION_RAD = 1e-3
+#: While relocalizing the modes are re-scored each search, and the whole map searched
+#: again every this many searches (the scan has grown; a mode dropped early may win).
+FULL_SEARCH_EVERY = 5
 
 
 @dataclass(frozen=True)
@@ -58,6 +70,33 @@ class LocalizationConfig:
     """Point-cloud observation model parameters (Eq. 1-2)."""
     grid: VisibilityGridConfig = LOCALIZATION_GRID
     """Visibility grid for the analytic ray cast (Algorithm 2)."""
+
+
+@dataclass(frozen=True)
+class RecoveryConfig:
+    """Lost detection and global relocalization (ours; the papers' operator re-localized
+    the robot by hand): :mod:`autonomy.health`, :mod:`autonomy.relocalization`."""
+
+    enabled: bool = True
+    """Watch the localization's health and relocalize globally when lost."""
+    health: HealthConfig = field(default_factory=HealthConfig)
+    """The lost and blind tests."""
+    relocalization: RelocalizationConfig = field(default_factory=RelocalizationConfig)
+    """Scan, search and decision."""
+    restart_std_xy_m: float = 0.15
+    """CGR restarts around an accepted mode with this position spread ..."""
+    restart_std_theta_rad: float = math.radians(4.0)
+    """... and this heading spread."""
+    explore_after_s: float = 12.0
+    """Still undecided after looking this long, the robot drives on the best mode's
+    belief to a place ``explore_m`` away (the modes agree on what is near, so the way
+    there is the same in all of them), looking as it goes, until the scan decides."""
+    explore_m: float = 6.0
+    """How far the exploring drive goes before the robot looks round again."""
+
+    def __post_init__(self) -> None:
+        require_non_negative(self, "recovery.", "restart_std_xy_m", "restart_std_theta_rad")
+        require_positive(self, "recovery.", "explore_after_s", "explore_m")
 
 
 @dataclass(frozen=True)
@@ -76,6 +115,8 @@ class StackConfig:
     """Carrot following, speed limits, memory and recovery."""
     navigate: bool = True
     """Run the navigator (off: perception and localization only, as in offline replays)."""
+    recovery: RecoveryConfig = field(default_factory=RecoveryConfig)
+    """Lost detection and global relocalization (needs localization)."""
 
 
 @dataclass
@@ -158,13 +199,52 @@ class RobotStack:
         self.spread = (0.0, 0.0)
         self.perception: Perception | None = None
         self.timings_s: dict[str, float] = {}
+        # Recovery: health, dead reckoning, the relocalization's scan and modes.
+        rec = cfg.recovery
+        self.health: HealthMonitor | None = HealthMonitor(rec.health) if (rec.enabled and self.localizer is not None) else None
+        self._global: GlobalLocalizer | None = None
+        self.odom = np.zeros(3)
+        """Dead reckoning from the odometry alone (the relocalization's scan frame)."""
+        self.relocalizing = False
+        """True while the stack is lost and searching the map (the navigator looks round)."""
+        self.scan = Scan(rec.relocalization.scan_cell_m, rec.relocalization.max_scan_points)
+        self.modes: list[tuple[np.ndarray, float]] = []
+        """Relocalization modes as (map-from-odometry transform, cost), best first."""
+        self.events: list[dict] = []
+        """What the recovery did: {"t", "event": lost | relocalized | blind | seeing, ...}."""
+        self.frame_fault = ""
+        """Why this frame was not used ('' when it was): dropped, invalid, stale."""
+        self.frames_rejected = {"dropped": 0, "stale": 0, "invalid": 0}
+        self._prior: np.ndarray | None = None
+        self._reloc_t0 = 0.0
+        self._last_search_t = -math.inf
+        self._searches = 0
+        self._exploring_from: np.ndarray | None = None
+        self._goal: int | None = None
+        self._last_depth_key: np.ndarray | None = None
+        self._maybe_stale = False
+        self._fresh = False
+        self._t = 0.0
+        self.last_search = None
 
     # -- belief ------------------------------------------------------------------------
-    def reset(self, pose: np.ndarray) -> None:
-        """Start at a known pose (the mission's start): belief and dead reckoning there."""
-        self.relocalize(pose)
+    def reset(self, pose: np.ndarray | None) -> None:
+        """Start at a known pose (the mission's start): belief and dead reckoning there.
+        ``None``: the pose is unknown; the robot looks round and relocalizes on the map
+        first (needs localization with recovery)."""
         self.frame = 0
         self.perception = None
+        self.events = []
+        self._last_depth_key = None
+        self.odom = np.zeros(3) if pose is None else np.asarray(pose, dtype=np.float64).copy()
+        if pose is None:
+            if self.health is None:
+                raise InputError("robot stack: an unknown start pose needs localization with recovery enabled")
+            self.pose = np.zeros(3)
+            self.spread = (math.inf, math.inf)
+            self._start_relocalizing(0.0, prior=None, why="start with an unknown pose")
+            return
+        self.relocalize(pose)
 
     def relocalize(self, pose: np.ndarray) -> None:
         """Re-initialise the belief around ``pose`` (an operator's reset, or a
@@ -177,6 +257,9 @@ class RobotStack:
             self.localizer.reset(self.pose)
             est = self.localizer.estimate()
             self.spread = (est.std_xy_m, est.std_theta_rad)
+        self._end_relocalizing()
+        if self.health is not None:
+            self.health.reset(self._t)
 
     def _read_estimate(self) -> None:
         assert self.localizer is not None
@@ -185,12 +268,33 @@ class RobotStack:
         self.spread = (est.std_xy_m, est.std_theta_rad)
 
     # -- the three steps of a frame ----------------------------------------------------
-    def perceive(self, depth: np.ndarray, seed: int | None = None) -> Perception:
+    def perceive(self, depth: np.ndarray | None, seed: int | None = None) -> Perception:
         """FSPF (BV2012 Algorithm 1) on a depth frame (float32 m, 0 = invalid), its
         floor projection (IV-B), the obstacles P u O (Section V) and the near field.
-        ``seed`` overrides this frame's FSPF seed (``fspf_seed + frame``)."""
+        ``seed`` overrides this frame's FSPF seed (``fspf_seed + frame``).
+
+        ``None`` is a dropped frame; NaN or infinite pixels count as invalid; a frame with
+        no valid pixel, or the same pixels as the last one while the wheels turn (a stuck
+        driver repeating itself, :meth:`localize` tells), is not used: the last
+        perception stands and ``frame_fault`` says why."""
         cam, cfg = self.cfg.camera, self.cfg
         s = (self.fspf_seed + self.frame) % FSPF_SEED_MODULUS if seed is None else int(seed)
+        self.frame += 1
+        self.frame_fault = ""
+        self._maybe_stale = False
+        self._fresh = False
+        if depth is None:
+            return self._reject("dropped")
+        depth = np.asarray(depth)
+        key = depth.ravel()[::STALE_SAMPLE_STRIDE]
+        if not np.isfinite(key).all() or not np.isfinite(depth).all():
+            depth = np.where(np.isfinite(depth), depth, np.float32(0.0)).astype(np.float32, copy=False)
+            key = depth.ravel()[::STALE_SAMPLE_STRIDE]
+        if not np.any(depth > 0):
+            self._last_depth_key = None
+            return self._reject("invalid")
+        self._maybe_stale = self._last_depth_key is not None and np.array_equal(key, self._last_depth_key)
+        self._last_depth_key = key.copy()
         t0 = time.perf_counter()
         planes = fspf(depth, cam.intrinsics, cfg.fspf, seed=s, mount=cam.mount)
         p2d, n2d = planes.projected(cfg.fspf.max_vertical_normal_angle_rad)
@@ -204,58 +308,258 @@ class RobotStack:
         t2 = time.perf_counter()
         self.timings_s = {"fspf": t1 - t0, "obstacles": t2 - t1}
         self.perception = Perception(planes, p2d, n2d, obstacles, near)
-        self.frame += 1
+        self._fresh = True
         return self.perception
 
-    def localize(self, increment: np.ndarray | None) -> np.ndarray:
+    def _reject(self, why: str) -> Perception:
+        self.frame_fault = why
+        self.frames_rejected[why] += 1
+        self.timings_s = {"fspf": 0.0, "obstacles": 0.0}
+        if self.perception is None:
+            z2, z3 = np.zeros((0, 2)), np.zeros((0, 3))
+            self.perception = Perception(FSPFResult(z3, z3, z3, np.zeros(0, np.int64)), z2, z2, z2, np.zeros((0, 4)))
+        return self.perception
+
+    def localize(self, increment: np.ndarray | None, t: float | None = None) -> np.ndarray:
         """CGR's predict (odometry ``increment``, robot frame dx, dy, dtheta) and update
         on the last perception's points (BV2012 IV-C); without localization, dead
-        reckoning. ``increment`` None: no motion since the last frame (the first one)."""
+        reckoning. ``increment`` None: no motion since the last frame (the first one).
+
+        ``t`` (seconds) drives the recovery: the health monitor's averages, the lost test
+        and, while lost, the relocalization (:mod:`autonomy.health`,
+        :mod:`autonomy.relocalization`). Without it the recovery waits."""
         t0 = time.perf_counter()
+        if t is not None:
+            self._t = float(t)
+        moved = False
         if increment is not None:
             inc = np.asarray(increment, dtype=np.float64)
             if inc.shape != (3,):
                 raise InputError(f"robot stack: odometry increment expected (dx, dy, dtheta), got shape {inc.shape}")
+            if np.all(np.isfinite(inc)):
+                self.odom = compose_pose(self.odom, inc)
+                moved = math.hypot(inc[0], inc[1]) > STALE_MOTION_M or abs(inc[2]) > STALE_MOTION_RAD
+            if self._maybe_stale and moved:
+                # The wheels turned but the camera gave the same pixels: a stale frame.
+                self._fresh = False
+                self.frame_fault = "stale"
+                self.frames_rejected["stale"] += 1
             if self.localizer is None:
                 if np.all(np.isfinite(inc)):
                     self.pose = compose_pose(self.pose, inc)
+            elif self.relocalizing:
+                self.pose = compose_pose(self.modes[0][0], self.odom) if self.modes else self.pose
             else:
                 self.localizer.predict(inc)
-                if self.perception is not None:
+                if self.perception is not None and self._fresh:
                     self.localizer.update(self.perception.points_2d, self.perception.normals_2d)
                 self._read_estimate()
+        if t is not None and self.health is not None:
+            if self.relocalizing:
+                self._relocalize_step(float(t))
+            else:
+                self._watch(float(t))
         self.timings_s["localization"] = time.perf_counter() - t0
         return self.pose
 
+    # -- recovery ------------------------------------------------------------------------
+    @property
+    def health_state(self) -> str:
+        """ok, blind, lost (the moment it is noticed) or relocalizing; ok without recovery."""
+        if self.relocalizing:
+            return "relocalizing"
+        return "ok" if self.health is None else self.health.state
+
+    @property
+    def health_sample(self) -> HealthSample | None:
+        """The health monitor's last sample (None without recovery)."""
+        return None if self.health is None else self.health.last
+
+    def _watch(self, t: float) -> None:
+        """The health monitor on this frame; lost: start relocalizing."""
+        assert self.health is not None and self.scene is not None
+        per, hc = self.perception, self.cfg.recovery.health
+        verdicts = None
+        if self._fresh and per is not None:
+            lines = np.ascontiguousarray(self.scene.scene_lines(float(self.pose[0]), float(self.pose[1]))[0])
+            verdicts = explain_points(lines, self.pose, np.ascontiguousarray(per.points_2d, dtype=np.float64), hc.explain_m, hc.through_m)
+        was = self.health.state
+        sample = self.health.update(t, verdicts, self.spread[0])
+        if sample.state != was and "blind" in (sample.state, was) and sample.state != "lost":
+            self.events.append({"t": round(t, 3), "event": sample.state if sample.state == "blind" else "seeing"})
+        if sample.state == "lost":
+            prior = compose_pose(self.pose, relative_pose(self.odom, np.zeros(3)))
+            self._start_relocalizing(t, prior, sample.reason)
+
+    def _global_localizer(self) -> GlobalLocalizer:
+        if self._global is None:
+            r = self.cfg.avoidance.robot_radius_m
+            fs = build_free_space(self.vectormap, FreeSpaceConfig(robot_radius_m=r))
+            self._global = GlobalLocalizer(fs, r, self.cfg.recovery.relocalization)
+        return self._global
+
+    def _start_relocalizing(self, t: float, prior: np.ndarray | None, why: str) -> None:
+        self.relocalizing = True
+        self.scan.clear()
+        self.modes = []
+        self._prior = prior
+        self._reloc_t0 = t
+        self._last_search_t = -math.inf
+        self._searches = 0
+        self._exploring_from = None
+        if self.navigator is not None:
+            self._goal = self.navigator.goal if self.navigator.goal is not None else self._goal
+        self.events.append({"t": round(t, 3), "event": "lost", "why": why, "estimate": [round(float(v), 3) for v in self.pose]})
+
+    def _end_relocalizing(self) -> None:
+        self.relocalizing = False
+        self.modes = []
+        self._prior = None
+        self._exploring_from = None
+
+    def _relocalize_step(self, t: float) -> None:
+        """While lost: grow the scan; once the robot has looked round, search the map (then
+        re-score the modes, and search again every few tries, as the scan grows)."""
+        rc = self.cfg.recovery.relocalization
+        per = self.perception
+        if self._fresh and per is not None:
+            self.scan.add(self.odom, per.points_2d)
+        looked = self.scan.turned_rad >= math.radians(rc.min_sweep_deg) or self.scan.travelled_m >= rc.min_travel_m
+        if not looked or t - self._last_search_t < rc.search_every_s or len(self.scan.points) < rc.min_scan_points:
+            return
+        self._last_search_t = t
+        gl = self._global_localizer()
+        assert self.scene is not None
+        query = self.scene
+        pts = self.scan.in_robot_frame(self.odom)
+        frame_pts = per.points_2d if (self._fresh and per is not None) else None
+        prior = None if self._prior is None else compose_pose(self._prior, self.odom)
+        if not self.modes or self._searches % FULL_SEARCH_EVERY == 0:
+            res = gl.search(pts, frame_pts, lambda x, y: query.scene_lines(x, y)[0], prior)
+        else:
+            poses = [compose_pose(T, self.odom) for T, _ in self.modes]
+            if prior is not None:
+                poses.append(prior)
+            res = gl.rescore(np.array(poses), pts, frame_pts, lambda x, y: query.scene_lines(x, y)[0])
+        self._searches += 1
+        inv = relative_pose(self.odom, np.zeros(3))
+        self.modes = [(compose_pose(m.pose, inv), m.cost) for m in res.modes]
+        if self.modes:
+            self.pose = compose_pose(self.modes[0][0], self.odom)
+        self.last_search = res
+        if res.accepted is not None:
+            self._accept(res.accepted, t, res.reason, len(res.modes))
+
+    def _accept(self, mode: Mode, t: float, reason: str, n_modes: int) -> None:
+        """Restart CGR on the accepted mode; the navigator re-plans to its goal from there."""
+        rec = self.cfg.recovery
+        assert self.localizer is not None and self.health is not None
+        pose = np.asarray(mode.pose, dtype=np.float64).copy()
+        self.localizer.reset(pose, rec.restart_std_xy_m, rec.restart_std_theta_rad)
+        self.pose = pose
+        est = self.localizer.estimate()
+        self.spread = (est.std_xy_m, est.std_theta_rad)
+        self.events.append(
+            {
+                "t": round(t, 3), "event": "relocalized", "pose": [round(float(v), 3) for v in pose], "reason": reason,
+                "modes": n_modes, "searches": self._searches, "scan_points": len(self.scan.points),
+                "looked_s": round(t - self._reloc_t0, 3),
+            }
+        )
+        self._end_relocalizing()
+        self.health.reset(t)
+        if self.navigator is not None:
+            self.navigator.pose_jumped()
+            if self._goal is not None:
+                self.navigator.set_goal(self._goal, pose, t)
+
+    # -- deciding ------------------------------------------------------------------------
     def decide(self, t: float, pose: np.ndarray | None = None) -> NavCommand:
         """The navigator's command at time ``t`` from the last perception, on the estimate
-        (or on ``pose``: a simulation's ground-truth follower)."""
+        (or on ``pose``: a simulation's ground-truth follower). Blind (no usable frame
+        for a while), the robot stands still; relocalizing, it turns in place to look
+        (and, undecided after ``recovery.explore_after_s``, drives on the best mode)."""
         if self.navigator is None:
             raise InputError("robot stack: built with navigate = false, it has no navigator")
         per = self.perception
         obstacles = np.zeros((0, 2)) if per is None else per.obstacles
         near = None if per is None else per.near_lines
         t0 = time.perf_counter()
-        cmd = self.navigator.command(self.pose if pose is None else pose, obstacles, t, near)
+        if self.health is not None and self.health.state == "blind":
+            cmd = NavCommand(np.zeros(3), "blind")
+        elif self.relocalizing and pose is None:
+            cmd = self._search_motion(t, obstacles, near)
+        else:
+            cmd = self.navigator.command(self.pose if pose is None else pose, obstacles, t, near)
         self.timings_s["navigation"] = time.perf_counter() - t0
         return cmd
 
+    def _search_motion(self, t: float, obstacles: np.ndarray, near: np.ndarray | None) -> NavCommand:
+        """Turn in place to look; still undecided after ``explore_after_s``, drive
+        ``explore_m`` on the best mode's belief, then look again."""
+        rec = self.cfg.recovery
+        nav = self.navigator
+        assert nav is not None
+        if not self.modes or t - self._reloc_t0 < rec.explore_after_s:
+            return nav.look_around(t)
+        best = compose_pose(self.modes[0][0], self.odom)
+        if self._exploring_from is None:
+            node = self._explore_node(best)
+            if node is None:
+                return nav.look_around(t)
+            nav.pose_jumped()
+            nav.set_goal(node, best, t)
+            self._exploring_from = self.odom.copy()
+        cmd = nav.command(best, obstacles, t, near)
+        gone = math.hypot(*(self.odom[:2] - self._exploring_from[:2]))
+        if cmd.state == "arrived" or gone >= rec.explore_m:
+            # Look round again from here (the scan keeps what it saw on the way).
+            self._exploring_from = None
+            self._reloc_t0 = t
+            self.scan.turned_rad = 0.0
+            return nav.look_around(t)
+        cmd.state = "exploring" if cmd.state in ("driving", "turning") else cmd.state
+        return cmd
+
+    def _explore_node(self, pose: np.ndarray) -> int | None:
+        """A navigation-graph node ``explore_m`` to twice that from the pose, the one most
+        nearly ahead (the robot goes on the way it faces)."""
+        nav = self.navigator
+        assert nav is not None
+        xy = nav.graph.node_xy()
+        d = np.hypot(xy[:, 0] - pose[0], xy[:, 1] - pose[1])
+        m = self.cfg.recovery.explore_m
+        cand = np.flatnonzero((d >= m) & (d <= 2 * m))
+        if not len(cand):
+            return None
+        bearing = np.abs(np.arctan2(np.sin(np.arctan2(xy[cand, 1] - pose[1], xy[cand, 0] - pose[0]) - pose[2]),
+                                    np.cos(np.arctan2(xy[cand, 1] - pose[1], xy[cand, 0] - pose[0]) - pose[2])))
+        return int(nav.graph.nodes[int(cand[int(np.argmin(bearing))])].id)
+
     def step(
-        self, depth: np.ndarray, increment: np.ndarray | None, t: float, pose: np.ndarray | None = None
+        self, depth: np.ndarray | None, increment: np.ndarray | None, t: float, pose: np.ndarray | None = None
     ) -> StackOutput:
         """One frame: perceive, localize, and (when navigating) decide."""
         per = self.perceive(depth)
-        self.localize(increment)
+        self.localize(increment, t)
         cmd = self.decide(t, pose) if self.navigator is not None else None
         return StackOutput(cmd, self.pose.copy(), self.spread, per, dict(self.timings_s))
 
     # -- goals ---------------------------------------------------------------------------
     def set_goal(self, node_id: int, t: float, pose: np.ndarray | None = None) -> float:
         """Plan to a navigation-graph node from the estimate (or ``pose``); returns the
-        plan's length in metres."""
+        plan's length in metres. While relocalizing the goal is kept for when the robot
+        knows where it is again (the length is then the best mode's)."""
         if self.navigator is None:
             raise InputError("robot stack: built with navigate = false, it has no navigator")
-        return self.navigator.set_goal(node_id, self.pose if pose is None else pose, t)
+        self._goal = int(node_id)
+        at = self.pose if pose is None else pose
+        if self.relocalizing and pose is None:
+            nav = self.navigator
+            nodes = astar(nav.graph, nav.nearest_reachable_node(np.asarray(at[:2])), int(node_id), exclude_stairs=nav.cfg.exclude_stairs)
+            pts = np.vstack([np.asarray(at[:2])[None, :], path_points(nav.graph, nodes)])
+            return float(np.hypot(*np.diff(pts, axis=0).T).sum())
+        return self.navigator.set_goal(node_id, at, t)
 
     # -- for viewers ---------------------------------------------------------------------
     def correspondences(self) -> tuple[np.ndarray, np.ndarray]:

@@ -118,12 +118,24 @@ class LocalizationConfig(StackLocalizationConfig):
     """The robot stack's CGR localization (BV2012, IV), plus the run's check against the truth."""
 
     reset_error_m: float = 1.0
-    """Error above which the run counts a localization reset and re-initialises at the
-    true pose (the paper's failure threshold)."""
+    """Error above which the run counts a localization failure (the paper's threshold:
+    its operator then re-localized the robot by hand, a "reset")."""
+    recovered_error_m: float = 0.5
+    """A failure is over when the error is back below this."""
+    truth_reset_after_s: float = 60.0
+    """A failure the robot has not recovered from itself within this long is ended by
+    re-initialising the belief at the true pose, as the paper's operator did; the run
+    counts it in ``truth_resets_needed``. 0 = at once (the paper's protocol)."""
+    start_known: bool = True
+    """The robot starts knowing its pose (false: it relocalizes on the map first)."""
 
     def __post_init__(self) -> None:
         if not self.reset_error_m > 0:
             raise InputError("localization.reset_error_m: expected a positive number")
+        if not 0 < self.recovered_error_m <= self.reset_error_m:
+            raise InputError("localization.recovered_error_m: expected a positive number no larger than reset_error_m")
+        if not (math.isfinite(self.truth_reset_after_s) and self.truth_reset_after_s >= 0):
+            raise InputError("localization.truth_reset_after_s: expected a number of seconds >= 0")
 
 
 @dataclass(frozen=True)

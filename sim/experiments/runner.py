@@ -146,7 +146,6 @@ class Run:
     frames: int = 0
     distance_m: float = 0.0
     collisions: int = 0
-    resets: int = 0
     times: list[float] = field(default_factory=list)
     truth: list[np.ndarray] = field(default_factory=list)
     estimates: list[np.ndarray] = field(default_factory=list)
@@ -161,6 +160,20 @@ class Run:
     """(frame, resident memory in MB), sampled every ``RSS_EVERY`` frames."""
     last_in_view: np.ndarray = field(default_factory=lambda: np.zeros(0))
     blackbox: FlightRecorder | None = None
+    failures: list[dict] = field(default_factory=list)
+    """Localization failures (error above ``reset_error_m``): when, how large, how they ended."""
+    truth_resets: int = 0
+    """Failures ended by re-initialising at the true pose (the robot did not recover itself)."""
+    health_states: list[str] = field(default_factory=list)
+    """The stack's health state at each frame (for the alarms' check against the truth)."""
+    faults: object | None = None
+    """The fault injector (``sim.simulator.faults.FaultInjector``) when the scenario has faults."""
+
+    @property
+    def resets(self) -> int:
+        """The paper's count: localization failures (error above ``reset_error_m``) not
+        caused by an injected fault (a kidnapping is meant to make one)."""
+        return sum(f.get("fault") is None for f in self.failures)
 
     @property
     def localizing(self) -> bool:
@@ -189,7 +202,7 @@ def build_run(scn: Scenario, seed: int) -> Run:
     stack = RobotStack(
         building.vectormap, graph, scn.stack_config(), rng=seeds.localization, fspf_seed=seeds.fspf_seed, map_path=building.map_path
     )
-    stack.reset(mission.start_pose)
+    stack.reset(mission.start_pose if scn.localization.start_known or stack.health is None else None)
     use_estimate = scn.mission.follower == "navigator" and stack.localizer is not None
     run = Run(scn, seed, seeds, building, furniture, people, mission, world, sim, stack, use_estimate)
     run.last_in_view = np.full(len(world.people.people), -np.inf)
@@ -296,7 +309,7 @@ def tick(run: Run, recorder) -> bool:
     note_contacts(run, frame, pose, t, nav, control_pose, obstacles)
     stack.perceive(frame.depth)
     run.fspf_counts.append(_fspf_counts(stack))
-    stack.localize(frame.increment)
+    stack.localize(frame.increment, frame.t)
     check_localization(run, frame)
     run.distance_m += float(np.hypot(*(frame.pose[:2] - pose[:2])))
     run.truth.append(frame.pose)
@@ -371,9 +384,12 @@ def _fspf_counts(stack: RobotStack) -> tuple[int, int, int, int]:
 
 
 def check_localization(run: Run, frame: SimFrame) -> None:
-    """Errors against the truth; above ``localization.reset_error_m`` the run counts a
-    reset and re-initialises the belief at the true pose (the paper's operator did)."""
-    stack = run.stack
+    """Errors against the truth, and the failures they make: above
+    ``localization.reset_error_m`` a failure starts; it ends when the error is back below
+    ``recovered_error_m`` (the robot recovered by itself), or after
+    ``truth_reset_after_s`` by re-initialising the belief at the true pose (counted in
+    ``truth_resets_needed``; the paper's operator did this at once)."""
+    stack, loc = run.stack, run.scn.localization
     if stack.localizer is None:
         return
     est = stack.pose
@@ -381,9 +397,33 @@ def check_localization(run: Run, frame: SimFrame) -> None:
     run.loc_errors.append(err)
     run.heading_errors.append(abs(wrap_angle(est[2] - frame.pose[2])))
     run.estimates.append(est.copy())
-    if err > run.scn.localization.reset_error_m:
-        run.resets += 1
-        run.reset_points.append(frame.pose[:2].copy())
+    run.health_states.append(stack.health_state)
+    open_ = run.failures[-1] if run.failures and run.failures[-1]["end_t"] is None else None
+    t = frame.t
+    if open_ is None:
+        if err > loc.reset_error_m and not (stack.relocalizing and loc.truth_reset_after_s > 0):
+            run.failures.append(
+                {"t": round(t, 3), "x": round(float(frame.pose[0]), 3), "y": round(float(frame.pose[1]), 3), "max_error_m": round(err, 3),
+                 "noticed_t": round(t, 3) if stack.relocalizing else None, "end_t": None, "ended_by": None,
+                 "fault": fault_at(run, t)}
+            )
+            open_ = run.failures[-1]
+            run.reset_points.append(frame.pose[:2].copy())
+        elif err > loc.reset_error_m:
+            # The stack is relocalizing (it knows it is lost): the estimate shown is its
+            # best mode so far, not a belief it drives on; a failure only if it accepts a
+            # wrong one.
+            return
+    if open_ is None:
+        return
+    open_["max_error_m"] = max(open_["max_error_m"], round(err, 3))
+    if open_["noticed_t"] is None and stack.relocalizing:
+        open_["noticed_t"] = round(t, 3)
+    if err < loc.recovered_error_m and not stack.relocalizing:
+        open_.update(end_t=round(t, 3), ended_by="robot")
+    elif t - open_["t"] >= loc.truth_reset_after_s:
+        open_.update(end_t=round(t, 3), ended_by="truth")
+        run.truth_resets += 1
         stack.relocalize(frame.pose)
 
 
@@ -451,6 +491,63 @@ def close_recording(rec, run: Run, wall_s: float) -> dict:
 # --------------------------------------------------------------------------- results
 
 
+#: A localization failure starting within this long after an injected fault began (or
+#: while it lasts) is that fault's doing.
+FAULT_ATTRIBUTION_S = 30.0
+#: A lost alarm is false when the true error is below this when it is raised.
+FALSE_ALARM_ERROR_M = 0.5
+
+
+def fault_events(run: Run) -> list[dict]:
+    """The injected faults' events (none without a ``[faults]`` table)."""
+    return [] if run.faults is None else run.faults.events
+
+
+def fault_at(run: Run, t: float) -> str | None:
+    """The kind of the injected fault active at ``t`` or begun at most
+    ``FAULT_ATTRIBUTION_S`` before it ended (None: no fault)."""
+    for ev in reversed(fault_events(run)):
+        end = ev["t_end"] if ev.get("t_end") is not None else t
+        if ev["t_start"] <= t <= end + FAULT_ATTRIBUTION_S:
+            return str(ev["kind"])
+    return None
+
+
+def recovery_metrics(run: Run) -> dict:
+    """Lost alarms against the truth (false alarms: raised while the error was below
+    ``FALSE_ALARM_ERROR_M``; misses: failures the robot never noticed before they ended),
+    relocalizations, rejected frames, and the failures' detection and recovery times."""
+    stack = run.stack
+    times = np.array(run.times[1 : 1 + len(run.loc_errors)])
+    errs = np.array(run.loc_errors)
+    lost = [e for e in stack.events if e["event"] == "lost"]
+    false_alarms = 0
+    for e in lost:
+        k = int(np.searchsorted(times, e["t"] - 1e-9)) if len(times) else 0
+        if k < len(errs) and errs[k] < FALSE_ALARM_ERROR_M:
+            false_alarms += 1
+    failures = run.failures
+    noticed = [f["noticed_t"] - f["t"] for f in failures if f["noticed_t"] is not None]
+    recovered = [f["end_t"] - f["t"] for f in failures if f["ended_by"] == "robot"]
+    return {
+        "loc_failures": len(failures),
+        "loc_failures_faults": sum(f.get("fault") is not None for f in failures),
+        "lost_alarms": len(lost),
+        "lost_false_alarms": false_alarms,
+        "lost_misses": sum(f["noticed_t"] is None for f in failures),
+        "relocalizations": sum(e["event"] == "relocalized" for e in stack.events),
+        "recovered_by_robot": sum(f["ended_by"] == "robot" for f in failures),
+        "recovery_time_median_s": round(float(np.median(recovered)), 2) if recovered else None,
+        "recovery_time_max_s": round(float(np.max(recovered)), 2) if recovered else None,
+        "notice_time_median_s": round(float(np.median(noticed)), 2) if noticed else None,
+        "frames_dropped": stack.frames_rejected["dropped"],
+        "frames_stale": stack.frames_rejected["stale"],
+        "frames_invalid": stack.frames_rejected["invalid"],
+        "relocalizing_frames": sum(s == "relocalizing" for s in run.health_states),
+        "blind_frames": sum(s == "blind" for s in run.health_states),
+    }
+
+
 def run_metrics(run: Run, wall_s: float) -> dict:
     """The report's metrics: distance, contacts, waypoints, speed, localization, FSPF."""
     world, mission = run.world, run.mission
@@ -474,6 +571,8 @@ def run_metrics(run: Run, wall_s: float) -> dict:
             {
                 "resets": run.resets,
                 "resets_per_km": round(run.resets / max(run.distance_m / 1000.0, 1e-9), 4),
+                "truth_resets_needed": run.truth_resets,
+                **recovery_metrics(run),
                 "loc_error_mean_m": round(float(e.mean()), 4),
                 "loc_error_median_m": round(float(np.median(e)), 4),
                 "loc_error_p95_m": round(float(np.percentile(e, 95)), 4),

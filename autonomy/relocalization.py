@@ -1,0 +1,368 @@
+"""Global relocalization on a vector map: where is the robot when its belief is lost?
+
+When the health monitor (:mod:`autonomy.health`) says lost, or at start-up with no known
+pose, the robot stops and turns in place, and this module collects what the camera sees
+into a **scan**: the down-projected plane points of every frame, placed through dead
+reckoning (over one turn in place it drifts by about a degree) and thinned to one point
+per ``scan_cell_m`` cell. A panorama is far less ambiguous than one 58 degree frame.
+
+The scan is then matched against the whole map (ours; the papers re-localized by hand):
+
+1. **Coarse search.** Hypotheses on a grid over the map's free space (every
+   ``grid_step_m`` where the robot fits, :class:`autonomy.freespace.FreeSpace`) times
+   ``heading_step_deg`` headings; each scores the mean robust cost
+   ``min(d^2, c^2) / c^2`` of a subsample of the scan's points, ``d`` the distance from
+   the point to the nearest wall, read from the free space's distance transform (a
+   likelihood field: one table look-up per point, no ray casting). People and furniture
+   cost the same at every hypothesis; the cost saturates so they cannot dominate.
+2. **Modes.** The best hypotheses, at least ``mode_separation_m`` or
+   ``mode_separation_deg`` apart (non-maximum suppression), are refined coarse to fine
+   on the same field with all scan points.
+3. **Decision.** The best mode is accepted when it explains the scan
+   (cost at most ``accept_cost``), the latest frame does not see through the map's walls
+   from it (:func:`autonomy.health.explain_points` on its visible scene lines), and no
+   other mode comes within ``accept_margin`` of its cost per point nor within
+   ``accept_margin_points`` over the whole scan. Otherwise the modes are kept
+   and the robot looks on (a symmetric corridor is resolved by what it sees next, not by
+   a guess). The belief the robot had before it was lost competes as one more mode, so a
+   false alarm ends where it began.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from autonomy.errors import require_int, require_positive
+from autonomy.freespace import FreeSpace
+from autonomy.geometry import wrap_angle
+from autonomy.health import explain_points
+
+
+@dataclass(frozen=True)
+class RelocalizationConfig:
+    """Scan, search and decision parameters of the global relocalization."""
+
+    grid_step_m: float = 0.4
+    """Coarse search: hypothesis positions every this far over the free space."""
+    heading_step_deg: float = 5.0
+    """Coarse search: hypothesis headings every this many degrees."""
+    coarse_points: int = 160
+    """Scan points scored per coarse hypothesis (an even subsample)."""
+    coarse_robust_m: float = 0.5
+    """Cost saturation distance c of the coarse search (a coarse hypothesis is up to half
+    a grid step and half a heading step off)."""
+    fine_robust_m: float = 0.2
+    """Cost saturation distance of the refinement and the decision."""
+    modes: int = 40
+    """Modes kept and refined."""
+    mode_separation_m: float = 1.0
+    """Modes closer than this ..."""
+    mode_separation_deg: float = 25.0
+    """... and this in heading are the same mode."""
+    scan_cell_m: float = 0.05
+    """The scan keeps one point per cell of this size."""
+    max_scan_points: int = 6000
+    """The scan keeps at most this many points (the newest)."""
+    min_scan_points: int = 150
+    """No search before the scan has this many points ..."""
+    min_sweep_deg: float = 300.0
+    """... and the robot has turned this far (or moved ``min_travel_m``) while looking."""
+    min_travel_m: float = 2.0
+    """Distance that counts as looking as much as the sweep."""
+    accept_cost: float = 0.45
+    """The best mode must explain the scan this well (mean robust cost, 0 = every point on
+    a wall)."""
+    accept_margin_points: float = 20.0
+    """... and every other mode must cost at least this much more in total over the scan
+    (the mean cost difference times the scan's points: what that many points lying on a
+    wall in one mode and off every wall in the other add up to) ..."""
+    accept_margin: float = 0.02
+    """... and at least this much more per point."""
+    max_through: float = 0.1
+    """... and at most this fraction of the latest frame's points may lie beyond the map's
+    walls seen from it."""
+    search_every_s: float = 1.0
+    """Repeat the search this often while undecided (the scan grows)."""
+
+    def __post_init__(self) -> None:
+        require_positive(
+            self, "relocalization.", "grid_step_m", "heading_step_deg", "coarse_robust_m", "fine_robust_m",
+            "mode_separation_m", "mode_separation_deg", "scan_cell_m", "accept_cost", "search_every_s", "min_travel_m",
+            "accept_margin_points", "accept_margin",
+        )
+        require_int(self, "relocalization.", "coarse_points", minimum=10)
+        require_int(self, "relocalization.", "modes", minimum=1)
+        require_int(self, "relocalization.", "max_scan_points", minimum=100)
+        require_int(self, "relocalization.", "min_scan_points", minimum=10)
+
+
+@dataclass(frozen=True)
+class Mode:
+    """One hypothesis of the robot's pose after the search."""
+
+    pose: np.ndarray
+    """(x, y, theta) in the map."""
+    cost: float
+    """Mean robust cost of the scan there (0 = every point on a wall, 1 = none near one)."""
+    through: float = math.nan
+    """Fraction of the latest frame's points seen through a mapped wall from there."""
+
+
+@dataclass(frozen=True)
+class SearchResult:
+    """What one search found and decided."""
+
+    modes: tuple[Mode, ...]
+    """Distinct modes, best first."""
+    accepted: Mode | None
+    """The mode accepted (None: undecided, keep looking)."""
+    reason: str
+    """Why it was accepted or not."""
+    hypotheses: int
+    """Coarse hypotheses scored."""
+
+
+# --------------------------------------------------------------------------- kernels
+
+
+@numba.njit(cache=True)
+def _cost(dist, ox, oy, inv_cell, x, y, c, s, pts, robust2):  # pragma: no cover - numba
+    ny, nx = dist.shape
+    acc = 0.0
+    for i in range(pts.shape[0]):
+        qx = x + c * pts[i, 0] - s * pts[i, 1]
+        qy = y + s * pts[i, 0] + c * pts[i, 1]
+        j = int(math.floor((qx - ox) * inv_cell))
+        k = int(math.floor((qy - oy) * inv_cell))
+        if j < 0 or k < 0 or j >= nx or k >= ny:
+            acc += 1.0
+            continue
+        d = dist[k, j]
+        d2 = d * d
+        acc += d2 / robust2 if d2 < robust2 else 1.0
+    return acc / max(pts.shape[0], 1)
+
+
+@numba.njit(cache=True)
+def _grid_costs(dist, ox, oy, inv_cell, xy, rot, robust2, out):  # pragma: no cover - numba
+    """out[h, k]: mean robust cost of the points pre-rotated by heading k (rot[k]) at
+    position xy[h] (a translation only: the rotation is shared by all positions)."""
+    ny, nx = dist.shape
+    n = rot.shape[1]
+    for h in range(xy.shape[0]):
+        x, y = xy[h, 0], xy[h, 1]
+        for k in range(rot.shape[0]):
+            acc = 0.0
+            for i in range(n):
+                j = int(math.floor((x + rot[k, i, 0] - ox) * inv_cell))
+                m = int(math.floor((y + rot[k, i, 1] - oy) * inv_cell))
+                if j < 0 or m < 0 or j >= nx or m >= ny:
+                    acc += 1.0
+                    continue
+                d = dist[m, j]
+                d2 = d * d
+                acc += d2 / robust2 if d2 < robust2 else 1.0
+            out[h, k] = acc / max(n, 1)
+
+
+@numba.njit(cache=True)
+def _refine(dist, ox, oy, inv_cell, pose, pts, robust2, step_m, step_rad, levels):  # pragma: no cover - numba
+    """Coarse-to-fine pattern search around ``pose``: at each level try the 26 neighbours
+    (+-step in x, y, theta), move to the best while it improves, then halve the steps."""
+    best = pose.copy()
+    bc = _cost(dist, ox, oy, inv_cell, best[0], best[1], math.cos(best[2]), math.sin(best[2]), pts, robust2)
+    sm, sr = step_m, step_rad
+    for _ in range(levels):
+        for _it in range(8):
+            improved = False
+            cx, cy, ct = best[0], best[1], best[2]
+            for a in range(-1, 2):
+                for b in range(-1, 2):
+                    for g in range(-1, 2):
+                        if a == 0 and b == 0 and g == 0:
+                            continue
+                        x, y, t = cx + a * sm, cy + b * sm, ct + g * sr
+                        cst = _cost(dist, ox, oy, inv_cell, x, y, math.cos(t), math.sin(t), pts, robust2)
+                        if cst < bc - 1e-12:
+                            bc = cst
+                            best[0], best[1], best[2] = x, y, t
+                            improved = True
+            if not improved:
+                break
+        sm *= 0.5
+        sr *= 0.5
+    return best, bc
+
+
+# --------------------------------------------------------------------------- the scan
+
+
+class Scan:
+    """Observation points gathered while looking, in the dead-reckoning frame, one per
+    ``cell_m`` cell (the newest), at most ``max_points``."""
+
+    def __init__(self, cell_m: float, max_points: int) -> None:
+        self.cell_m = cell_m
+        self.max_points = max_points
+        self.clear()
+
+    def clear(self) -> None:
+        self.points = np.zeros((0, 2))
+        self.turned_rad = 0.0
+        self.travelled_m = 0.0
+        self._last: np.ndarray | None = None
+        self.frames = 0
+
+    def add(self, odom_pose: np.ndarray, pts_robot: np.ndarray) -> None:
+        """Add one frame's points (robot frame) seen at ``odom_pose`` (dead reckoning)."""
+        p = np.asarray(odom_pose, dtype=np.float64)
+        if self._last is not None:
+            self.turned_rad += abs(wrap_angle(float(p[2] - self._last[2])))
+            self.travelled_m += math.hypot(float(p[0] - self._last[0]), float(p[1] - self._last[1]))
+        self._last = p.copy()
+        self.frames += 1
+        q = np.asarray(pts_robot, dtype=np.float64).reshape(-1, 2)
+        if not len(q):
+            return
+        c, s = math.cos(p[2]), math.sin(p[2])
+        w = np.column_stack([p[0] + c * q[:, 0] - s * q[:, 1], p[1] + s * q[:, 0] + c * q[:, 1]])
+        allp = np.vstack([w, self.points])  # newest first: np.unique keeps the first of a cell
+        key = np.floor(allp / self.cell_m).astype(np.int64)
+        _, first = np.unique(key[:, 0] * 1_000_003 + key[:, 1], return_index=True)
+        first.sort()
+        self.points = allp[first[: self.max_points]]
+
+    def in_robot_frame(self, odom_pose: np.ndarray) -> np.ndarray:
+        """The scan relative to the robot now (at ``odom_pose``)."""
+        p = np.asarray(odom_pose, dtype=np.float64)
+        d = self.points - p[:2]
+        c, s = math.cos(p[2]), math.sin(p[2])
+        return np.ascontiguousarray(np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]]))
+
+
+# --------------------------------------------------------------------------- the search
+
+
+class GlobalLocalizer:
+    """The coarse search, modes and decision of the module docstring, on one map."""
+
+    def __init__(self, free_space: FreeSpace, robot_radius_m: float, cfg: RelocalizationConfig = RelocalizationConfig()) -> None:
+        self.cfg = cfg
+        self.fs = free_space
+        self.dist = np.ascontiguousarray(free_space.dist, dtype=np.float32)
+        self.origin = free_space.origin
+        self.inv_cell = 1.0 / free_space.cell_m
+        rows, cols = free_space.free_cells(robot_radius_m, region=None)
+        step = max(1, int(round(cfg.grid_step_m / free_space.cell_m)))
+        keep = (rows % step == step // 2) & (cols % step == step // 2)
+        self.candidates = np.ascontiguousarray(free_space.centres(rows[keep], cols[keep]))
+        k = max(1, int(round(360.0 / cfg.heading_step_deg)))
+        self.headings = np.arange(k) * (2.0 * math.pi / k)
+
+    def cost(self, pose: np.ndarray, pts: np.ndarray, robust_m: float | None = None) -> float:
+        """Mean robust cost of robot-frame points at a pose (the likelihood field)."""
+        r = self.cfg.fine_robust_m if robust_m is None else robust_m
+        p = np.asarray(pose, dtype=np.float64)
+        return float(
+            _cost(self.dist, self.origin[0], self.origin[1], self.inv_cell, p[0], p[1], math.cos(p[2]), math.sin(p[2]),
+                  np.ascontiguousarray(pts, dtype=np.float64), r * r)
+        )
+
+    def coarse(self, pts: np.ndarray) -> np.ndarray:
+        """Costs (H, K) of every coarse hypothesis for robot-frame points ``pts``."""
+        cfg = self.cfg
+        n = len(pts)
+        sub = pts[np.linspace(0, n - 1, min(n, cfg.coarse_points)).astype(np.int64)] if n else pts
+        c, s = np.cos(self.headings), np.sin(self.headings)
+        rot = np.empty((len(self.headings), len(sub), 2))
+        rot[:, :, 0] = c[:, None] * sub[None, :, 0] - s[:, None] * sub[None, :, 1]
+        rot[:, :, 1] = s[:, None] * sub[None, :, 0] + c[:, None] * sub[None, :, 1]
+        out = np.empty((len(self.candidates), len(self.headings)))
+        _grid_costs(self.dist, self.origin[0], self.origin[1], self.inv_cell, self.candidates, rot, cfg.coarse_robust_m**2, out)
+        return out
+
+    def _distinct(self, poses: np.ndarray, order: np.ndarray, limit: int) -> list[int]:
+        cfg = self.cfg
+        sep_rad = math.radians(cfg.mode_separation_deg)
+        picked: list[int] = []
+        for i in order:
+            p = poses[i]
+            if all(
+                math.hypot(p[0] - poses[j][0], p[1] - poses[j][1]) >= cfg.mode_separation_m
+                or abs(wrap_angle(float(p[2] - poses[j][2]))) >= sep_rad
+                for j in picked
+            ):
+                picked.append(int(i))
+                if len(picked) >= limit:
+                    break
+        return picked
+
+    def search(
+        self, pts: np.ndarray, frame_pts: np.ndarray | None = None, scene_lines=None, prior: np.ndarray | None = None
+    ) -> SearchResult:
+        """Match robot-frame scan points ``pts`` against the whole map: coarse search,
+        then :meth:`rescore` of the best distinct hypotheses (``prior``, the belief before
+        the robot was lost, competes with them)."""
+        cfg = self.cfg
+        pts = np.ascontiguousarray(pts, dtype=np.float64).reshape(-1, 2)
+        if len(pts) < cfg.min_scan_points:
+            return SearchResult((), None, f"{len(pts)} scan points (need {cfg.min_scan_points})", 0)
+        costs = self.coarse(pts)
+        flat = np.argsort(costs, axis=None)[: 40 * cfg.modes]
+        h, k = np.unravel_index(flat, costs.shape)
+        seeds = np.column_stack([self.candidates[h], self.headings[k]])
+        if prior is not None:
+            seeds = np.vstack([np.asarray(prior, dtype=np.float64)[None, :], seeds])
+        picked = self._distinct(seeds, np.arange(len(seeds)), 2 * cfg.modes)
+        res = self.rescore(seeds[picked], pts, frame_pts, scene_lines)
+        return SearchResult(res.modes, res.accepted, res.reason, int(costs.size))
+
+    def rescore(self, poses: np.ndarray, pts: np.ndarray, frame_pts: np.ndarray | None = None, scene_lines=None) -> SearchResult:
+        """Refine each hypothesis (robot poses in the map) on the scan ``pts`` (robot
+        frame), merge those that meet, check the latest frame's points ``frame_pts`` for
+        sight through walls with ``scene_lines(x, y)``, and decide (module docstring)."""
+        cfg = self.cfg
+        pts = np.ascontiguousarray(pts, dtype=np.float64).reshape(-1, 2)
+        r2 = cfg.fine_robust_m**2
+        refined, rc = [], []
+        for p0 in np.asarray(poses, dtype=np.float64).reshape(-1, 3):
+            p, c = _refine(
+                self.dist, self.origin[0], self.origin[1], self.inv_cell, p0.copy(), pts, r2,
+                0.5 * cfg.grid_step_m, 0.5 * math.radians(cfg.heading_step_deg), 5,
+            )
+            p[2] = wrap_angle(float(p[2]))
+            refined.append(p)
+            rc.append(c)
+        if not refined:
+            return SearchResult((), None, "no hypothesis", 0)
+        refined_a = np.array(refined)
+        order = np.argsort(np.array(rc), kind="stable")
+        modes = []
+        for i in self._distinct(refined_a, order, cfg.modes):
+            through = math.nan
+            if frame_pts is not None and scene_lines is not None and len(frame_pts):
+                at = refined_a[i]
+                lines = np.ascontiguousarray(scene_lines(float(at[0]), float(at[1])), dtype=np.float64).reshape(-1, 4)
+                v = explain_points(lines, at, np.ascontiguousarray(frame_pts, dtype=np.float64), 0.15, 0.4)
+                through = float(np.count_nonzero(v < 0)) / len(v)
+            modes.append(Mode(refined_a[i].copy(), float(rc[i]), through))
+        return SearchResult(tuple(modes), *self._decide(modes, len(pts)), hypotheses=len(refined))
+
+    def _decide(self, modes: list[Mode], n_points: int) -> tuple[Mode | None, str]:
+        cfg = self.cfg
+        if not modes:
+            return None, "no mode"
+        best = modes[0]
+        if best.cost > cfg.accept_cost:
+            return None, f"best mode explains too little (cost {best.cost:.2f} > {cfg.accept_cost})"
+        if not math.isnan(best.through) and best.through > cfg.max_through:
+            return None, f"best mode sees through walls ({best.through:.2f} of the frame)"
+        if len(modes) > 1:
+            gap = modes[1].cost - best.cost
+            if gap < cfg.accept_margin or gap * n_points < cfg.accept_margin_points:
+                return None, f"ambiguous: {len(modes)} modes, the second within {gap:.3f} ({gap * n_points:.1f} points)"
+        return best, f"cost {best.cost:.3f}, next {modes[1].cost:.3f}" if len(modes) > 1 else f"cost {best.cost:.3f}"

@@ -39,10 +39,10 @@ from BV2012 or the plane-mapping paper):
    straddles a bump waits), and the tilt error exceeds ``threshold_deg`` (or, with
    ``correct_height``, the height error exceeds ``height_threshold_m``).
 
-The stack re-runs FSPF with the proposed mount from then on. A correctly mounted camera
-under Kinect noise gives per-frame tilt estimates of a few tenths of a degree and an
-accumulated one of a few hundredths, far below the 1 degree threshold (the measurements
-are in docs/fspf.md, "Mount self-check").
+The stack re-runs FSPF with the proposed mount from then on (and keeps feeding this
+check, whose :attr:`MountCheck.mount` is then the proposed one). Under the Kinect model a
+correctly mounted camera's window estimate stays below about 0.2 degrees, far below the
+1 degree threshold (docs/fspf.md, "Mount self-check", has the measurements).
 """
 
 from __future__ import annotations

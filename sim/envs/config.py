@@ -154,8 +154,9 @@ class EnvConfig:
     """FSPF parameters for the full-size camera; eta_px is scaled to depth_shape."""
     localization: LocalizationConfig = field(default_factory=LocalizationConfig)
     """CGR localization (enabled by default); disabled: the estimate is dead reckoning.
-    Above ``reset_error_m`` error the filter is re-initialised at the true pose and
-    ``info['loc_resets']`` counts it."""
+    Above ``reset_error_m`` error the filter is re-initialised at the true pose at once
+    (episodes are short; scenario runs wait ``truth_reset_after_s`` for the robot's own
+    recovery) and ``info['loc_resets']`` counts it."""
     avoidance: AvoidanceConfig = field(default_factory=AvoidanceConfig)
     """The robot stack's obstacle avoidance (its robot radius is ``robot.radius_m``)."""
     navigator: NavigatorConfig = field(default_factory=NavigatorConfig)

@@ -419,7 +419,7 @@ class DepthNavEnv(gym.Env):
             self._estimate, self._spread = self._sim.odometry.pose.copy(), (0.0, 0.0)
             return
         stack.perceive(self._depth)
-        stack.localize(frame.increment)
+        stack.localize(frame.increment, frame.t)
         if stack.localizer is not None and math.hypot(*(stack.pose[:2] - frame.pose[:2])) > cfg.localization.reset_error_m:
             ep.loc_resets += 1
             stack.relocalize(frame.pose)

@@ -253,3 +253,89 @@ def test_look_around_turns_in_place_and_a_pose_jump_clears_what_the_old_estimate
         NavigatorConfig(trail_tolerance_m=-0.1)
     with pytest.raises(InputError, match="blocked_edge_s"):
         NavigatorConfig(blocked_edge_s=float("nan"))
+
+
+# -- the incident figure draws every body a contact names ---------------------------------
+
+
+def _incident(bodies: list[str], people: list[list[float]] | None = None) -> dict:
+    frame = {
+        "t": 9.9, "truth": [2.0, 3.0, 0.0], "estimate": [2.0, 3.0, 0.0], "state": "driving", "cmd": [0.3, 0.0, 0.0],
+        "desired_deg": 0.0, "theta_star_deg": 0.0, "open_m": 1.0, "n_obstacles": 0, "nearest_obstacle": None,
+        "near_points": 0, "people": people or [],
+    }
+    return {"event": {"t": 10.0, "x": 2.0, "y": 3.0, "bodies": bodies, "heading_deg": 0.0}, "trace": [frame, frame]}
+
+
+def test_the_incident_figure_draws_fault_placed_furniture_and_named_people(tmp_path) -> None:
+    import warnings
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    from sim.experiments.blackbox import (
+        _draw_furniture,
+        _draw_tracks,
+        footprints,
+        render_incidents,
+        undrawn_bodies,
+    )
+    from sim.simulator.actors import Furniture
+
+    pieces = [Furniture("table", 1.0, 2.0, 0.5), (2.0, 3.6, math.pi / 2, (1.0, 0.4, 1.0))]  # the second placed by a fault
+    drawn = footprints(pieces, {"door_0": (3.0, 3.0, 0.0, (0.05, 0.9))})
+    assert [f["body"] for f in drawn] == ["furniture_0", "furniture_1", "door_0"]
+    # The fault's box stands where it was given: yaw 90 degrees swaps length and width.
+    ax = Figure().add_subplot()
+    _draw_furniture(ax, drawn)
+    xy = ax.patches[1].get_xy()[:4]
+    np.testing.assert_allclose(np.sort(xy[:, 0]), [1.8, 1.8, 2.2, 2.2], atol=1e-4)  # yaw kept to 1e-4 rad
+    np.testing.assert_allclose(np.sort(xy[:, 1]), [3.1, 3.1, 4.1, 4.1], atol=1e-4)
+    assert [t.get_text() for t in ax.texts] == ["table 0", "box 1", "door_0"]
+    # Every body the contacts name is drawn: no warning.
+    inc = _incident(["furniture_1", "person_1", "world", "door_0"], people=[[0.0, 0.0], [8.0, 3.0]])
+    assert undrawn_bodies(inc, drawn) == []
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        out = render_incidents([inc], np.array([[0.0, 0.0, 4.0, 0.0]]), tmp_path / "i.png", furniture=pieces, boxes={"door_0": (3.0, 3.0, 0.0, (0.05, 0.9))})
+    assert out is not None and out.stat().st_size > 0
+    # A person the contact names is drawn even when the trace has them far off.
+    ax = Figure().add_subplot()
+    _draw_tracks(ax, inc["trace"], 2.0, 3.0, 0.22, {1})
+    assert " p1" in [t.get_text() for t in ax.texts]
+    ax = Figure().add_subplot()
+    _draw_tracks(ax, inc["trace"], 2.0, 3.0, 0.22)
+    assert " p1" not in [t.get_text() for t in ax.texts]  # 6 m away and not named: not drawn
+
+
+def test_an_incident_naming_a_body_not_drawn_says_so(tmp_path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+
+    from sim.experiments.blackbox import footprints, render_incidents, undrawn_bodies
+
+    pieces = [(1.0, 1.0, 0.0, (0.5, 0.5))]
+    inc = _incident(["furniture_3", "person_0"])  # a piece not passed; a person the trace lacks
+    assert undrawn_bodies(inc, footprints(pieces)) == ["furniture_3", "person_0"]
+    with pytest.warns(RuntimeWarning, match="furniture_3, person_0"):
+        render_incidents([inc], np.zeros((0, 4)), tmp_path / "i.png", furniture=pieces)
+    with pytest.raises(InputError, match="furniture_0"):
+        footprints([(1.0, 2.0)])
+
+
+def test_an_incident_keeps_the_furniture_where_it_stood() -> None:
+    """The flight recorder keeps the furniture's poses with a new incident (a fault's box
+    may be taken away before the run ends); the panel draws those."""
+    from sim.experiments.blackbox import FlightRecorder, undrawn_bodies
+
+    rec = FlightRecorder(1.0, 30.0)
+    rec.on_events([{"t": 1.0, "x": 0.0, "y": 0.0, "bodies": ["furniture_0"]}], furniture=[(0.5, 0.0, 0.0, (0.4, 2.0, 1.0))])
+    rec.on_events([{"t": 2.0, "x": 0.0, "y": 0.0, "bodies": ["world"]}])
+    assert rec.incidents[0]["furniture"] == [
+        {"body": "furniture_0", "label": "box 0", "x": 0.5, "y": 0.0, "yaw": 0.0, "size": [0.4, 2.0]}
+    ]
+    assert "furniture" not in rec.incidents[1]
+    assert undrawn_bodies(rec.incidents[0], rec.incidents[0]["furniture"]) == []

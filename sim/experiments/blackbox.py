@@ -5,21 +5,26 @@ runner therefore keeps a ring buffer of what mattered each frame (true and estim
 pose, the navigator's state, command and chosen direction, the nearest sensed obstacle,
 where every person stood) and, when a collision incident begins, freezes a copy of it.
 ``incidents.json`` holds those copies and ``incidents.png`` draws each one over the map:
-the robot's track, the people's tracks, where contact was made.
+the robot's track, the people's tracks, the furniture (also pieces a fault placed or moved
+during the run), where contact was made. Every body a contact names is drawn; a panel
+whose incident names one it cannot draw says so in its title (and a warning is raised).
 """
 
 from __future__ import annotations
 
 import math
 import os
+import warnings
 from collections import deque
+from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 
 from autonomy.constants import ROBOT_RADIUS_M
+from autonomy.errors import InputError
 
-__all__ = ["FlightRecorder", "render_incidents", "starts_incident"]
+__all__ = ["FlightRecorder", "footprints", "render_incidents", "starts_incident", "undrawn_bodies"]
 
 
 INCIDENT_GAP_S = 3.0
@@ -55,11 +60,19 @@ class FlightRecorder:
         arrays must not be modified afterwards (the runner makes new ones each frame)."""
         self._buf.append((t, truth, estimate, nav, cmd, obstacles, people))
 
-    def on_events(self, events: list[dict]) -> None:
-        """Freeze the buffer for each event that starts a new incident (``starts_incident``)."""
+    def on_events(self, events: list[dict], furniture: Sequence = (), boxes: Mapping[str, object] | None = None) -> None:
+        """Freeze the buffer for each event that starts a new incident (``starts_incident``).
+
+        ``furniture`` / ``boxes`` (as :func:`footprints` takes them): where the furniture
+        stands now; given, each new incident keeps a copy (``"furniture"``), which its
+        panel draws instead of the pieces passed to :func:`render_incidents` (a fault may
+        move a piece away again before the run ends)."""
         for e in events:
             if starts_incident(self._last, e):
-                self.incidents.append({"event": dict(e), "trace": [frame_record(*f) for f in self._buf]})
+                inc = {"event": dict(e), "trace": [frame_record(*f) for f in self._buf]}
+                if len(furniture) or boxes:
+                    inc["furniture"] = footprints(furniture, boxes)
+                self.incidents.append(inc)
 
 
 def frame_record(
@@ -103,6 +116,44 @@ _PERSON_NEAR_M = 4.0
 """A person's track is drawn when it passes this close to the contact."""
 
 
+def footprints(furniture: Sequence = (), boxes: Mapping[str, object] | None = None) -> list[dict]:
+    """Named footprints of furniture: item ``i`` of ``furniture`` is the body
+    ``furniture_<i>`` (the simulator's names, fault-placed pieces included), ``boxes``
+    further bodies by name. Each piece is a :class:`sim.simulator.actors.Furniture` or an
+    ``(x, y, yaw, dims)`` tuple (dims: length and width, a height may follow), where it
+    stands now. Returns dicts with body, label, x, y, yaw and size (length, width)."""
+    out = []
+    named = [(f"furniture_{i}", f, i) for i, f in enumerate(furniture)] + [(str(k), f, None) for k, f in (boxes or {}).items()]
+    for body, f, i in named:
+        if hasattr(f, "dims"):
+            kind, x, y, yaw, dims = f.kind, f.x, f.y, f.yaw, f.dims
+        else:
+            try:
+                x, y, yaw, dims = f
+                dims = tuple(dims)
+            except (TypeError, ValueError):
+                raise InputError(f"incident figure: furniture {body}: expected a Furniture or (x, y, yaw, dims), got {f!r}") from None
+            kind = "box"
+        if len(dims) < 2:
+            raise InputError(f"incident figure: furniture {body}: expected dims (length, width[, height]), got {dims!r}")
+        label = f"{kind} {i}" if i is not None else body
+        out.append({
+            "body": body, "label": label, "x": round(float(x), 3), "y": round(float(y), 3), "yaw": round(float(yaw), 4),
+            "size": [round(float(dims[0]), 3), round(float(dims[1]), 3)],
+        })
+    return out
+
+
+def undrawn_bodies(incident: dict, drawn: list[dict]) -> list[str]:
+    """The bodies the incident's contact names that its panel does not draw: the walls
+    (``world``) are drawn, so are the ``drawn`` footprints (:func:`footprints`) and each
+    person ``person_<j>`` the trace holds."""
+    tr = incident.get("trace", [])
+    n_people = max((len(f.get("people", [])) for f in tr), default=0)
+    have = {"world"} | {f["body"] for f in drawn} | {f"person_{j}" for j in range(n_people)}
+    return [b for b in incident["event"].get("bodies", []) if b not in have]
+
+
 def render_incidents(
     incidents: list[dict],
     walls: np.ndarray,
@@ -110,14 +161,21 @@ def render_incidents(
     robot_radius_m: float = ROBOT_RADIUS_M,
     person_radius_m: float = 0.22,
     dpi: int = 110,
-    furniture: tuple = (),
+    furniture: Sequence = (),
+    boxes: Mapping[str, object] | None = None,
 ) -> Path | None:
     """One panel per incident (up to 12): the walls, the furniture (footprints, kinds
     labelled: the map does not hold them, the contact often names them), the robot's true
-    track (its footprint at the contact), each person's track, arrows for the commanded
-    direction."""
+    track (its footprint at the contact), each person's track (always those the contact
+    names), arrows for the commanded direction.
+
+    ``furniture`` / ``boxes``: every piece, fault-placed ones included, where it stands
+    now (:func:`footprints`); an incident that kept its own copy
+    (:meth:`FlightRecorder.on_events`) is drawn with that. A panel whose contact names a
+    body it does not draw says so in its title, and a ``RuntimeWarning`` is raised."""
     if not incidents:
         return None
+    now = footprints(furniture, boxes)
     import matplotlib
 
     matplotlib.use("Agg")
@@ -132,23 +190,29 @@ def render_incidents(
     segs = np.asarray(walls, dtype=np.float64).reshape(-1, 4)
     for k, inc in enumerate(shown):
         ax = fig.add_subplot(rows, cols, k + 1)
-        _draw_furniture(ax, furniture)
-        _draw_incident(ax, inc, segs, robot_radius_m, person_radius_m)
+        pieces = inc.get("furniture", now)
+        _draw_furniture(ax, pieces)
+        missing = undrawn_bodies(inc, pieces)
+        _draw_incident(ax, inc, segs, robot_radius_m, person_radius_m, missing)
+        if missing:
+            warnings.warn(f"incident figure: the contact at t={inc['event']['t']} s names {', '.join(missing)}, not drawn", RuntimeWarning, stacklevel=2)
     fig.tight_layout()
     out = Path(out_png)
     fig.savefig(out, dpi=dpi)
     return out
 
 
-def _draw_incident(ax, inc: dict, segs: np.ndarray, robot_radius_m: float, person_radius_m: float) -> None:
-    """One incident's panel, centred on the contact."""
+def _draw_incident(ax, inc: dict, segs: np.ndarray, robot_radius_m: float, person_radius_m: float, missing: Sequence[str] = ()) -> None:
+    """One incident's panel, centred on the contact; ``missing``: bodies the contact
+    names that are not drawn (said in the title)."""
     from matplotlib.collections import LineCollection
 
     ev, tr = inc["event"], inc["trace"]
     cx, cy = float(ev["x"]), float(ev["y"])
     ax.add_collection(LineCollection(segs.reshape(-1, 2, 2), colors="k", linewidths=1.2))
     if tr:
-        _draw_tracks(ax, tr, cx, cy, person_radius_m)
+        named = {int(b[len("person_"):]) for b in ev.get("bodies", []) if b.startswith("person_") and b[len("person_"):].isdigit()}
+        _draw_tracks(ax, tr, cx, cy, person_radius_m, named)
         _draw_commands(ax, tr)
     _draw_contact(ax, ev, cx, cy, robot_radius_m)
     ax.set_xlim(cx - _VIEW_HALF_M, cx + _VIEW_HALF_M)
@@ -157,29 +221,34 @@ def _draw_incident(ax, inc: dict, segs: np.ndarray, robot_radius_m: float, perso
     seen = ev.get("person_in_view_s_ago")
     ax.set_title(
         f"t={ev['t']:.0f}s {','.join(ev.get('bodies', []))} {ev.get('nav_state', '')}"
-        + (f"\nseen {seen:.1f}s ago" if seen is not None else ""),
+        + (f"\nseen {seen:.1f}s ago" if seen is not None else "")
+        + (f"\nNOT DRAWN: {', '.join(missing)}" if missing else ""),
         fontsize=8,
+        color="red" if missing else "black",
     )
     ax.tick_params(labelsize=7)
 
 
-def _draw_furniture(ax, furniture: tuple) -> None:
-    """Each piece's footprint (a rotated rectangle) and its kind and index, as the contact
-    events name them (``furniture_<i>``)."""
+def _draw_furniture(ax, furniture: Sequence) -> None:
+    """Each piece's footprint (a rotated rectangle) and its label, kind and index as the
+    contact events name them (``furniture_<i>``). ``furniture``: pieces as
+    :func:`footprints` takes them, or its footprints."""
     from matplotlib.patches import Polygon
 
-    for i, f in enumerate(furniture):
-        lx, ly, _ = f.dims
-        c, s = math.cos(f.yaw), math.sin(f.yaw)
-        corners = [(f.x + c * dx - s * dy, f.y + s * dx + c * dy)
+    pieces = furniture if all(isinstance(f, dict) for f in furniture) else footprints(furniture)
+    for f in pieces:
+        x, y, yaw = f["x"], f["y"], f["yaw"]
+        lx, ly = f["size"]
+        c, s = math.cos(yaw), math.sin(yaw)
+        corners = [(x + c * dx - s * dy, y + s * dx + c * dy)
                    for dx, dy in ((-lx / 2, -ly / 2), (lx / 2, -ly / 2), (lx / 2, ly / 2), (-lx / 2, ly / 2))]
         ax.add_patch(Polygon(corners, closed=True, fill=True, facecolor=_FURNITURE_COLOR, edgecolor="saddlebrown", lw=1.0, alpha=0.6))
-        ax.text(f.x, f.y, f"{f.kind} {i}", fontsize=6, ha="center", va="center", clip_on=True)
+        ax.text(x, y, f["label"], fontsize=6, ha="center", va="center", clip_on=True)
 
 
-def _draw_tracks(ax, tr: list[dict], cx: float, cy: float, person_radius_m: float) -> None:
+def _draw_tracks(ax, tr: list[dict], cx: float, cy: float, person_radius_m: float, named: Collection[int] = ()) -> None:
     """The robot's true and estimated tracks, and the tracks of the people who came near
-    the contact (each with its body at the end)."""
+    the contact or whom it names (``named``: their indices), each with its body at the end."""
     from matplotlib.patches import Circle
 
     xy = np.array([f["truth"][:2] for f in tr])
@@ -190,7 +259,7 @@ def _draw_tracks(ax, tr: list[dict], cx: float, cy: float, person_radius_m: floa
     if not ppl.size:
         return
     for j in range(ppl.shape[1]):
-        if np.min(np.hypot(ppl[:, j, 0] - cx, ppl[:, j, 1] - cy)) < _PERSON_NEAR_M:
+        if j in named or np.min(np.hypot(ppl[:, j, 0] - cx, ppl[:, j, 1] - cy)) < _PERSON_NEAR_M:
             ax.plot(ppl[:, j, 0], ppl[:, j, 1], "-", color=_PERSON_COLOR, lw=1.0)
             ax.add_patch(Circle((ppl[-1, j, 0], ppl[-1, j, 1]), person_radius_m, fill=False, color=_PERSON_COLOR, lw=1.2))
             ax.text(ppl[-1, j, 0], ppl[-1, j, 1], f" p{j}", fontsize=7, color=_PERSON_COLOR, clip_on=True)

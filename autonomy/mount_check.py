@@ -114,7 +114,7 @@ class MountCheckConfig:
     max_height_offset_m: float = 0.15
     """Floor: candidates within this distance of the believed floor (along the candidates' median normal)."""
     inlier_m: float = 0.04
-    """Refit: points within this distance of the first floor fit."""
+    """Refits (two): points within this distance of the previous fit."""
     min_points: int = 150
     """A frame is floor evidence with at least this many floor inliers ..."""
     min_spread_m: float = 0.15
@@ -178,7 +178,7 @@ class MountEvidence:
     frames_total: int
     """Evidence frames in all."""
     stable: bool
-    """The recent per-frame estimates agree with the accumulated one."""
+    """The window of per-frame estimates is consistent (module docstring, step 4)."""
     corrections: int
     """Corrected mounts proposed so far."""
 
@@ -194,10 +194,12 @@ def _floor_kernel(points, normals, rot, t, height, cos_gate, height_gate, inlier
         a0 = normals[i, 0] * rot[0, 0] + normals[i, 1] * rot[1, 0] + normals[i, 2] * rot[2, 0]
         a1 = normals[i, 0] * rot[0, 1] + normals[i, 1] * rot[1, 1] + normals[i, 2] * rot[2, 1]
         a2 = normals[i, 0] * rot[0, 2] + normals[i, 1] * rot[1, 2] + normals[i, 2] * rot[2, 2]
-        if a0 * rot[2, 0] + a1 * rot[2, 1] + a2 * rot[2, 2] <= cos_gate:
+        if not a0 * rot[2, 0] + a1 * rot[2, 1] + a2 * rot[2, 2] > cos_gate:  # NaN fails too
+            continue
+        q0, q1, q2 = points[i, 0] - t[0], points[i, 1] - t[1], points[i, 2] - t[2]
+        if not math.isfinite(q0 + q1 + q2):
             continue
         nc[m, 0], nc[m, 1], nc[m, 2] = a0, a1, a2
-        q0, q1, q2 = points[i, 0] - t[0], points[i, 1] - t[1], points[i, 2] - t[2]
         pc[m, 0] = q0 * rot[0, 0] + q1 * rot[1, 0] + q2 * rot[2, 0]
         pc[m, 1] = q0 * rot[0, 1] + q1 * rot[1, 1] + q2 * rot[2, 1]
         pc[m, 2] = q0 * rot[0, 2] + q1 * rot[1, 2] + q2 * rot[2, 2]

@@ -181,6 +181,21 @@ def test_no_floor_no_evidence() -> None:
     assert math.isnan(check.tilt_error_deg) and check.evidence().frames_total == 0
 
 
+def test_nan_and_empty_plane_points_are_no_evidence() -> None:
+    """A broken frame's NaN points and an empty FSPF result change nothing."""
+    from autonomy.fspf import FSPFResult
+
+    check = MountCheck(NOMINAL)
+    res = fspf(render(SCENES[0], NOMINAL.pitch_down_rad, 0.0), INTR, FSPFConfig(), seed=1, mount=NOMINAL)
+    pts, nrm = res.points.copy(), res.normals.copy()
+    pts[::2] = np.nan
+    nrm[1::2] = np.nan
+    empty = np.zeros((0, 3))
+    for p, n in ((pts, nrm), (empty, empty)):
+        assert check.update(FSPFResult(points=p, normals=n, outliers=empty, plane_ids=np.zeros(len(p), np.int32))) is None
+    assert check.evidence().frames_total == 0
+
+
 def test_floor_fit_ignores_furniture_tops() -> None:
     """A big low table top in view does not pull the floor up or tilt it."""
     table = Scene(wall_m=4.5, boxes=((1.3, 3.0, -1.5, 0.2, 0.45),))

@@ -648,13 +648,15 @@ class Navigator:
         c, sn = math.cos(float(pose[2])), math.sin(float(pose[2]))
         rel = np.column_stack([c * obs[:, 0] - sn * obs[:, 1], sn * obs[:, 0] + c * obs[:, 1]])  # world axes
         w = rel + xy
+        # The stretch checked: each plan segment cut to arc lengths [s0 - r, s0 + check].
         s0 = self._project(xy)
-        a, d = self._segments[:, :2], self._segments[:, 2:] - self._segments[:, :2]
-        L2 = np.einsum("ij,ij->i", d, d)
-        f = np.clip(np.einsum("mkj,kj->mk", w[:, None, :] - a[None], d) / np.where(L2 > 0, L2, 1.0), 0.0, 1.0)
-        gap = np.hypot(w[:, None, 0] - a[None, :, 0] - f * d[None, :, 0], w[:, None, 1] - a[None, :, 1] - f * d[None, :, 1])
-        arc = self._cum[None, :-1] + f * self._seg_len[None, :]
-        on = ((gap < r) & (arc > s0 - r) & (arc < s0 + cfg.blocked_check_m)).any(axis=1)
+        lo, hi = s0 - r, s0 + cfg.blocked_check_m
+        seg = np.flatnonzero((self._cum[1:] > lo) & (self._cum[:-1] < hi))
+        a, d = self._segments[seg, :2], self._segments[seg, 2:] - self._segments[seg, :2]
+        L = np.maximum(self._seg_len[seg], 1e-12)
+        f0 = (np.clip(lo - self._cum[seg], 0.0, None) / L)[:, None]
+        f1 = (np.clip(hi - self._cum[seg], None, self._seg_len[seg]) / L)[:, None]
+        on = (point_segment_distance(w, np.hstack([a + f0 * d, a + f1 * d])) < r).any(axis=1)
         rel, w = rel[on], w[on]
         if len(rel):
             walls = self._near_walls(pose, float(np.max(np.hypot(rel[:, 0], rel[:, 1]))) + cfg.near_wall_tol_m)

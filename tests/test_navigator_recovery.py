@@ -339,3 +339,31 @@ def test_an_incident_keeps_the_furniture_where_it_stood() -> None:
     ]
     assert "furniture" not in rec.incidents[1]
     assert undrawn_bodies(rec.incidents[0], rec.incidents[0]["furniture"]) == []
+
+
+def test_blocking_points_are_those_on_the_plans_line_ahead() -> None:
+    """Against a dense sampling of the plan: a sensed point counts when some point of the
+    plan between the avoidance radius behind the robot's place on it and blocked_check_m
+    ahead lies within the avoidance radius of it, unless a map wall explains it."""
+    rng = np.random.default_rng(11)
+    wall = np.array([[-1.0, -0.3, 9.0, -0.3]])  # a mapped wall 0.3 m right of the line
+    nav = Navigator(ring_graph(), walls=wall)
+    pose = np.array([1.0, 0.0, 0.4])
+    nav.set_goal(C, np.array([0.0, 0.0, 0.0]))
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    world = np.column_stack([rng.uniform(-0.5, 3.5, 4000), rng.uniform(-1.0, 1.0, 4000)])
+    rel = world - pose[:2]
+    local = np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]])
+    got = nav.blocking_points(pose, local)
+    r, s0 = nav.avoid.radius_m, 1.0  # the plan runs along y = 0 from x = 0
+    xs = np.arange(s0 - r, s0 + nav.cfg.blocked_check_m, 0.001)
+    line = np.column_stack([xs, np.zeros(len(xs))])
+    gap = np.hypot(world[:, None, 0] - line[None, :, 0], world[:, None, 1]).min(axis=1)
+    by_wall = np.abs(world[:, 1] + 0.3) < nav.cfg.near_wall_tol_m
+    clear_cut = (np.abs(gap - r) > 0.003) & (np.abs(np.abs(world[:, 1] + 0.3) - nav.cfg.near_wall_tol_m) > 0.003)
+    want = (gap < r) & ~by_wall
+    hit = np.zeros(len(world), dtype=bool)
+    for p in got:
+        hit |= np.all(np.abs(world - p) < 1e-9, axis=1)
+    assert want.sum() > 300 and (by_wall & (gap < r)).sum() > 100
+    assert np.array_equal(hit[clear_cut], want[clear_cut])

@@ -33,7 +33,9 @@ Fault kinds (the names in the TOML):
   once out of the camera's range.
 - ``blockage``: a door slab (or a row of boxes, ``blockage_depth_m``) of corridor width
   across the robot's planned path, 4-8 m ahead of it, where the navigation graph has
-  another way to the plan's goal; it stays ``blockage_s`` (0: the rest of the run).
+  another way to the plan's goal (while there is no such place, in an open hall, it
+  waits for one, up to ``BLOCKAGE_WAIT_M`` driven); it stays ``blockage_s`` (0: the
+  rest of the run).
 """
 
 from __future__ import annotations
@@ -109,6 +111,11 @@ BLOCKAGE_AHEAD_M = (4.0, 8.0)
 BLOCKAGE_STEP_M = 0.25
 #: A blockage keeps this much beyond the robot's radius from the robot.
 BLOCKAGE_ROBOT_GAP_M = 0.5
+#: A blockage due where there is no such place (an open hall, no plan) waits for one,
+#: looking every this many seconds ...
+BLOCKAGE_RETRY_S = 0.5
+#: ... while the robot drives up to this far (then it is recorded as skipped).
+BLOCKAGE_WAIT_M = 50.0
 #: Parked fault furniture stands in a row this far from ``PARK_XY`` (apart from the env's).
 PARK_ROW_OFFSET_M = -50.0
 #: A crowd person appears this far beyond both radii from the robot.
@@ -432,6 +439,8 @@ class FaultInjector:
         self._stale: np.ndarray | None = None
         self._odom_before: np.ndarray | None = None
         self._adj = None
+        self._waiting: tuple[FaultParams, str, float, float] | None = None
+        self._next_try = -math.inf
 
     # ------------------------------------------------------------------ the loop
 
@@ -448,7 +457,14 @@ class FaultInjector:
             self._end(kind, t)
         if self._leaving:
             self._park_the_left(t)
-        started = [self._start(kind, params, trigger, t, distance_m, plan_xy) for kind, params, trigger in self.schedule.due(t, distance_m)]
+        started = []
+        for kind, params, trigger in self.schedule.due(t, distance_m):
+            if kind == "blockage":
+                self._waiting, self._next_try = (params, trigger, float(t), float(distance_m)), -math.inf
+            else:
+                started.append(self._start(kind, params, trigger, t, distance_m, plan_xy))
+        if self._waiting is not None and t >= self._next_try - TIME_EPS_S:
+            started += self._try_blockage(t, distance_m, plan_xy)
         if "slip" in self._active:
             self._odom_before = self.odometry.pose.copy()
         return started
@@ -491,7 +507,23 @@ class FaultInjector:
     def _pose(self) -> np.ndarray:
         return self.world.robot.pose(self.world.data)
 
-    def _start(self, kind: str, params: FaultParams, trigger: str, t: float, distance_m: float, plan_xy: np.ndarray | None) -> dict:
+    def _try_blockage(self, t: float, distance_m: float, plan_xy: np.ndarray | None) -> list[dict]:
+        """Place the waiting blockage if there is a place for it now; record it as skipped
+        once the robot has driven ``BLOCKAGE_WAIT_M`` without one."""
+        assert self._waiting is not None
+        params, trigger, due_t, due_m = self._waiting
+        spot = self._blockage_spot(self._pose(), plan_xy)
+        if spot is None and distance_m - due_m < BLOCKAGE_WAIT_M:
+            self._next_try = t + BLOCKAGE_RETRY_S
+            return []
+        self._waiting = None
+        rec = self._start("blockage", params, trigger, t, distance_m, plan_xy, spot=spot)
+        rec.update(due_t=due_t, due_distance_m=due_m)
+        return [rec]
+
+    def _start(
+        self, kind: str, params: FaultParams, trigger: str, t: float, distance_m: float, plan_xy: np.ndarray | None, **extra
+    ) -> dict:
         if kind in self._active:
             self._active[kind].record["replaced"] = True
             self._end(kind, t)
@@ -506,7 +538,7 @@ class FaultInjector:
             "truth_after": None,
             "params": {k: getattr(params, k) for k in KIND_PARAMS[kind]},
         }
-        ok = getattr(self, f"_start_{kind}")(rec, params, before, plan_xy)
+        ok = getattr(self, f"_start_{kind}")(rec, params, before, plan_xy, **extra)
         rec["truth_after"] = _pose_list(self._pose())
         self.events.append(rec)
         duration = DURATION_PARAM.get(kind)
@@ -615,12 +647,13 @@ class FaultInjector:
             rec["skipped"] = f"no graph route of {len(self._crowd)} near the robot"
         return placed > 0
 
-    def _start_blockage(self, rec: dict, params: FaultParams, pose: np.ndarray, plan_xy: np.ndarray | None) -> bool:
-        spot = self._blockage_spot(pose, plan_xy)
+    def _start_blockage(
+        self, rec: dict, params: FaultParams, pose: np.ndarray, plan_xy: np.ndarray | None, spot: tuple | None = None
+    ) -> bool:
         if spot is None:
             rec["skipped"] = (
                 f"no corridor up to {self.cfg.blockage_max_width_m} m wide {BLOCKAGE_AHEAD_M[0]}-{BLOCKAGE_AHEAD_M[1]} m "
-                "ahead on the plan with another route to its goal"
+                f"ahead on the plan with another route to its goal within {BLOCKAGE_WAIT_M} m driven"
             )
             return False
         a, b, d, ahead, cut = spot

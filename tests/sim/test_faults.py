@@ -502,11 +502,31 @@ def test_blockage_shows_in_the_depth_frame() -> None:
     rig.close()
 
 
-def test_a_blockage_without_a_plan_or_without_another_route_is_skipped_and_recorded() -> None:
+def test_a_blockage_waits_for_a_place_and_is_skipped_after_the_wait() -> None:
+    """Due without a plan, it waits; placed once there is one, with when it was due; a
+    second one that finds no place while the robot drives 50 m is recorded as skipped."""
+    rig, plan = _blockage_rig(TINY)
+    for _ in range(3):
+        rig.tick(plan_xy=None)
+    assert rig.faults.events == [] and rig.faults.active == []
+    while not rig.faults.events:
+        rig.tick(plan_xy=plan)
+    ev = rig.faults.events[0]
+    # It looks again every 0.5 s.
+    assert "where" in ev and ev["due_t"] == 0.0 and ev["t_start"] == pytest.approx(0.5, abs=1e-6) and rig.faults.active == ["blockage"]
+    rig.close()
+
     rig, _ = _blockage_rig(TINY)
     rig.tick(plan_xy=None)
+    rig.distance_m = 49.0
+    rig.tick(plan_xy=None)
+    assert rig.faults.events == []
+    rig.distance_m = 51.0
+    for _ in range(16):  # it looks every 0.5 s
+        rig.tick(plan_xy=None)
     ev = rig.faults.events[0]
     assert ev["t_end"] == ev["t_start"] and "no corridor" in ev["skipped"] and rig.faults.active == []
+    assert ev["due_distance_m"] == 0.0 and ev["distance_m"] >= 51.0
     rig.close()
 
 

@@ -11,12 +11,12 @@ import pytest
 
 from autonomy.camera import CameraIntrinsics, CameraMount
 from autonomy.errors import InputError
-from autonomy.geometry import point_segment_distance, relative_pose
+from autonomy.geometry import compose_pose, point_segment_distance, relative_pose
 from autonomy.planner import astar, path_points
-from autonomy.vectormap import NavGraph
+from autonomy.vectormap import NavEdge, NavGraph, NavNode
 from sim.config import from_dict, to_dict
 from sim.simulator import blueprints
-from sim.simulator.actors import PARK_XY
+from sim.simulator.actors import PARK_XY, Furniture
 from sim.simulator.blueprints import ASSETS_DIR
 from sim.simulator.building import Building
 from sim.simulator.faults import (
@@ -61,8 +61,10 @@ class Rig:
     def __init__(
         self, cfg: FaultsConfig, building: Building, start, kinect: KinectConfig = TINY, odometry: OdometryConfig = DEFAULT_ODOMETRY,
         mount: CameraMount = DEFAULT_MOUNT, seed: int = 0, injector: bool = True, world: WorldConfig = DEFAULT_WORLD,
+        furniture: tuple[Furniture, ...] = (),
     ) -> None:
-        furniture, people = fault_actors(cfg)
+        fault_furniture, people = fault_actors(cfg)
+        furniture = furniture + fault_furniture
         self.building = building
         self.world = build_world(
             building.vectormap, world=world, intrinsics=kinect.intrinsics, mount=mount, furniture=furniture, people=people, start_pose=tuple(start)
@@ -223,12 +225,14 @@ def test_kidnap_carries_the_robot_to_a_free_place_unseen_by_the_odometry() -> No
 
 
 def test_kidnap_keeps_clear_of_furniture_and_people() -> None:
-    """In a small room crowded with people, a landing place is 1 m from each of them."""
+    """In a small room with a cabinet and people, a landing place is 1 m from each of them."""
     vm = box_room(8.0, 6.0)
     b = Building(vm, _line_graph([(1.0, 1.0), (7.0, 1.0), (7.0, 5.0), (1.0, 5.0)]))
     crowd = FaultEvent(kind="crowd", at_s=0.0, crowd_size=3, crowd_radius_m=20.0)
     cfg = FaultsConfig(events=(crowd, *(FaultEvent(kind="kidnap", at_s=(k + 1) / 30.0) for k in range(20))))
-    rig = Rig(cfg, b, (4.0, 3.0, 0.0), seed=5)
+    cabinet = Furniture(kind="cabinet", x=2.0, y=3.0, yaw=0.3)
+    rig = Rig(cfg, b, (4.0, 3.0, 0.0), seed=5, furniture=(cabinet,))
+    half = 0.5 * math.hypot(*cabinet.dims[:2])
     landed = 0
     for _ in range(21):
         _, pose = rig.tick()
@@ -239,13 +243,13 @@ def test_kidnap_keeps_clear_of_furniture_and_people() -> None:
         people = rig.world.people.positions()[:, :2]
         near = np.hypot(*(people - pose[:2]).T)
         assert near.min() >= RADIUS + 0.22 + KEEP_OUT_M - 0.1  # people walked one frame since
+        assert math.hypot(pose[0] - cabinet.x, pose[1] - cabinet.y) >= RADIUS + half + KEEP_OUT_M - 1e-9
     assert landed >= 10
     rig.close()
 
 
 def _line_graph(points) -> NavGraph:
-    from autonomy.vectormap import NavEdge, NavNode
-
+    """A closed loop of nodes through ``points``."""
     nodes = tuple(NavNode(id=i, x=float(x), y=float(y)) for i, (x, y) in enumerate(points))
     edges = tuple(NavEdge(s0_id=i, s1_id=(i + 1) % len(points)) for i in range(len(points)))
     return NavGraph(nodes, edges)
@@ -267,7 +271,7 @@ def test_slip_reports_motion_that_did_not_happen_and_a_bump_moves_truth_not_odom
         true_inc = relative_pose(pose, frame.pose)
         diffs.append((frame.t, frame.increment - true_inc))
         # The odometry's dead reckoning follows what the robot was told, increment by increment.
-        assert np.allclose(rig.odometry.pose, _compose(odom_before, frame.increment), atol=1e-12)
+        assert np.allclose(rig.odometry.pose, compose_pose(odom_before, frame.increment), atol=1e-12)
     before, after, ev = bumped
     assert ev["t_start"] == pytest.approx(1.0, abs=1e-6) and ev["t_end"] == pytest.approx(2.0, abs=1e-6)
     assert math.hypot(*(after[:2] - before[:2])) == pytest.approx(0.3, abs=1e-6)
@@ -278,12 +282,6 @@ def test_slip_reports_motion_that_did_not_happen_and_a_bump_moves_truth_not_odom
         assert np.allclose(d, expected, atol=1e-9), (t, d)
     assert sum(ev["t_start"] < t <= ev["t_end"] + 1e-9 for t, _ in diffs) == 30
     rig.close()
-
-
-def _compose(a, inc):
-    from autonomy.geometry import compose_pose
-
-    return compose_pose(a, inc)
 
 
 # --------------------------------------------------------------------------- depth faults

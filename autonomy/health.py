@@ -58,11 +58,11 @@ class HealthConfig:
     """Time constant of the long-term explained average."""
     lost_through: float = 0.3
     """Lost when the short-term contradiction fraction is above this ..."""
-    lost_ratio: float = 0.3
+    lost_ratio: float = 0.2
     """... or the short-term explained fraction is below this fraction of the long-term one ..."""
     lost_spread_m: float = 1.0
     """... or the particles' position spread is above this ..."""
-    hold_s: float = 1.0
+    hold_s: float = 1.5
     """... for this long."""
     min_history_s: float = 5.0
     """The ratio test needs this much observed time behind the long-term average."""

@@ -73,10 +73,10 @@ class RelocalizationConfig:
     """... and the robot has turned this far (or moved ``min_travel_m``) while looking."""
     min_travel_m: float = 2.0
     """Distance that counts as looking as much as the sweep."""
-    accept_cost: float = 0.45
+    accept_cost: float = 0.2
     """The best mode must explain the scan this well (mean robust cost, 0 = every point on
-    a wall)."""
-    accept_margin_points: float = 20.0
+    a wall) ..."""
+    accept_margin_points: float = 40.0
     """... and every other mode must cost at least this much more in total over the scan
     (the mean cost difference times the scan's points: what that many points lying on a
     wall in one mode and off every wall in the other add up to) ..."""
@@ -87,6 +87,12 @@ class RelocalizationConfig:
     walls seen from it."""
     search_every_s: float = 1.0
     """Repeat the search this often while undecided (the scan grows)."""
+    confirmations: int = 2
+    """A mode is accepted once it has passed the decision in this many searches in a row
+    (within ``mode_separation_m`` and ``mode_separation_deg`` of itself)."""
+    prior_cost: float = 0.45
+    """A false alarm: the belief before the alarm is kept when it explains the scan at
+    least this well and within ``accept_margin`` of the best mode."""
 
     def __post_init__(self) -> None:
         require_positive(
@@ -96,6 +102,7 @@ class RelocalizationConfig:
         )
         require_int(self, "relocalization.", "coarse_points", minimum=10)
         require_int(self, "relocalization.", "modes", minimum=1)
+        require_int(self, "relocalization.", "confirmations", minimum=1)
         require_int(self, "relocalization.", "max_scan_points", minimum=100)
         require_int(self, "relocalization.", "min_scan_points", minimum=10)
 

@@ -33,8 +33,9 @@ from autonomy.cgr import CGRConfig, CGRLocalizer
 from autonomy.errors import InputError, require_non_negative, require_positive
 from autonomy.freespace import FreeSpaceConfig, build_free_space
 from autonomy.fspf import FSPFConfig, FSPFResult, fspf
-from autonomy.geometry import compose_pose, relative_pose
+from autonomy.geometry import compose_pose, relative_pose, wrap_angle
 from autonomy.health import HealthConfig, HealthMonitor, HealthSample, explain_points
+from autonomy.mount_check import MountCheck, MountCheckConfig
 from autonomy.navigator import NavCommand, Navigator, NavigatorConfig
 from autonomy.nearfield import NearField
 from autonomy.observation import ObservationConfig, correspond
@@ -83,6 +84,11 @@ class RecoveryConfig:
     """The lost and blind tests."""
     relocalization: RelocalizationConfig = field(default_factory=RelocalizationConfig)
     """Scan, search and decision."""
+    check_mount: bool = True
+    """Watch the floor for a tilted camera mount and correct the mount FSPF uses
+    (:mod:`autonomy.mount_check`)."""
+    mount_check: MountCheckConfig = field(default_factory=MountCheckConfig)
+    """The mount self-check's parameters."""
     restart_std_xy_m: float = 0.15
     """CGR restarts around an accepted mode with this position spread ..."""
     restart_std_theta_rad: float = math.radians(4.0)
@@ -199,6 +205,9 @@ class RobotStack:
         self.spread = (0.0, 0.0)
         self.perception: Perception | None = None
         self.timings_s: dict[str, float] = {}
+        self.mount = cam.mount
+        """The camera mount FSPF and the near field use (the mount check corrects it)."""
+        self.mount_check = MountCheck(cam.mount, cfg.recovery.mount_check) if (cfg.recovery.enabled and cfg.recovery.check_mount) else None
         # Recovery: health, dead reckoning, the relocalization's scan and modes.
         rec = cfg.recovery
         self.health: HealthMonitor | None = HealthMonitor(rec.health) if (rec.enabled and self.localizer is not None) else None
@@ -219,6 +228,8 @@ class RobotStack:
         self._reloc_t0 = 0.0
         self._last_search_t = -math.inf
         self._searches = 0
+        self._confirmed = 0
+        self._candidate: np.ndarray | None = None
         self._exploring_from: np.ndarray | None = None
         self._goal: int | None = None
         self._last_depth_key: np.ndarray | None = None
@@ -296,7 +307,12 @@ class RobotStack:
         self._maybe_stale = self._last_depth_key is not None and np.array_equal(key, self._last_depth_key)
         self._last_depth_key = key.copy()
         t0 = time.perf_counter()
-        planes = fspf(depth, cam.intrinsics, cfg.fspf, seed=s, mount=cam.mount)
+        planes = fspf(depth, cam.intrinsics, cfg.fspf, seed=s, mount=self.mount)
+        if self.mount_check is not None:
+            corrected = self.mount_check.update(planes)
+            if corrected is not None:
+                self._correct_mount(corrected)
+                planes = fspf(depth, cam.intrinsics, cfg.fspf, seed=s, mount=self.mount)
         p2d, n2d = planes.projected(cfg.fspf.max_vertical_normal_angle_rad)
         t1 = time.perf_counter()
         if self.navigator is not None:
@@ -310,6 +326,19 @@ class RobotStack:
         self.perception = Perception(planes, p2d, n2d, obstacles, near)
         self._fresh = True
         return self.perception
+
+    def _correct_mount(self, mount) -> None:
+        """Use a corrected camera mount from now on (FSPF, the near field)."""
+        assert self.mount_check is not None
+        self.events.append(
+            {"t": round(self._t, 3), "event": "mount corrected", "tilt_error_deg": round(float(self.mount_check.tilt_error_deg), 2),
+             "pitch_down_deg": round(math.degrees(float(mount.pitch_down_rad)), 2),
+             "roll_deg": round(math.degrees(float(getattr(mount, "roll_rad", 0.0))), 2)}
+        )
+        self.mount = mount
+        if self.near_field is not None:
+            cam = self.cfg.camera
+            self.near_field = NearField(cam.intrinsics, mount, cam.min_range_m, self.cfg.avoidance.robot_radius_m, self.cfg.avoidance.near_field)
 
     def _reject(self, why: str) -> Perception:
         self.frame_fault = why
@@ -407,6 +436,8 @@ class RobotStack:
         self._last_search_t = -math.inf
         self._searches = 0
         self._exploring_from = None
+        self._confirmed = 0
+        self._candidate: np.ndarray | None = None
         if self.navigator is not None:
             self._goal = self.navigator.goal if self.navigator.goal is not None else self._goal
         self.events.append({"t": round(t, 3), "event": "lost", "why": why, "estimate": [round(float(v), 3) for v in self.pose]})
@@ -447,8 +478,24 @@ class RobotStack:
         if self.modes:
             self.pose = compose_pose(self.modes[0][0], self.odom)
         self.last_search = res
-        if res.accepted is not None:
-            self._accept(res.accepted, t, res.reason, len(res.modes))
+        if prior is not None and res.modes:
+            # A false alarm ends where it began: the belief before the alarm, if it still
+            # explains the scan about as well as the best mode.
+            kept = gl.rescore(prior[None, :], pts).modes
+            if kept and kept[0].cost <= rc.prior_cost and kept[0].cost <= res.modes[0].cost + rc.accept_margin:
+                self._accept(kept[0], t, f"the belief before the alarm explains the scan (cost {kept[0].cost:.3f})", len(res.modes))
+                return
+        acc = res.accepted
+        if acc is None:
+            self._confirmed = 0
+            return
+        same = self._candidate is not None and math.hypot(*(acc.pose[:2] - self._candidate[:2])) < rc.mode_separation_m and abs(
+            wrap_angle(float(acc.pose[2] - self._candidate[2]))
+        ) < math.radians(rc.mode_separation_deg)
+        self._confirmed = self._confirmed + 1 if same else 1
+        self._candidate = acc.pose.copy()
+        if self._confirmed >= rc.confirmations:
+            self._accept(acc, t, res.reason, len(res.modes))
 
     def _accept(self, mode: Mode, t: float, reason: str, n_modes: int) -> None:
         """Restart CGR on the accepted mode; the navigator re-plans to its goal from there."""

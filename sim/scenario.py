@@ -23,6 +23,7 @@ from autonomy.stack import StackConfig
 from sim.config import apply_overrides, from_dict, read_toml
 from sim.simulator.actors import Furniture, Person
 from sim.simulator.blueprints import ASSETS_DIR
+from sim.simulator.faults import FaultsConfig
 from sim.simulator.kinect import KinectConfig
 from sim.simulator.robot import OdometryConfig, RobotConfig, avoidance_for_body
 from sim.simulator.world import WorldConfig
@@ -182,6 +183,8 @@ class Scenario:
     avoidance: AvoidanceConfig = field(default_factory=AvoidanceConfig)
     actors: ActorsConfig = field(default_factory=ActorsConfig)
     mission: MissionConfig = field(default_factory=MissionConfig)
+    faults: FaultsConfig = field(default_factory=FaultsConfig)
+    """Injected faults (sim.simulator.faults): none by default."""
     report: ReportConfig = field(default_factory=ReportConfig)
     base_dir: str = ""
     """Directory that relative paths resolve against (set by the loader)."""

@@ -39,6 +39,7 @@ from sim.simulator import blueprints
 from sim.simulator.actors import Furniture, Person
 from sim.simulator.blueprints import ASSETS_DIR
 from sim.simulator.building import Building, navgraph_from_walls, random_furniture, random_people
+from sim.simulator.faults import FaultInjector, fault_actors, fault_rng
 from sim.simulator.kinect import KinectCamera
 from sim.simulator.robot import Odometry
 from sim.simulator.step import EpisodeSeeds, SimFrame, SimStep
@@ -166,8 +167,10 @@ class Run:
     """Failures ended by re-initialising at the true pose (the robot did not recover itself)."""
     health_states: list[str] = field(default_factory=list)
     """The stack's health state at each frame (for the alarms' check against the truth)."""
-    faults: object | None = None
-    """The fault injector (``sim.simulator.faults.FaultInjector``) when the scenario has faults."""
+    faults: FaultInjector | None = None
+    """The fault injector when the scenario has faults."""
+    rejected: list[tuple[float, str]] = field(default_factory=list)
+    """(time, why) of each frame the stack did not use (dropped, invalid, stale)."""
 
     @property
     def resets(self) -> int:
@@ -192,6 +195,10 @@ def build_run(scn: Scenario, seed: int) -> Run:
     graph = building.navgraph
     furniture = tuple(scn.actors.furniture) + random_furniture(building, scn.actors.random_furniture, seeds.actors, scn.robot.radius_m)
     people = tuple(scn.actors.people) + random_people(graph, scn.actors.random_people, seeds.actors, building.main_node_ids)
+    if scn.faults.enabled:
+        # Bodies the faults move in (a blockage's panels, a crowd), parked outside.
+        extra_furniture, extra_people = fault_actors(scn.faults)
+        furniture, people = furniture + extra_furniture, people + extra_people
     mission = plan_mission(scn.mission, graph, seeds.mission)
     world = build_world(
         building.vectormap, world=scn.world, robot=scn.robot, intrinsics=scn.kinect.intrinsics, mount=scn.kinect.mount,
@@ -207,6 +214,8 @@ def build_run(scn: Scenario, seed: int) -> Run:
     run = Run(scn, seed, seeds, building, furniture, people, mission, world, sim, stack, use_estimate)
     run.last_in_view = np.full(len(world.people.people), -np.inf)
     run.blackbox = FlightRecorder(scn.report.incident_seconds, scn.kinect.rate_hz)
+    if scn.faults.enabled:
+        run.faults = FaultInjector(scn.faults, world, building, fault_rng(seed), sim.odometry, scn.robot.radius_m)
     run.estimates.append(mission.start_pose.copy())
     return run
 
@@ -292,6 +301,9 @@ def tick(run: Run, recorder) -> bool:
     False when the mission has ended this frame."""
     world, stack = run.world, run.stack
     t = float(world.data.time)
+    if run.faults is not None:
+        nav_ = stack.navigator
+        run.faults.before_step(t, run.distance_m, None if nav_ is None or len(nav_.path) < 2 else nav_.path)
     pose = world.robot.pose(world.data)
     control_pose = stack.pose.copy() if run.use_estimate else pose
     override = None if run.use_estimate else pose
@@ -306,10 +318,14 @@ def tick(run: Run, recorder) -> bool:
             return False
     obstacles = stack.perception.obstacles
     frame = run.sim.step(nav.velocity)
+    if run.faults is not None:
+        frame = run.faults.filter_frame(frame)
     note_contacts(run, frame, pose, t, nav, control_pose, obstacles)
     stack.perceive(frame.depth)
     run.fspf_counts.append(_fspf_counts(stack))
     stack.localize(frame.increment, frame.t)
+    if stack.frame_fault:
+        run.rejected.append((frame.t, stack.frame_fault))
     check_localization(run, frame)
     run.distance_m += float(np.hypot(*(frame.pose[:2] - pose[:2])))
     run.truth.append(frame.pose)
@@ -474,9 +490,27 @@ def log_frame(rec, run: Run, frame: SimFrame, nav: NavCommand) -> None:
             "fspf/points_2d": float(len(per.points_2d)),
             "localization/error_m": run.loc_errors[-1] if run.loc_errors else float("nan"),
             "localization/spread_m": stack.spread[0] if loc is not None else float("nan"),
+            **health_scalars(stack),
             "collisions": float(run.collisions),
         }
     )
+
+
+#: The health state as a number for the rerun timeline.
+HEALTH_CODES = {"ok": 0.0, "blind": 1.0, "lost": 2.0, "relocalizing": 3.0}
+
+
+def health_scalars(stack: RobotStack) -> dict[str, float]:
+    """The health signal for the recording's timeline (autonomy.health)."""
+    h = stack.health_sample
+    if h is None:
+        return {}
+    return {
+        "health/state": HEALTH_CODES.get(stack.health_state, -1.0),
+        "health/explained_fast": h.explained_fast,
+        "health/explained_slow": h.explained_slow,
+        "health/through_fast": h.through_fast,
+    }
 
 
 def close_recording(rec, run: Run, wall_s: float) -> dict:
@@ -513,6 +547,62 @@ def fault_at(run: Run, t: float) -> str | None:
     return None
 
 
+#: A fault counts as noticed by the stack within this long of its start ...
+NOTICE_WINDOW_S = 60.0
+#: ... and the error after it is the largest over this long once it is over.
+AFTER_WINDOW_S = 10.0
+
+
+def fault_report(run: Run) -> list[dict]:
+    """Per injected fault: when it happened, when the stack noticed it (its first lost,
+    blind or mount-corrected event, or a frame it refused, after the start), when it was
+    over for the robot (kidnap: its relocalization; the others: the fault's end, then the
+    error back below ``recovered_error_m``), the true error before and after, the
+    contacts in between."""
+    out = []
+    times = np.array(run.times[1 : 1 + len(run.loc_errors)])
+    errs = np.array(run.loc_errors)
+    ok_m = run.scn.localization.recovered_error_m
+    signals = [(e["t"], e["event"]) for e in run.stack.events if e["event"] in ("lost", "blind", "mount corrected")]
+    signals += [(t, f"frame {why}") for t, why in run.rejected]
+    signals.sort()
+    relocs = [e["t"] for e in run.stack.events if e["event"] == "relocalized"]
+    for ev in fault_events(run):
+        t0 = float(ev["t_start"])
+        end = float(ev["t_end"]) if ev.get("t_end") is not None else (float(run.times[-1]) if ev["kind"] != "kidnap" else t0)
+        rec = {k: ev[k] for k in ("kind", "t_start", "t_end", "distance_m") if k in ev}
+        if ev.get("skipped"):
+            rec["skipped"] = ev["skipped"]
+        seen = [(t, what) for t, what in signals if t0 <= t <= t0 + NOTICE_WINDOW_S]
+        rec["noticed_t"] = round(seen[0][0], 3) if seen else None
+        rec["noticed_by"] = seen[0][1] if seen else None
+        k0 = int(np.searchsorted(times, t0)) if len(times) else 0
+        rec["error_before_m"] = round(float(errs[max(k0 - 1, 0)]), 3) if len(errs) else None
+        if ev["kind"] == "kidnap":
+            # Its failure (the error it caused), ended by the robot's relocalization or by the truth.
+            mine = [f for f in run.failures if f.get("fault") == "kidnap" and t0 - 1.0 <= f["t"] <= t0 + FAULT_ATTRIBUTION_S]
+            if mine and mine[0]["ended_by"] == "truth":
+                done, rec["ended_by"] = None, "truth"
+            else:
+                nxt = min([float(e["t_start"]) for e in fault_events(run) if float(e["t_start"]) > t0], default=math.inf)
+                after = [t for t in relocs if t0 <= t < nxt]
+                done = after[0] if after else None
+                rec["ended_by"] = "robot" if done is not None else None
+        else:
+            k1 = int(np.searchsorted(times, end))
+            back = np.flatnonzero(errs[k1:] < ok_m) if k1 < len(errs) else np.zeros(0, np.int64)
+            done = float(times[k1 + int(back[0])]) if len(back) else None
+        rec["recovered_t"] = round(done, 3) if done is not None else None
+        rec["recovery_s"] = round(done - t0, 3) if done is not None else None
+        if done is not None and len(times):
+            a, b = np.searchsorted(times, done), np.searchsorted(times, done + AFTER_WINDOW_S)
+            rec["error_after_m"] = round(float(errs[a:b].max()), 3) if b > a else None
+        last = (done if done is not None else end) + AFTER_WINDOW_S
+        rec["contacts"] = sum(t0 <= c["t"] <= last for c in run.world.collision_log)
+        out.append(rec)
+    return out
+
+
 def recovery_metrics(run: Run) -> dict:
     """Lost alarms against the truth (false alarms: raised while the error was below
     ``FALSE_ALARM_ERROR_M``; misses: failures the robot never noticed before they ended),
@@ -545,6 +635,24 @@ def recovery_metrics(run: Run) -> dict:
         "frames_invalid": stack.frames_rejected["invalid"],
         "relocalizing_frames": sum(s == "relocalizing" for s in run.health_states),
         "blind_frames": sum(s == "blind" for s in run.health_states),
+        **fault_metrics(fault_report(run)),
+    }
+
+
+def fault_metrics(report: list[dict]) -> dict:
+    """Injected faults and kidnappings in numbers: how many, how many recovered, and the
+    kidnappings' median and worst time to recover (without truth)."""
+    if not report:
+        return {}
+    kid = [r for r in report if r["kind"] == "kidnap" and not r.get("skipped")]
+    times = [r["recovery_s"] for r in kid if r["recovery_s"] is not None]
+    return {
+        "faults_injected": sum(not r.get("skipped") for r in report),
+        "faults_recovered": sum(r["recovered_t"] is not None for r in report if not r.get("skipped")),
+        "kidnappings": len(kid),
+        "kidnappings_recovered": len(times),
+        "kidnap_recovery_median_s": round(float(np.median(times)), 2) if times else None,
+        "kidnap_recovery_max_s": round(float(np.max(times)), 2) if times else None,
     }
 
 
@@ -646,6 +754,7 @@ def build_report(run: Run, metrics: dict, files: dict[str, str], interrupted: bo
         "waypoints": run.mission.waypoints,
         "navigation": {"states": run.nav_states, "replans": nav.replans, "recoveries": nav.recoveries, "near_field_frames": run.near_frames},
         "events": run.mission.events,
+        "recovery": {"events": run.stack.events, "failures": run.failures, "faults": fault_report(run)},
         "collision_events": run.world.collision_log,
         "files": files,
         "config": {k: v for k, v in to_dict(scn).items() if k != "base_dir"},

@@ -19,7 +19,7 @@ from autonomy.fspf import FSPFConfig
 from autonomy.navigator import NavigatorConfig
 from autonomy.nearfield import NearField
 from autonomy.stack import LocalizationConfig as StackLocalizationConfig
-from autonomy.stack import StackConfig
+from autonomy.stack import RecoveryConfig, StackConfig
 from sim.config import apply_overrides, from_dict, read_toml
 from sim.simulator.actors import Furniture, Person
 from sim.simulator.blueprints import ASSETS_DIR
@@ -185,6 +185,8 @@ class Scenario:
     mission: MissionConfig = field(default_factory=MissionConfig)
     faults: FaultsConfig = field(default_factory=FaultsConfig)
     """Injected faults (sim.simulator.faults): none by default."""
+    recovery: RecoveryConfig = field(default_factory=RecoveryConfig)
+    """The robot stack's lost detection, relocalization and mount check."""
     report: ReportConfig = field(default_factory=ReportConfig)
     base_dir: str = ""
     """Directory that relative paths resolve against (set by the loader)."""
@@ -197,7 +199,9 @@ class Scenario:
         """The robot stack's configuration: the camera as the Kinect model defines it (one
         source for its intrinsics, mount and range), FSPF, localization, avoidance and the
         navigator."""
-        return StackConfig(self.kinect.depth_camera(), self.fspf, self.localization, self.avoidance, self.navigator)
+        return StackConfig(
+            self.kinect.depth_camera(), self.fspf, self.localization, self.avoidance, self.navigator, recovery=self.recovery
+        )
 
     def resolve(self, path: str) -> Path:
         p = Path(path)

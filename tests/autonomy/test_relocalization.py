@@ -1,0 +1,254 @@
+"""Global relocalization: the scan in the dead-reckoning frame (closed form), and the map
+search on panoramas ray-cast from known poses of the shipped corridor_loop building."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from autonomy.avoidance import AvoidanceConfig
+from autonomy.errors import InputError
+from autonomy.freespace import FreeSpaceConfig, build_free_space
+from autonomy.geometry import compose_pose, wrap_angle
+from autonomy.raycast import SceneQuery, rays_hit
+from autonomy.relocalization import GlobalLocalizer, RelocalizationConfig, Scan
+from sim.simulator.blueprints import load_blueprint
+
+CELL = 0.05
+
+
+def robot_from_world(pose: np.ndarray, w: np.ndarray) -> np.ndarray:
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    d = np.asarray(w, dtype=np.float64) - pose[:2]
+    return np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
+
+
+# --------------------------------------------------------------------------- the scan
+
+
+def cell_centres(rng: np.random.Generator, n: int, lo: int = -60, hi: int = 60) -> np.ndarray:
+    """``n`` distinct world points at scan-cell centres (no cell boundary in doubt)."""
+    keys = rng.choice((hi - lo) ** 2, size=n, replace=False)
+    return (np.column_stack([keys // (hi - lo), keys % (hi - lo)]) + lo + 0.5) * CELL
+
+
+def test_scan_points_come_back_in_the_robot_frame_at_any_later_pose() -> None:
+    rng = np.random.default_rng(0)
+    scan = Scan(CELL, 6000)
+    world = cell_centres(rng, 300)
+    seen_at = [np.array([0.3, -0.2, 0.4]), np.array([0.5, 0.1, 2.9]), np.array([0.4, 0.0, -2.8])]
+    for k, p in enumerate(seen_at):
+        scan.add(p, robot_from_world(p, world[k * 100 : (k + 1) * 100]))
+    assert len(scan.points) == 300 and scan.frames == 3
+    now = np.array([1.7, -3.1, -1.2])
+    got = scan.in_robot_frame(now)
+    assert got.flags.c_contiguous
+    # Same set (order: newest frame first).
+    want = robot_from_world(now, np.vstack([world[200:], world[100:200], world[:100]]))
+    np.testing.assert_allclose(got, want, atol=1e-9)
+
+
+def test_one_point_per_cell_the_newest_kept() -> None:
+    rng = np.random.default_rng(1)
+    scan = Scan(CELL, 6000)
+    world = cell_centres(rng, 200)
+    p0, p1 = np.array([0.0, 0.0, 0.0]), np.array([0.2, 0.1, 0.5])
+    scan.add(p0, robot_from_world(p0, world))
+    # The same cells seen again, each point moved within its cell.
+    moved = world + rng.uniform(-0.45, 0.45, world.shape) * CELL
+    scan.add(p1, robot_from_world(p1, moved))
+    assert len(scan.points) == 200
+    np.testing.assert_allclose(scan.points, moved, atol=1e-9)
+    # Two points of one frame in one cell: one is kept.
+    scan.clear()
+    scan.add(p0, np.array([[1.0 + 0.01, 2.0 + 0.01], [1.0 + 0.04, 2.0 + 0.03], [3.0 + 0.01, 0.01]]))
+    assert len(scan.points) == 2
+
+
+def test_max_points_keeps_the_newest_frames() -> None:
+    rng = np.random.default_rng(2)
+    scan = Scan(CELL, 250)
+    world = cell_centres(rng, 400)
+    p = np.array([0.1, 0.2, 0.3])
+    scan.add(p, robot_from_world(p, world[:200]))
+    scan.add(p, robot_from_world(p, world[200:]))
+    assert len(scan.points) == 250
+    kept = {tuple(np.round(q / CELL - 0.5).astype(int)) for q in scan.points}
+    newest = {tuple(np.round(q / CELL - 0.5).astype(int)) for q in world[200:]}
+    assert newest <= kept  # the whole newest frame, then 50 of the older one
+    assert len(kept & {tuple(np.round(q / CELL - 0.5).astype(int)) for q in world[:200]}) == 50
+
+
+def test_turned_and_travelled_accumulate_across_the_wrap() -> None:
+    scan = Scan(CELL, 6000)
+    poses = [(0.0, 0.0, 3.0), (0.0, 0.0, -3.0), (3.0, 4.0, -3.0), (3.0, 4.0, -2.5), (3.0, 5.0, 3.1)]
+    for p in poses:
+        scan.add(np.array(p), np.zeros((0, 2)))  # frames without points count as motion
+    want_turn = sum(abs(wrap_angle(b[2] - a[2])) for a, b in zip(poses, poses[1:], strict=False))
+    assert want_turn == pytest.approx((2 * math.pi - 6.0) + 0.5 + (2 * math.pi - 5.6))
+    assert scan.turned_rad == pytest.approx(want_turn)
+    assert scan.travelled_m == pytest.approx(5.0 + 1.0)
+    assert scan.frames == 5 and len(scan.points) == 0
+    scan.clear()
+    assert scan.turned_rad == scan.travelled_m == 0.0 and scan.frames == 0
+
+
+# --------------------------------------------------------------------------- the search
+
+
+@pytest.fixture(scope="module")
+def building():
+    vm = load_blueprint("corridor_loop").vectormap
+    r = AvoidanceConfig().robot_radius_m  # as the stack builds its localizer
+    gl = GlobalLocalizer(build_free_space(vm, FreeSpaceConfig(robot_radius_m=r)), r)
+    return gl, SceneQuery(vm)
+
+
+def panorama(
+    scene: SceneQuery, pose: np.ndarray, rng: np.random.Generator, rays: int = 4000, max_range_m: float = 4.0,
+    clutter: float = 0.0, noise_m: float = 0.01,
+) -> np.ndarray:
+    """Robot-frame scan of a 360 degree turn at ``pose`` as the stack gathers it: the
+    first wall along each of ``rays`` rays within range (plus noise), one point per scan
+    cell; then a ``clutter`` fraction of points short of the walls (people and furniture
+    the map does not hold)."""
+    lines = scene.scene_lines(pose[0], pose[1])[0]
+    a = rng.uniform(-math.pi, math.pi, rays)
+    idx, t = rays_hit(lines, pose[0], pose[1], np.column_stack([np.cos(a + pose[2]), np.sin(a + pose[2])]))
+    ok = (idx >= 0) & (t <= max_range_m)
+    a, r = a[ok], t[ok] + rng.normal(0.0, noise_m, ok.sum())
+    scan = Scan(RelocalizationConfig().scan_cell_m, RelocalizationConfig().max_scan_points)
+    scan.add(np.zeros(3), np.column_stack([r * np.cos(a), r * np.sin(a)]))
+    pts = scan.points
+    if clutter:
+        k = int(round(clutter / (1.0 - clutter) * len(pts)))
+        pick = rng.integers(len(pts), size=k)
+        pts = np.vstack([pts, pts[pick] * rng.uniform(0.15, 0.85, k)[:, None]])
+    return pts
+
+
+def pose_error(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+    return math.hypot(a[0] - b[0], a[1] - b[1]), abs(wrap_angle(float(a[2] - b[2])))
+
+
+def is_at(mode_pose: np.ndarray, truth: np.ndarray, xy_m: float = 0.15, theta_deg: float = 3.0) -> bool:
+    e, th = pose_error(mode_pose, truth)
+    return e < xy_m and th < math.radians(theta_deg)
+
+
+#: Spots whose 4 m panorama no other place of the building matches within the decision's
+#: margins (checked over noise draws): corridor spots by office doors.
+UNIQUE = [np.array([38.31, 33.34, -2.56]), np.array([22.91, 30.84, -2.2])]
+#: An office corner repeated elsewhere in the building (within 4 m they look the same).
+REPEATED = np.array([1.16, 33.7, -3.04])
+
+
+def assert_margins(res, n: int, cfg: RelocalizationConfig) -> None:
+    """Every other mode is worse than the best by the decision's margins."""
+    for m in res.modes[1:]:
+        gap = m.cost - res.modes[0].cost
+        assert gap >= cfg.accept_margin and gap * n >= cfg.accept_margin_points, (gap, gap * n, m.pose)
+
+
+@pytest.mark.parametrize("k", range(len(UNIQUE)))
+def test_a_unique_spot_is_found_and_accepted(building, k) -> None:
+    gl, scene = building
+    truth = UNIQUE[k]
+    pts = panorama(scene, truth, np.random.default_rng(k))
+    res = gl.search(pts)
+    assert res.accepted is not None, res.reason
+    assert is_at(res.accepted.pose, truth), (pose_error(res.accepted.pose, truth), truth)
+    assert res.modes[0] is res.accepted and res.hypotheses == gl.candidates.shape[0] * len(gl.headings)
+    assert res.accepted.cost <= gl.cfg.accept_cost and len(res.modes) == gl.cfg.modes
+    assert_margins(res, len(pts), gl.cfg)
+
+
+@pytest.fixture(scope="module")
+def repeated(building):
+    """The scan at the repeated spot (noise-free: the offices tie exactly) and its search."""
+    gl, scene = building
+    pts = panorama(scene, REPEATED, np.random.default_rng(10), noise_m=0.0)
+    return pts, gl.search(pts)
+
+
+def test_a_repeated_spot_is_not_accepted_but_the_truth_is_among_the_modes(building, repeated) -> None:
+    gl, _ = building
+    _, res = repeated
+    assert res.accepted is None and res.reason.startswith("ambiguous"), res.reason
+    at_truth = [m for m in res.modes if is_at(m.pose, REPEATED)]
+    assert at_truth, [np.round(m.pose, 2) for m in res.modes[:5]]
+    # ... and a mode elsewhere explains the scan as well (another office ranks first).
+    far = [m for m in res.modes if pose_error(m.pose, REPEATED)[0] > 3.0]
+    assert far and min(m.cost for m in far) - at_truth[0].cost < gl.cfg.accept_margin
+    assert not is_at(res.modes[0].pose, REPEATED) and at_truth[0].cost == pytest.approx(res.modes[0].cost, abs=1e-9)
+
+
+def test_thirty_percent_clutter_still_finds_the_truth(building) -> None:
+    gl, scene = building
+    truth = UNIQUE[0]
+    pts = panorama(scene, truth, np.random.default_rng(20), clutter=0.3)
+    res = gl.search(pts)
+    assert is_at(res.modes[0].pose, truth), pose_error(res.modes[0].pose, truth)
+    # Clutter costs every hypothesis alike: the others stay beyond the margins ...
+    assert_margins(res, len(pts), gl.cfg)
+    # ... and the truth pays for about the clutter's share of the points (saturated).
+    assert 0.2 < res.modes[0].cost < 0.35
+    # Accepted exactly when that is within accept_cost.
+    assert (res.accepted is not None) == (res.modes[0].cost <= gl.cfg.accept_cost), res.reason
+
+
+def test_the_prior_wins_ties(building, repeated) -> None:
+    gl, _ = building
+    pts, without = repeated
+    assert not is_at(without.modes[0].pose, REPEATED)  # a tie, decided for another office ...
+    res = gl.search(pts, prior=REPEATED + np.array([0.08, -0.06, math.radians(2.0)]))
+    assert is_at(res.modes[0].pose, REPEATED), pose_error(res.modes[0].pose, REPEATED)  # ... unless the prior is here
+    assert res.modes[0].cost == pytest.approx(without.modes[0].cost, abs=1e-9)
+    assert res.accepted is None  # still a tie: the robot looks on
+
+
+def test_rescore_refines_a_nearby_pose_and_ranks_the_truth_first(building) -> None:
+    """(A prior elsewhere is one such wrong pose: it competes on cost alone.)"""
+    gl, scene = building
+    truth = UNIQUE[1]
+    pts = panorama(scene, truth, np.random.default_rng(40))
+    near = compose_pose(truth, np.array([0.15, -0.12, math.radians(4.0)]))
+    wrong = compose_pose(truth, np.array([1.5, 0.0, math.radians(30.0)]))
+    res = gl.rescore(np.array([wrong, near]), pts)
+    assert res.hypotheses == 2 and len(res.modes) == 2
+    assert is_at(res.modes[0].pose, truth, 0.06, 1.0), pose_error(res.modes[0].pose, truth)
+    assert res.modes[0].cost < 0.05 < res.modes[1].cost
+    assert gl.cost(res.modes[0].pose, pts) == pytest.approx(res.modes[0].cost)
+    assert gl.cost(near, pts) > res.modes[0].cost + 0.1  # refined: better than where it started
+
+
+def test_a_mode_whose_latest_frame_sees_through_walls_is_not_accepted(building) -> None:
+    gl, scene = building
+    truth = UNIQUE[0]
+    pts = panorama(scene, truth, np.random.default_rng(50))
+    lines_at = lambda x, y: scene.scene_lines(x, y)[0]  # noqa: E731
+    frame = pts[np.abs(np.arctan2(pts[:, 1], pts[:, 0])) < math.radians(29)]
+    ok = gl.rescore(truth[None, :], pts, frame, lines_at)
+    assert ok.accepted is not None and ok.modes[0].through < 0.05
+    # The same frame's points 1 m farther along their rays: beyond the walls.
+    through = frame * (1.0 + 1.0 / np.hypot(frame[:, 0], frame[:, 1]))[:, None]
+    bad = gl.rescore(truth[None, :], pts, through, lines_at)
+    assert bad.accepted is None and "sees through walls" in bad.reason and bad.modes[0].through > 0.9
+
+
+def test_too_few_points_or_too_poor_a_match_is_no_decision(building) -> None:
+    gl, scene = building
+    res = gl.search(np.zeros((gl.cfg.min_scan_points - 1, 2)))
+    assert res.modes == () and res.accepted is None and res.hypotheses == 0 and "need 150" in res.reason
+    strict = GlobalLocalizer(gl.fs, AvoidanceConfig().robot_radius_m, RelocalizationConfig(accept_cost=0.1))
+    truth = UNIQUE[0]
+    res = strict.rescore(truth[None, :], panorama(scene, truth, np.random.default_rng(60), clutter=0.3))
+    assert res.accepted is None and "explains too little" in res.reason
+
+
+@pytest.mark.parametrize(("field", "value"), [("grid_step_m", 0.0), ("modes", 0), ("coarse_points", 5.5), ("accept_margin", -1.0)])
+def test_bad_config_is_a_one_line_error_naming_the_field(field, value) -> None:
+    with pytest.raises(InputError, match=rf"relocalization\.{field}: expected"):
+        RelocalizationConfig(**{field: value})

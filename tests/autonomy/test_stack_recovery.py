@@ -1,0 +1,357 @@
+"""The robot stack's recovery on the shipped corridor_loop map, without a simulator:
+frame faults (dropped, NaN, invalid, stale), blind and lost detection, and relocalization
+from an unknown start pose.
+
+Depth frames are synthetic: constant arrays for the frame checks, and for the rest a
+closed-form render of the map's walls (vertical planes) and the floor through the
+default Kinect mount, the frame the camera would see at a known pose.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from autonomy.camera import DepthCamera, pixel_rays
+from autonomy.geometry import compose_pose, relative_pose, wrap_angle
+from autonomy.raycast import SceneQuery, load_or_build, rays_hit
+from autonomy.stack import LOCALIZATION_GRID, RobotStack, StackConfig
+from sim.simulator.blueprints import ASSETS_DIR, load_blueprint
+
+CAM = DepthCamera()
+SHAPE = (CAM.intrinsics.height, CAM.intrinsics.width)
+MAP_PATH = ASSETS_DIR / "corridor_loop.vectormap.txt"
+#: A corridor spot by an office door whose surroundings no other place repeats (the
+#: relocalization tests use it too), facing along the corridor.
+START = np.array([38.31, 33.34, -2.56])
+FPS = 30.0
+
+
+@pytest.fixture(scope="module")
+def building():
+    bp = load_blueprint("corridor_loop")
+    scene = SceneQuery(bp.vectormap, load_or_build(bp.vectormap, MAP_PATH, LOCALIZATION_GRID))
+    return bp, scene
+
+
+def make_stack(building, pose: np.ndarray | None = START, **cfg) -> RobotStack:
+    bp, scene = building
+    stack = RobotStack(bp.vectormap, bp.navgraph, StackConfig(**cfg), rng=np.random.default_rng(0), fspf_seed=3, scene=scene)
+    stack.reset(pose)
+    return stack
+
+
+_RAYS = pixel_rays(CAM.intrinsics).reshape(-1, 3) @ CAM.mount.rotation().T  # robot frame, per unit of depth
+_BEARING = np.arctan2(_RAYS[:, 1], _RAYS[:, 0])  # each pixel's horizontal bearing (robot frame)
+_H_PER_DEPTH = np.hypot(_RAYS[:, 0], _RAYS[:, 1])  # horizontal distance per unit of depth
+with np.errstate(divide="ignore"):
+    _TO_FLOOR = np.where(_RAYS[:, 2] < 0, -CAM.mount.translation()[2] / _RAYS[:, 2], np.inf)
+_TABLE = np.linspace(_BEARING.min(), _BEARING.max(), 8192)  # bearings ray-cast per frame
+
+
+def render(scene: SceneQuery, pose: np.ndarray) -> np.ndarray:
+    """Planar depth (float32 m, 0 out of range) of the map's walls (vertical planes) and
+    the floor seen from ``pose``. A pixel's ray meets a wall where its horizontal part
+    does; the horizontal distances are ray-cast once per frame on a fine table of
+    bearings (0.007 degrees apart) and looked up per pixel."""
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    t = CAM.mount.translation()
+    ox, oy = pose[0] + c * t[0] - s * t[1], pose[1] + s * t[0] + c * t[1]
+    a = _TABLE + pose[2]
+    idx, dist = rays_hit(scene.scene_lines(ox, oy)[0], ox, oy, np.column_stack([np.cos(a), np.sin(a)]))
+    dist = np.where(idx >= 0, dist, np.inf)
+    k = np.rint((_BEARING - _TABLE[0]) / (_TABLE[1] - _TABLE[0])).astype(np.int64)
+    z = np.minimum(dist[k] / _H_PER_DEPTH, _TO_FLOOR)
+    z = np.where((z >= CAM.min_range_m) & (z <= CAM.max_range_m), z, 0.0)
+    return z.reshape(SHAPE).astype(np.float32)
+
+
+def wall(depth_m: float = 2.0) -> np.ndarray:
+    return np.full(SHAPE, depth_m, np.float32)
+
+
+def count_updates(stack: RobotStack, monkeypatch) -> list[int]:
+    """Count CGR's observation updates (a frame that is not used must not reach CGR)."""
+    calls = [0]
+    original = stack.localizer.update
+
+    def update(*args, **kwargs):
+        calls[0] += 1
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(stack.localizer, "update", update)
+    return calls
+
+
+# --------------------------------------------------------------------------- frame faults
+
+
+def test_a_dropped_frame_keeps_the_last_perception_and_does_not_reach_cgr(building, monkeypatch) -> None:
+    stack = make_stack(building)
+    updates = count_updates(stack, monkeypatch)
+    first = stack.perceive(wall())
+    stack.localize(np.zeros(3), 0.0)
+    assert stack.frame_fault == "" and updates[0] == 1 and len(first.points_2d) > 50
+    again = stack.perceive(None)
+    stack.localize(np.zeros(3), 1 / FPS)
+    assert again is first and stack.frame_fault == "dropped" and updates[0] == 1
+    assert stack.frames_rejected == {"dropped": 1, "stale": 0, "invalid": 0} and stack.frame == 2
+    # Dropped before any frame: an empty perception, not None.
+    fresh = make_stack(building)
+    empty = fresh.perceive(None)
+    assert empty.points_2d.shape == (0, 2) and empty.obstacles.shape == (0, 2) and fresh.frame_fault == "dropped"
+
+
+def test_nan_and_infinite_pixels_are_invalid_pixels(building) -> None:
+    rng = np.random.default_rng(0)
+    clean = render(building[1], START)
+    bad = clean.copy()
+    holes = rng.random(SHAPE) < 0.2
+    bad[holes] = rng.choice(np.array([np.nan, np.inf, -np.inf], np.float32), holes.sum())
+    as_zero = np.where(holes, np.float32(0.0), clean)
+    a, b = make_stack(building), make_stack(building)
+    pa = a.perceive(bad, seed=11)
+    pb = b.perceive(as_zero, seed=11)
+    assert a.frame_fault == "" and np.isnan(bad).any()  # the caller's frame is left as it was
+    for arr in (pa.planes.points, pa.planes.normals, pa.planes.outliers, pa.points_2d, pa.normals_2d, pa.obstacles, pa.near_lines):
+        assert np.isfinite(arr).all()
+    # Exactly as if those pixels had been 0 (the Kinect's invalid value).
+    assert len(pa.points_2d) > 50
+    np.testing.assert_array_equal(pa.planes.points, pb.planes.points)
+    np.testing.assert_array_equal(pa.points_2d, pb.points_2d)
+
+
+@pytest.mark.parametrize("frame", ["zeros", "nan", "negative"])
+def test_a_frame_without_a_valid_pixel_is_invalid(building, frame) -> None:
+    stack = make_stack(building)
+    kept = stack.perceive(wall())
+    depth = {"zeros": np.zeros(SHAPE, np.float32), "nan": np.full(SHAPE, np.nan, np.float32), "negative": wall(-1.0)}[frame]
+    assert stack.perceive(depth) is kept and stack.frame_fault == "invalid"
+    assert stack.frames_rejected["invalid"] == 1
+    # The next good frame is used again (and is not taken for a repeat of the last).
+    stack.perceive(wall())
+    stack.localize(np.array([0.05, 0.0, 0.0]), 0.1)
+    assert stack.frame_fault == ""
+
+
+def test_the_same_pixels_while_the_wheels_turn_are_stale_and_while_still_are_not(building, monkeypatch) -> None:
+    stack = make_stack(building)
+    updates = count_updates(stack, monkeypatch)
+    depth = wall()
+    stack.perceive(depth)
+    stack.localize(np.zeros(3), 0.0)
+    # Standing still, a still scene repeats itself: used.
+    stack.perceive(depth.copy())
+    stack.localize(np.zeros(3), 1 / FPS)
+    assert stack.frame_fault == "" and updates[0] == 2
+    # Moving (1 cm or 1 degree a frame), the same pixels again: a stuck driver.
+    for k, inc in enumerate((np.array([0.01, 0.0, 0.0]), np.array([0.0, 0.0, math.radians(1.0)]))):
+        stack.perceive(depth.copy())
+        stack.localize(inc, (2 + k) / FPS)
+        assert stack.frame_fault == "stale" and stack.frames_rejected["stale"] == k + 1 and updates[0] == 2
+    # Below the motion threshold it is still: used.
+    stack.perceive(depth)
+    stack.localize(np.array([0.5e-3, 0.0, 0.5e-3]), 4 / FPS)
+    assert stack.frame_fault == "" and updates[0] == 3
+    # One sampled pixel different: a new frame.
+    other = depth.copy()
+    other.ravel()[7 * 1000] += 0.01
+    stack.perceive(other)
+    stack.localize(np.array([0.02, 0.0, 0.0]), 5 / FPS)
+    assert stack.frame_fault == "" and updates[0] == 4
+    # The odometry is dead-reckoned through stale frames too.
+    want = START
+    for inc in ([0.01, 0.0, 0.0], [0.0, 0.0, math.radians(1.0)], [0.5e-3, 0.0, 0.5e-3], [0.02, 0.0, 0.0]):
+        want = compose_pose(want, np.array(inc))
+    np.testing.assert_allclose(stack.odom, want, atol=1e-12)
+
+
+# --------------------------------------------------------------------------- blind and lost
+
+
+def drive(stack: RobotStack, frames, t0: float = 0.0, fps: float = FPS, increment=None):
+    """Feed ``frames`` (depth or None) at ``fps`` from ``t0``; returns (t, decide()) per frame."""
+    out = []
+    for k, depth in enumerate(frames):
+        t = t0 + (k + 1) / fps
+        stack.perceive(depth)
+        stack.localize(np.zeros(3) if increment is None else increment, t)
+        out.append((t, stack.decide(t)))
+    return out
+
+
+def test_consistent_frames_at_the_true_pose_stay_ok(building) -> None:
+    stack = make_stack(building)
+    depth = render(building[1], START)
+    drive(stack, [depth] * 45)
+    s = stack.health_sample
+    assert stack.health_state == "ok" and s.explained > 0.8 and s.through < 0.05 and stack.events == []
+    assert math.hypot(*(stack.pose[:2] - START[:2])) < 0.1
+
+
+def test_no_usable_frames_for_longer_than_blind_s_stops_the_robot(building) -> None:
+    stack = make_stack(building)
+    hc = stack.cfg.recovery.health
+    depth = render(building[1], START)
+    drive(stack, [depth] * 15)
+    t_last = 15 / FPS
+    # Dropped and invalid frames alike: none is usable.
+    faults = [None, np.zeros(SHAPE, np.float32)] * 15
+    out = drive(stack, faults, t0=t_last)
+    blind = [(t, c) for t, c in out if c.state == "blind"]
+    assert blind, [c.state for _, c in out]
+    t_blind = blind[0][0]
+    assert hc.blind_s < t_blind - t_last <= hc.blind_s + 1.01 / FPS
+    assert all(np.array_equal(c.velocity, np.zeros(3)) for _, c in blind)
+    assert all(c.state == "blind" for t, c in out if t >= t_blind)
+    assert stack.health_state == "blind" and [e["event"] for e in stack.events] == ["blind"]
+    # Frames again: seeing, and the navigator decides again.
+    out = drive(stack, [depth] * 3, t0=out[-1][0])
+    assert stack.health_state == "ok" and out[-1][1].state != "blind"
+    assert [e["event"] for e in stack.events] == ["blind", "seeing"]
+
+
+def follow(stack: RobotStack, scene: SceneQuery, truth: np.ndarray, t: float, until_s: float, fps: float = 10.0):
+    """The robot does what decide() says (perfect odometry) and the camera sees the map
+    from the true pose, until it has relocalized or ``until_s``; returns the truth, the
+    time and the commands' (t, state, velocity)."""
+    commands = []
+    while t < until_s and not any(e["event"] == "relocalized" for e in stack.events):
+        cmd = stack.decide(t)
+        commands.append((t, cmd.state, cmd.velocity.copy()))
+        inc = cmd.velocity / fps
+        truth = compose_pose(truth, inc)
+        t += 1.0 / fps
+        stack.perceive(render(scene, truth))
+        stack.localize(inc, t)
+    return truth, t, commands
+
+
+def settle(stack: RobotStack, scene: SceneQuery, seconds: float, fps: float = 10.0) -> float:
+    """Standing at the belief's pose (the frame repeats: standing still, not stale)."""
+    depth = render(scene, stack.pose.copy())
+    for k in range(int(seconds * fps)):
+        stack.perceive(depth)
+        stack.localize(np.zeros(3), (k + 1) / fps)
+    return seconds
+
+
+def test_a_kidnap_is_noticed_and_the_robot_relocalizes_where_it_is(building) -> None:
+    scene = building[1]
+    stack = make_stack(building)
+    hc = stack.cfg.recovery.health
+    t = settle(stack, scene, hc.min_history_s + 1.0)
+    assert stack.health_state == "ok" and stack.events == []
+    # Carried to another corridor (a spot no other place repeats).
+    truth, t, commands = follow(stack, scene, np.array([22.91, 30.84, -2.2]), t, until_s=40.0)
+    kidnap = hc.min_history_s + 1.0
+    lost = [e for e in stack.events if e["event"] == "lost"]
+    assert len(lost) == 1 and lost[0]["why"] in ("sees through walls", "explains little", "spread"), lost
+    assert hc.hold_s <= lost[0]["t"] - kidnap <= hc.hold_s + 4.0
+    # The estimate at the alarm was still START's (the belief it began with) ...
+    assert math.hypot(lost[0]["estimate"][0] - START[0], lost[0]["estimate"][1] - START[1]) < 1.0
+    # ... then the robot turned in place to look ...
+    looking = [(s, v) for tc, s, v in commands if lost[0]["t"] < tc < lost[0]["t"] + 5.0]
+    assert looking and all(s == "looking" and v[0] == v[1] == 0.0 and v[2] > 0 for s, v in looking)
+    # ... and found where it is, not where it was.
+    done = [e for e in stack.events if e["event"] == "relocalized"]
+    assert len(done) == 1 and "before the alarm" not in done[0]["reason"], (t, stack.events)
+    err = relative_pose(truth, stack.pose)
+    assert math.hypot(err[0], err[1]) < 0.15 and abs(wrap_angle(err[2])) < math.radians(3.0), err
+    assert stack.health_state == "ok"
+
+
+def test_a_false_alarm_in_a_repeated_office_ends_where_it_began(building) -> None:
+    """In an office corner that other offices repeat, the map search cannot decide; the
+    belief before the alarm explains the scan, and the stack goes back to it."""
+    scene = building[1]
+    office = np.array([1.16, 33.7, -3.04])
+    stack = make_stack(building, pose=office)
+    t = settle(stack, scene, 2.0)
+    # A few seconds of frames that belong elsewhere (a camera fault) raise the alarm.
+    away = render(scene, np.array([30.0, 6.3, 0.0]))
+    while not stack.relocalizing and t < 10.0:
+        t += 0.1
+        stack.perceive(away)
+        stack.localize(np.zeros(3), t)
+    assert stack.relocalizing
+    # The camera is right again; the robot looks round where it is.
+    truth, t, _ = follow(stack, scene, office, t, until_s=t + 20.0)
+    done = [e for e in stack.events if e["event"] == "relocalized"]
+    assert len(done) == 1 and "before the alarm" in done[0]["reason"], stack.events
+    assert stack.last_search.accepted is None  # the map search alone: ambiguous
+    err = relative_pose(truth, stack.pose)
+    assert math.hypot(err[0], err[1]) < 0.15 and abs(wrap_angle(err[2])) < math.radians(3.0), err
+
+
+# --------------------------------------------------------------------------- unknown start
+
+
+def test_an_unknown_start_pose_looks_round_in_place(building) -> None:
+    stack = make_stack(building, pose=None)
+    assert stack.relocalizing and stack.health_state == "relocalizing"
+    assert stack.events[-1]["event"] == "lost" and "unknown" in stack.events[-1]["why"]
+    for t in (0.0, 1.0, 30.0):  # no modes yet: it looks on, whatever the time
+        cmd = stack.decide(t)
+        assert cmd.state == "looking" and np.array_equal(cmd.velocity[:2], [0.0, 0.0])
+        assert cmd.velocity[2] == pytest.approx(stack.cfg.navigator.look_turn_rate_rad_s)
+
+
+@pytest.fixture(scope="module")
+def found(building):
+    """reset(None) at START, then the robot does what decide() says (perfect odometry),
+    the camera seeing the map from the true pose, until it relocalizes (20 s at most)."""
+    stack = make_stack(building, pose=None)
+    fps = 10.0
+    truth, inc, t, states = START.copy(), None, 0.0, []
+    for k in range(int(20 * fps)):
+        t = k / fps
+        stack.perceive(render(building[1], truth))
+        stack.localize(inc, t)
+        if not stack.relocalizing:
+            break
+        cmd = stack.decide(t)
+        states.append(cmd.state)
+        inc = cmd.velocity / fps
+        truth = compose_pose(truth, inc)
+    return stack, truth, t, states, fps
+
+
+def test_an_unknown_start_pose_is_found_by_looking_round(found) -> None:
+    stack, truth, t, states, _ = found
+    done = [e for e in stack.events if e["event"] == "relocalized"]
+    assert len(done) == 1, (t, stack.last_search.reason if stack.last_search else None)
+    assert states[0] == "looking" and set(states) <= {"looking", "exploring", "turning", "driving"}
+    err = relative_pose(truth, stack.pose)
+    assert math.hypot(err[0], err[1]) < 0.15 and abs(wrap_angle(err[2])) < math.radians(3.0), err
+    assert not stack.relocalizing and stack.health_state == "ok" and stack.decide(t).state != "looking"
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="RobotStack._relocalize_step compares the accepted mode's pose (which turns with the robot) "
+    "with the last search's, so turning in place at the look rate (34 degrees a search > mode_separation_deg) "
+    "never confirms a mode; it is confirmed only once the robot drives to explore",
+)
+def test_an_unknown_start_pose_is_found_while_still_turning_in_place(found) -> None:
+    stack, _, t, states, fps = found
+    rc = stack.cfg.recovery.relocalization
+    assert set(states) == {"looking"}
+    # Not before the sweep, then one search a second until confirmed.
+    swept = math.radians(rc.min_sweep_deg) / stack.cfg.navigator.look_turn_rate_rad_s
+    assert swept <= t <= swept + rc.confirmations * rc.search_every_s + 2 / fps
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="reset(None) does not reset the health monitor: blind before it, the stack stays blind "
+    "(health is not updated while relocalizing) and decide() never turns to look",
+)
+def test_an_unknown_start_after_a_blackout_still_looks_round(building) -> None:
+    stack = make_stack(building)
+    drive(stack, [None] * 30)
+    assert stack.health_state == "blind"
+    stack.reset(None)
+    assert stack.decide(1.0).state == "looking"

@@ -222,7 +222,8 @@ class RobotStack:
         self.events: list[dict] = []
         """What the recovery did: {"t", "event": lost | relocalized | blind | seeing, ...}."""
         self.frame_fault = ""
-        """Why this frame was not used ('' when it was): dropped, invalid, stale."""
+        """What was wrong with this frame ('' nothing): dropped or stale (not used), invalid
+        (no valid pixel; used)."""
         self.frames_rejected = {"dropped": 0, "stale": 0, "invalid": 0}
         self._prior: np.ndarray | None = None
         self._reloc_t0 = 0.0
@@ -284,10 +285,11 @@ class RobotStack:
         floor projection (IV-B), the obstacles P u O (Section V) and the near field.
         ``seed`` overrides this frame's FSPF seed (``fspf_seed + frame``).
 
-        ``None`` is a dropped frame; NaN or infinite pixels count as invalid; a frame with
-        no valid pixel, or the same pixels as the last one while the wheels turn (a stuck
-        driver repeating itself, :meth:`localize` tells), is not used: the last
-        perception stands and ``frame_fault`` says why."""
+        ``None`` is a dropped frame; NaN or infinite pixels count as invalid. A dropped
+        frame, or the same pixels as the last one while the wheels turn (a stuck driver
+        repeating itself, :meth:`localize` tells), is not used: the last perception
+        stands and ``frame_fault`` says why. A frame with no valid pixel is used (the
+        near field reads it as blocked right ahead) and counted as ``invalid``."""
         cam, cfg = self.cfg.camera, self.cfg
         s = (self.fspf_seed + self.frame) % FSPF_SEED_MODULUS if seed is None else int(seed)
         self.frame += 1
@@ -302,10 +304,14 @@ class RobotStack:
             depth = np.where(np.isfinite(depth), depth, np.float32(0.0)).astype(np.float32, copy=False)
             key = depth.ravel()[::STALE_SAMPLE_STRIDE]
         if not np.any(depth > 0):
+            # Nothing valid: a camera that fails, or something closer than its minimum
+            # range filling the view; the two look alike, and the near field reads both
+            # as "blocked right ahead" (it never drives into either). Counted, and used.
             self._last_depth_key = None
-            return self._reject("invalid")
+            self.frame_fault = "invalid"
+            self.frames_rejected["invalid"] += 1
         self._maybe_stale = self._last_depth_key is not None and np.array_equal(key, self._last_depth_key)
-        self._last_depth_key = key.copy()
+        self._last_depth_key = key.copy() if self.frame_fault != "invalid" else None
         t0 = time.perf_counter()
         planes = fspf(depth, cam.intrinsics, cfg.fspf, seed=s, mount=self.mount)
         if self.mount_check is not None:

@@ -1,6 +1,6 @@
 """Closed-loop fault scenarios: one short headless run per fault kind (the runner injects
-the fault, the robot stack recovers), and for kidnap, blackout and tilt the same run
-without the recovery, which must fail the same criterion."""
+the fault, the robot stack recovers), and for kidnap, missing frames and tilt the same
+run without the recovery, which must fail the same criterion."""
 
 from __future__ import annotations
 
@@ -105,21 +105,46 @@ def test_kidnap_without_recovery_stays_lost(tmp_path):
 BLACKOUT = 'kind = "blackout"\nat_s = 3.0\nblackout_s = 4.0'
 
 
-def test_blackout_robot_stands_still_while_blind(tmp_path):
+def forward_m(track: np.ndarray, t0: float, t1: float) -> float:
+    """Distance driven forward (along the robot's heading) between t0 and t1, from the
+    true trajectory (TUM rows t, x, y, z, qx, qy, qz, qw)."""
+    seg = track[(track[:, 0] >= t0) & (track[:, 0] <= t1)]
+    if len(seg) < 2:
+        return 0.0
+    th = 2.0 * np.arctan2(seg[:-1, 6], seg[:-1, 7])
+    d = np.diff(seg[:, 1:3], axis=0)
+    return float(np.sum(np.maximum(d[:, 0] * np.cos(th) + d[:, 1] * np.sin(th), 0.0)))
+
+
+def test_blackout_robot_does_not_drive_into_what_it_cannot_see(tmp_path):
+    # A blank frame is what a failed camera and a door right in front of it both give:
+    # the near field reads it as blocked ahead, so the robot stops driving forward.
     rep = run(tmp_path, BLACKOUT, 12.0, 1, name="on")
     f, m = the_fault(rep, "blackout"), rep["metrics"]
-    assert m["frames_invalid"] >= 100  # 4 s at 30 Hz, less the frames before the alarm
-    assert m["blind_frames"] > 0 and m["collisions"] == 0
+    assert m["frames_invalid"] >= 110 and m["collisions"] == 0
+    track = np.loadtxt(tmp_path / "on" / "trajectory_truth.tum", comments="#")
+    assert forward_m(track, f["t_start"] - 3.0, f["t_start"]) > 0.5  # it was driving
+    assert forward_m(track, f["t_start"] + 0.5, f["t_end"]) < 0.1
+    assert f["error_after_m"] is not None and f["error_after_m"] < OK_M
+
+
+NO_FRAMES = 'kind = "dropped"\nat_s = 3.0\nburst_s = 3.0\ndrop_probability = 1.0'
+
+
+def test_no_frames_robot_stands_still_while_blind(tmp_path):
+    rep = run(tmp_path, NO_FRAMES, 10.0, 1, name="on")
+    f, m = the_fault(rep, "dropped"), rep["metrics"]
+    assert m["frames_dropped"] >= 85 and m["blind_frames"] > 0 and m["collisions"] == 0
     blind = [e["t"] for e in rep["recovery"]["events"] if e["event"] == "blind"]
     assert blind and f["t_start"] <= blind[0] <= f["t_start"] + 1.0
-    # From the blind alarm to the end of the blackout the robot does not move.
+    # From the blind alarm to the end of the burst the robot does not move.
     assert moved_m(truth_track(tmp_path, "on"), blind[0] + 0.5, f["t_end"]) < 0.05
     assert f["error_after_m"] is not None and f["error_after_m"] < OK_M
 
 
-def test_blackout_without_recovery_drives_blind(tmp_path):
-    rep = run(tmp_path, BLACKOUT, 12.0, 1, "[recovery]\nenabled = false", name="off")
-    f = the_fault(rep, "blackout")
+def test_no_frames_without_recovery_drives_blind(tmp_path):
+    rep = run(tmp_path, NO_FRAMES, 10.0, 1, "[recovery]\nenabled = false", name="off")
+    f = the_fault(rep, "dropped")
     assert rep["metrics"]["blind_frames"] == 0
     assert moved_m(truth_track(tmp_path, "off"), f["t_start"] + 1.0, f["t_end"]) > 0.5
 

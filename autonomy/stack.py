@@ -223,8 +223,8 @@ class RobotStack:
         """What the recovery did: {"t", "event": lost | relocalized | blind | seeing, ...}."""
         self.frame_fault = ""
         """What was wrong with this frame ('' nothing): dropped or stale (not used), invalid
-        (no valid pixel; used)."""
-        self.frames_rejected = {"dropped": 0, "stale": 0, "invalid": 0}
+        (no valid pixel; used), corrupt (NaN or infinite pixels; used without them)."""
+        self.frames_rejected = {"dropped": 0, "stale": 0, "invalid": 0, "corrupt": 0}
         self._prior: np.ndarray | None = None
         self._reloc_t0 = 0.0
         self._last_search_t = -math.inf
@@ -301,8 +301,11 @@ class RobotStack:
         depth = np.asarray(depth)
         key = depth.ravel()[::STALE_SAMPLE_STRIDE]
         if not np.isfinite(key).all() or not np.isfinite(depth).all():
+            # A broken driver: its non-finite pixels count as invalid, the rest is used.
             depth = np.where(np.isfinite(depth), depth, np.float32(0.0)).astype(np.float32, copy=False)
             key = depth.ravel()[::STALE_SAMPLE_STRIDE]
+            self.frame_fault = "corrupt"
+            self.frames_rejected["corrupt"] += 1
         if not np.any(depth > 0):
             # Nothing valid: a camera that fails, or something closer than its minimum
             # range filling the view; the two look alike, and the near field reads both

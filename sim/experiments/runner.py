@@ -633,6 +633,7 @@ def recovery_metrics(run: Run) -> dict:
         "frames_dropped": stack.frames_rejected["dropped"],
         "frames_stale": stack.frames_rejected["stale"],
         "frames_invalid": stack.frames_rejected["invalid"],
+        "frames_corrupt": stack.frames_rejected["corrupt"],
         "relocalizing_frames": sum(s == "relocalizing" for s in run.health_states),
         "blind_frames": sum(s == "blind" for s in run.health_states),
         **fault_metrics(fault_report(run)),

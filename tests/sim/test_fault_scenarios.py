@@ -150,13 +150,12 @@ def test_no_frames_without_recovery_drives_blind(tmp_path):
 
 
 @pytest.mark.parametrize(
-    ("kind", "counter"), [("dropped", "frames_dropped"), ("corrupt_nan", None), ("stale", "frames_stale")]
+    ("kind", "counter"), [("dropped", "frames_dropped"), ("corrupt_nan", "frames_corrupt"), ("stale", "frames_stale")]
 )
 def test_bad_frames_are_not_used(tmp_path, kind, counter):
     rep = run(tmp_path, f'kind = "{kind}"\nat_s = 3.0\nburst_s = 3.0', 10.0, 1)
     f, m = the_fault(rep, kind), rep["metrics"]
-    if counter is not None:  # frames with some NaN pixels are used, their NaNs left out
-        assert m[counter] > 0 and f["noticed_by"] is not None
+    assert m[counter] > 0 and f["noticed_by"] is not None
     assert m["collisions"] == 0 and m["truth_resets_needed"] == 0
     assert f["error_after_m"] is not None and f["error_after_m"] < OK_M
 

@@ -126,10 +126,11 @@ def test_nan_and_infinite_pixels_are_invalid_pixels(building) -> None:
 @pytest.mark.parametrize("frame", ["zeros", "nan", "negative"])
 def test_a_frame_without_a_valid_pixel_is_invalid(building, frame) -> None:
     stack = make_stack(building)
-    kept = stack.perceive(wall())
+    stack.perceive(wall())
     depth = {"zeros": np.zeros(SHAPE, np.float32), "nan": np.full(SHAPE, np.nan, np.float32), "negative": wall(-1.0)}[frame]
-    assert stack.perceive(depth) is kept and stack.frame_fault == "invalid"
-    assert stack.frames_rejected["invalid"] == 1
+    per = stack.perceive(depth)
+    assert stack.frame_fault == "invalid" and stack.frames_rejected == {"dropped": 0, "stale": 0, "invalid": 1}
+    assert all(np.isfinite(a).all() for a in (per.points_2d, per.obstacles, per.near_lines))
     # The next good frame is used again (and is not taken for a repeat of the last).
     stack.perceive(wall())
     stack.localize(np.array([0.05, 0.0, 0.0]), 0.1)
@@ -197,9 +198,9 @@ def test_no_usable_frames_for_longer_than_blind_s_stops_the_robot(building) -> N
     depth = render(building[1], START)
     drive(stack, [depth] * 15)
     t_last = 15 / FPS
-    # Dropped and invalid frames alike: none is usable.
-    faults = [None, np.zeros(SHAPE, np.float32)] * 15
-    out = drive(stack, faults, t0=t_last)
+    # Dropped frames, and the last frame repeated while the wheels turn (stale): none is usable.
+    out = drive(stack, [None, depth] * 15, t0=t_last, increment=np.array([0.0, 0.0, 0.01]))
+    assert stack.frames_rejected["dropped"] == stack.frames_rejected["stale"] == 15
     blind = [(t, c) for t, c in out if c.state == "blind"]
     assert blind, [c.state for _, c in out]
     t_blind = blind[0][0]
@@ -207,8 +208,8 @@ def test_no_usable_frames_for_longer_than_blind_s_stops_the_robot(building) -> N
     assert all(np.array_equal(c.velocity, np.zeros(3)) for _, c in blind)
     assert all(c.state == "blind" for t, c in out if t >= t_blind)
     assert stack.health_state == "blind" and [e["event"] for e in stack.events] == ["blind"]
-    # Frames again: seeing, and the navigator decides again.
-    out = drive(stack, [depth] * 3, t0=out[-1][0])
+    # New frames again (where the wheels have turned it): seeing, and the navigator decides again.
+    out = drive(stack, [render(building[1], stack.odom.copy())] * 3, t0=out[-1][0])
     assert stack.health_state == "ok" and out[-1][1].state != "blind"
     assert [e["event"] for e in stack.events] == ["blind", "seeing"]
 

@@ -175,8 +175,8 @@ class HealthMonitor:
             n = len(verdicts)
             e = float(np.count_nonzero(verdicts > 0)) / n
             th = float(np.count_nonzero(verdicts < 0)) / n
-            a_fast = 1.0 - math.exp(-dt / cfg.fast_s) if dt > 0 else 1.0
-            a_slow = 1.0 - math.exp(-dt / cfg.slow_s) if dt > 0 else 1.0
+            a_fast = 1.0 - math.exp(-dt / cfg.fast_s)
+            a_slow = 1.0 - math.exp(-dt / cfg.slow_s)
             self.e_fast = e if math.isnan(self.e_fast) else self.e_fast + a_fast * (e - self.e_fast)
             self.th_fast = th if math.isnan(self.th_fast) else self.th_fast + a_fast * (th - self.th_fast)
             self.e_slow = e if math.isnan(self.e_slow) else self.e_slow + a_slow * (e - self.e_slow)

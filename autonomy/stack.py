@@ -447,6 +447,10 @@ class RobotStack:
         self._exploring_from = None
         self._confirmed = 0
         self._candidate: np.ndarray | None = None
+        if self.health is not None:
+            # Its averages restart when the robot knows where it is again; a blind state
+            # from before would keep the robot from turning to look.
+            self.health.reset(t)
         if self.navigator is not None:
             self._goal = self.navigator.goal if self.navigator.goal is not None else self._goal
         self.events.append({"t": round(t, 3), "event": "lost", "why": why, "estimate": [round(float(v), 3) for v in self.pose]})
@@ -498,11 +502,13 @@ class RobotStack:
         if acc is None:
             self._confirmed = 0
             return
-        same = self._candidate is not None and math.hypot(*(acc.pose[:2] - self._candidate[:2])) < rc.mode_separation_m and abs(
-            wrap_angle(float(acc.pose[2] - self._candidate[2]))
+        # Modes compared as map-from-odometry transforms: the robot turns between searches.
+        cand = compose_pose(acc.pose, inv)
+        same = self._candidate is not None and math.hypot(*(cand[:2] - self._candidate[:2])) < rc.mode_separation_m and abs(
+            wrap_angle(float(cand[2] - self._candidate[2]))
         ) < math.radians(rc.mode_separation_deg)
         self._confirmed = self._confirmed + 1 if same else 1
-        self._candidate = acc.pose.copy()
+        self._candidate = cand
         if self._confirmed >= rc.confirmations:
             self._accept(acc, t, res.reason, len(res.modes))
 

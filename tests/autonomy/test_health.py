@@ -318,11 +318,6 @@ def test_reset_clears_the_state_and_the_averages() -> None:
     assert {s.state for s in samples} == {"ok"}
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="HealthMonitor.update weighs a frame with dt == 0 fully (alpha 1) into both averages, "
-    "so the first frame after reset(keep_long_term=True), or a second frame at the same t, replaces the long-term level",
-)
 def test_reset_keeping_the_long_term_level_keeps_it() -> None:
     rng = np.random.default_rng(9)
     keep = HealthMonitor()
@@ -334,7 +329,6 @@ def test_reset_keeping_the_long_term_level_keeps_it() -> None:
     assert samples[-1].state == "lost"
 
 
-@pytest.mark.xfail(strict=True, reason="as above: a frame at the same t replaces both averages (alpha 1 for dt == 0)")
 def test_a_second_frame_at_the_same_time_moves_no_average() -> None:
     rng = np.random.default_rng(10)
     mon = HealthMonitor()

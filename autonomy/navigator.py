@@ -360,20 +360,31 @@ class Navigator:
         through what blocked them; when that leaves no path, the marks are forgotten and
         the plan uses the whole graph (:class:`autonomy.planner.NoPathError` when even
         that has none)."""
-        xy = np.asarray(pose[:2])
         self._prune_blocked(t)
+        nodes = self._route(goal_id, np.asarray(pose[:2]))
+        if nodes is None:
+            self.forget_blocked()
+            nodes = self._route(goal_id, np.asarray(pose[:2]))
+        assert nodes is not None
+        self._set_plan(goal_id, nodes, pose, t)
+        return float(self._cum[-1])
+
+    def _route(self, goal_id: int, xy: np.ndarray) -> list[int] | None:
+        """Graph nodes of a plan from ``xy`` to the goal without the blocked edges, not
+        starting through what blocked them; None when the blocked edges leave no path
+        (:class:`autonomy.planner.NoPathError` when there are none and still no path)."""
         excluded = tuple(self.blocked)
-        if excluded:
-            avoid = np.vstack([self._blocked_pts.get(e, np.zeros((0, 2))) for e in excluded])
-            start = self.nearest_reachable_node(xy, avoid)
-            try:
-                nodes = astar(self.graph, start, goal_id, exclude_stairs=self.cfg.exclude_stairs, excluded=excluded)
-            except NoPathError:
-                self.forget_blocked()
-                excluded = ()
         if not excluded:
-            start = self.nearest_reachable_node(xy)
-            nodes = astar(self.graph, start, goal_id, exclude_stairs=self.cfg.exclude_stairs)
+            return astar(self.graph, self.nearest_reachable_node(xy), goal_id, exclude_stairs=self.cfg.exclude_stairs)
+        avoid = np.vstack([self._blocked_pts.get(e, np.zeros((0, 2))) for e in excluded])
+        try:
+            return astar(self.graph, self.nearest_reachable_node(xy, avoid), goal_id, exclude_stairs=self.cfg.exclude_stairs, excluded=excluded)
+        except NoPathError:
+            return None
+
+    def _set_plan(self, goal_id: int, nodes: list[int], pose: np.ndarray, t: float) -> None:
+        """Make the path from the pose through ``nodes`` the plan (its segments, speed
+        limits and corners) and start the stuck clock at ``t``."""
         self.plan_nodes = list(nodes)
         pts = np.vstack([np.asarray(pose[:2], dtype=np.float64)[None, :], path_points(self.graph, nodes)])
         # Speed limit of each segment: the edge's max_speed; none from the pose to the plan.
@@ -396,7 +407,6 @@ class Navigator:
         self.goal = goal_id
         self._best_s = 0.0
         self._progress_t = t
-        return float(self._cum[-1])
 
     def _project(self, xy: np.ndarray) -> float:
         """Arc length of the point of the plan nearest ``xy``."""
@@ -1032,9 +1042,10 @@ class Navigator:
     def _replan_round_block(self, pose: np.ndarray, located: np.ndarray, t: float) -> bool:
         """Blocked (Eq. 5 finds no open direction, or a back-off from what blocks is under
         way) without progress for ``blocked_wait_s``: mark the edges the obstacle stands
-        on (:meth:`_mark_blocked`) and re-plan. True when the plan changed; when it did
-        not (no other way), the robot waits as before, the stuck clock running on, and
-        tries again only after some progress."""
+        on (:meth:`_mark_blocked`) and re-plan. True when the plan goes round them; when
+        it does not (no other way: the marks were forgotten, or they are off the plan),
+        the robot waits as before, the stuck clock running on, and tries again only after
+        some progress."""
         cfg = self.cfg
         if not (
             cfg.blocked_edge_s > 0
@@ -1044,14 +1055,16 @@ class Navigator:
             and self._mark_blocked(pose, located, t)
         ):
             return False
-        before, since = list(self.plan_nodes), self._progress_t
+        nodes = self._route(self.goal, np.asarray(pose[:2]))
+        if nodes is None or nodes == self.plan_nodes:
+            # No other way: the plan and the stuck clock stay as they were.
+            if nodes is None:
+                self.forget_blocked()
+            self._waited_since = self._progress_t
+            return False
         self.replans += 1
-        self.set_goal(self.goal, pose, t)
-        if self.plan_nodes != before:
-            return True
-        self._progress_t = self._waited_since = since
-        self._best_s = self._project(np.asarray(pose[:2], dtype=np.float64))
-        return False
+        self._set_plan(self.goal, nodes, pose, t)
+        return True
 
     def _drive(self, obstacles: np.ndarray, carrot: np.ndarray, desired: float, speed: float, res: AvoidanceResult) -> NavCommand:
         """Drive along theta* at ``speed``, turning towards it (look where the robot goes);

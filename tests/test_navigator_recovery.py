@@ -367,3 +367,29 @@ def test_blocking_points_are_those_on_the_plans_line_ahead() -> None:
         hit |= np.all(np.abs(world - p) < 1e-9, axis=1)
     assert want.sum() > 300 and (by_wall & (gap < r)).sum() > 100
     assert np.array_equal(hit[clear_cut], want[clear_cut])
+
+
+def test_in_a_dead_end_the_blocked_edges_change_nothing() -> None:
+    """A box across the only corridor to the goal: marking its edge leaves no path, so
+    the marks are forgotten and the robot waits and recovers exactly as with the blocked
+    edges off, command for command (only the count of marks differs)."""
+    walls = np.array([[-1.0, -1.0, 11.0, -1.0], [-1.0, 1.0, 11.0, 1.0], [-1.0, -1.0, -1.0, 1.0], [11.0, -1.0, 11.0, 1.0]])
+    nodes = tuple(NavNode(id=i, x=2.0 * i, y=0.0) for i in range(6))
+    line = NavGraph(nodes=nodes, edges=tuple(NavEdge(s0_id=i, s1_id=i + 1) for i in range(5)))
+    box = (4.6, 5.0, -1.0, 1.0)
+    world_pts = np.vstack([wall_points(walls, 0.03), box_outline(box)])
+    runs = []
+    for blocked_edge_s in (120.0, 0.0):
+        nav = Navigator(line, NavigatorConfig(blocked_edge_s=blocked_edge_s), walls=walls)
+        pose = np.array([0.0, 0.0, 0.0])
+        nav.set_goal(5, pose, 0.0)
+        cmds = []
+        for k in range(int(30 * RATE_HZ)):
+            cmd = nav.command(pose, sense(pose, world_pts), k / RATE_HZ)
+            cmds.append(cmd.velocity.copy())
+            pose = step(pose, cmd.velocity)
+        runs.append((np.array(cmds), nav))
+    (on, nav_on), (off, nav_off) = runs
+    assert nav_on.blocked_edges >= 2 and not nav_on.blocked and nav_off.blocked_edges == 0
+    assert nav_on.recoveries == nav_off.recoveries >= 2 and nav_on.replans == nav_off.replans
+    np.testing.assert_array_equal(on, off)

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from autonomy.errors import require_non_negative, require_positive
+from autonomy.errors import require_int, require_non_negative, require_positive
 
 #: Health states, in the order of severity.
 STATES = ("ok", "blind", "lost")
@@ -72,6 +72,7 @@ class HealthConfig:
     def __post_init__(self) -> None:
         require_positive(self, "health.", "explain_m", "through_m", "fast_s", "slow_s", "lost_spread_m", "blind_s")
         require_non_negative(self, "health.", "lost_through", "lost_ratio", "hold_s", "min_history_s")
+        require_int(self, "health.", "min_points", minimum=1)
 
 
 @numba.njit(cache=True)

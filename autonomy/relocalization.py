@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from autonomy.errors import require_int, require_positive
+from autonomy.errors import require_int, require_non_negative, require_positive
 from autonomy.freespace import FreeSpace
 from autonomy.geometry import wrap_angle
 from autonomy.health import explain_points
@@ -87,6 +87,11 @@ class RelocalizationConfig:
     walls seen from it."""
     search_every_s: float = 1.0
     """Repeat the search this often while undecided (the scan grows)."""
+    explain_m: float = 0.15
+    """The check of the latest frame from a mode: a point within this of the first wall
+    on its ray is explained ... (as :class:`autonomy.health.HealthConfig`)"""
+    through_m: float = 0.4
+    """... and one this far beyond it is seen through the wall."""
     confirmations: int = 2
     """A mode is accepted once it has passed the decision in this many searches in a row
     (within ``mode_separation_m`` and ``mode_separation_deg`` of itself)."""
@@ -100,6 +105,7 @@ class RelocalizationConfig:
             "mode_separation_m", "mode_separation_deg", "scan_cell_m", "accept_cost", "search_every_s", "min_travel_m",
             "accept_margin_points", "accept_margin",
         )
+        require_non_negative(self, "relocalization.", "min_sweep_deg", "max_through", "prior_cost", "explain_m", "through_m")
         require_int(self, "relocalization.", "coarse_points", minimum=10)
         require_int(self, "relocalization.", "modes", minimum=1)
         require_int(self, "relocalization.", "confirmations", minimum=1)
@@ -354,7 +360,7 @@ class GlobalLocalizer:
             if frame_pts is not None and scene_lines is not None and len(frame_pts):
                 at = refined_a[i]
                 lines = np.ascontiguousarray(scene_lines(float(at[0]), float(at[1])), dtype=np.float64).reshape(-1, 4)
-                v = explain_points(lines, at, np.ascontiguousarray(frame_pts, dtype=np.float64), 0.15, 0.4)
+                v = explain_points(lines, at, np.ascontiguousarray(frame_pts, dtype=np.float64), cfg.explain_m, cfg.through_m)
                 through = float(np.count_nonzero(v < 0)) / len(v)
             modes.append(Mode(refined_a[i].copy(), float(rc[i]), through))
         return SearchResult(tuple(modes), *self._decide(modes, len(pts)), hypotheses=len(refined))

@@ -75,12 +75,19 @@ def resident_mb() -> float:
 
 def resources(run: Run) -> dict[str, float]:
     """Memory and per-frame time at the start and the end of a run, to show nothing grows
-    over a long one: resident MB at the first and last samples and at the peak, and the
-    median frame time (all stages) over the first and last ``ENDS_FRAMES`` frames."""
+    over a long one: resident MB at the first and last samples and at the peak (and, from
+    2 km on, the median over the first and over the last kilometre), and the median
+    frame time (all stages) over the first and last ``ENDS_FRAMES`` frames."""
     out: dict[str, float] = {}
     if run.rss_mb:
-        mb = [m for _, m in run.rss_mb]
+        mb = [m for _, m, _ in run.rss_mb]
         out.update(rss_start_mb=round(mb[0], 1), rss_end_mb=round(mb[-1], 1), rss_peak_mb=round(max(mb), 1))
+        # The first and the last kilometre of a long run (the start includes the warm-up).
+        if run.distance_m >= 2000.0:
+            first = [m for _, m, d in run.rss_mb if d <= 1000.0]
+            last = [m for _, m, d in run.rss_mb if d >= run.distance_m - 1000.0]
+            if first and last:
+                out.update(rss_first_km_mb=round(float(np.median(first)), 1), rss_last_km_mb=round(float(np.median(last)), 1))
     n = len(run.timing["physics"])
     if n:
         total = np.sum([np.asarray(run.timing[k]) for k in STAGES], axis=0) * 1e3
@@ -157,8 +164,8 @@ class Run:
     nav_states: dict[str, int] = field(default_factory=dict)
     near_frames: int = 0
     timing: dict[str, list[float]] = field(default_factory=lambda: {k: [] for k in STAGES})
-    rss_mb: list[tuple[int, float]] = field(default_factory=list)
-    """(frame, resident memory in MB), sampled every ``RSS_EVERY`` frames."""
+    rss_mb: list[tuple[int, float, float]] = field(default_factory=list)
+    """(frame, resident memory in MB, distance driven), sampled every ``RSS_EVERY`` frames."""
     last_in_view: np.ndarray = field(default_factory=lambda: np.zeros(0))
     blackbox: FlightRecorder | None = None
     failures: list[dict] = field(default_factory=list)
@@ -338,7 +345,7 @@ def tick(run: Run, recorder) -> bool:
     for k in STAGES:
         run.timing[k].append(timings[k])
     if run.frames % RSS_EVERY == 1:
-        run.rss_mb.append((run.frames, resident_mb()))
+        run.rss_mb.append((run.frames, resident_mb(), run.distance_m))
     return True
 
 

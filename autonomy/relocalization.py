@@ -160,13 +160,14 @@ def _cost(dist, ox, oy, inv_cell, x, y, c, s, pts, robust2):  # pragma: no cover
     return acc / max(pts.shape[0], 1)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, parallel=True)
 def _grid_costs(dist, ox, oy, inv_cell, xy, rot, robust2, out):  # pragma: no cover - numba
     """out[h, k]: mean robust cost of the points pre-rotated by heading k (rot[k]) at
-    position xy[h] (a translation only: the rotation is shared by all positions)."""
+    position xy[h] (a translation only: the rotation is shared by all positions). The
+    positions are shared out over the cores (each writes its own rows)."""
     ny, nx = dist.shape
     n = rot.shape[1]
-    for h in range(xy.shape[0]):
+    for h in numba.prange(xy.shape[0]):
         x, y = xy[h, 0], xy[h, 1]
         for k in range(rot.shape[0]):
             acc = 0.0

@@ -260,7 +260,7 @@ def print_table(results: dict[str, Result]) -> None:
             )
 
 
-GROUP_NAMES = ["maps", "localization", "sim", "planes", "env", "scans", "viz", "start", "open3d"]
+GROUP_NAMES = ["maps", "localization", "sim", "planes", "env", "scans", "viz", "start", "open3d", "recovery"]
 
 
 def _groups() -> dict[str, Callable[[dict[str, Result], bool], None]]:
@@ -270,6 +270,7 @@ def _groups() -> dict[str, Callable[[dict[str, Result], bool], None]]:
     from loc_bench import bench_scans
     from open3d_bench import bench_open3d
     from planes_bench import bench_planes
+    from recovery_bench import bench_recovery
     from start_bench import bench_start
     from viz_bench import bench_viz
 
@@ -282,6 +283,7 @@ def _groups() -> dict[str, Callable[[dict[str, Result], bool], None]]:
         "scans": bench_scans,
         "viz": bench_viz,
         "start": bench_start,
+        "recovery": bench_recovery,
         "open3d": bench_open3d,
     }
 

@@ -1,0 +1,55 @@
+"""Recovery benchmarks: the health check of one frame, and one global relocalization
+search (autonomy.health, autonomy.relocalization)."""
+
+from __future__ import annotations
+
+import math
+import sys
+
+import numpy as np
+from common import Result, entry, timeit
+
+from autonomy.freespace import FreeSpaceConfig, build_free_space
+from autonomy.health import HealthConfig, explain_points
+from autonomy.raycast import SceneQuery, VisibilityGrid, rays_hit
+from autonomy.relocalization import GlobalLocalizer, Scan
+from autonomy.stack import LOCALIZATION_GRID
+from sim.simulator import blueprints
+from sim.simulator.blueprints import ASSETS_DIR
+
+
+def _panorama(query: SceneQuery, pose: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """A turn in place's scan at ``pose`` (robot frame): walls 0.8-4 m away, 1 cm noise,
+    thinned to one point per 5 cm as the stack's scan keeps them."""
+    lines = query.scene_lines(float(pose[0]), float(pose[1]))[0]
+    ang = np.linspace(-math.pi, math.pi, 2880, endpoint=False)
+    dirs = np.column_stack([np.cos(ang + pose[2]), np.sin(ang + pose[2])])
+    idx, t = rays_hit(lines, float(pose[0]), float(pose[1]), dirs)
+    ok = (idx >= 0) & (t > 0.8) & (t < 4.0)
+    pts = np.column_stack([t[ok] * np.cos(ang[ok]), t[ok] * np.sin(ang[ok])]) + rng.normal(0.0, 0.01, (int(ok.sum()), 2))
+    scan = Scan(0.05, 6000)
+    scan.add(np.zeros(3), pts)
+    return scan.in_robot_frame(np.zeros(3))
+
+
+def bench_recovery(results: dict[str, Result], quick: bool) -> None:
+    rng = np.random.default_rng(0)
+    bp = blueprints.load_blueprint(ASSETS_DIR / "corridor_loop")
+    vm = bp.vectormap
+    query = SceneQuery(vm, VisibilityGrid.build(vm, LOCALIZATION_GRID))
+    fs = build_free_space(vm, FreeSpaceConfig(robot_radius_m=0.25))
+    gl = GlobalLocalizer(fs, 0.25)
+    pose = np.array([*fs.sample(rng, 1, 0.5, region=0)[0], 0.4])
+    scan = _panorama(query, pose, rng)
+    print(f"  relocalization: {len(gl.candidates) * len(gl.headings):,} coarse hypotheses, a {len(scan)}-point scan", file=sys.stderr)
+    frame = scan[np.abs(np.arctan2(scan[:, 1], scan[:, 0])) < math.radians(29.0)]
+    lines = np.ascontiguousarray(query.scene_lines(float(pose[0]), float(pose[1]))[0])
+    hc = HealthConfig()
+    results["health_frame"] = entry(
+        timeit(lambda: explain_points(lines, pose, frame, hc.explain_m, hc.through_m), 200 if quick else 2000, warmup=3), target=0.2
+    )
+    results["relocalize_search"] = entry(
+        timeit(lambda: gl.search(scan, frame, lambda x, y: query.scene_lines(x, y)[0]), 2 if quick else 5, warmup=1), target=1000.0
+    )
+    modes = np.array([m.pose for m in gl.search(scan).modes])
+    results["relocalize_rescore"] = entry(timeit(lambda: gl.rescore(modes, scan), 3 if quick else 10, warmup=1), target=250.0)

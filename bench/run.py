@@ -283,8 +283,8 @@ def _groups() -> dict[str, Callable[[dict[str, Result], bool], None]]:
         "scans": bench_scans,
         "viz": bench_viz,
         "start": bench_start,
-        "recovery": bench_recovery,
         "open3d": bench_open3d,
+        "recovery": bench_recovery,
     }
 
 

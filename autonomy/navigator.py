@@ -19,7 +19,9 @@ Per frame it:
 
 A back-off (the camera does not look behind the robot) goes only over the robot's own
 recent trail, where it has been (``trail_s``); else the robot turns in place towards its
-plan, so that the camera looks before the robot drives.
+plan, so that the camera looks before the robot drives (or, stuck with the plan still
+leading the blocked way, turns round to look back and drives away that way,
+``look_back_m``).
 
 Obstacles are remembered for ``memory_s`` in the world frame (through the pose
 estimate) while they are out of the camera's view: with a 58 degree field of view and
@@ -56,6 +58,8 @@ _TRAIL_STEP_M = 0.05
 """The trail keeps a footprint each time the robot has moved this far (``trail_s``)."""
 _TRAIL_SAMPLE_M = 0.025
 """A back-off's sweep is checked against the trail at points this far apart."""
+_LOOK_BACK_FACING_RAD = math.radians(10.0)
+"""A look back drives once the robot faces the way back this closely."""
 _BLOCKED_POINTS_KEPT = 64
 """At most this many of the points that blocked an edge are kept with its mark."""
 
@@ -107,6 +111,13 @@ class NavigatorConfig:
     memory leave room)."""
     trail_tolerance_m: float = 0.1
     """... this far off the trail's footprints at most."""
+    look_back_m: float = 1.0
+    """A stuck robot that may not back off (``trail_s``) and whose re-plan still leads
+    the way it is blocked (no other way, e.g. a person it meets in a doorway it has just
+    turned round in) turns round in place to look the way back, drives this far that
+    way as it drives forward (seen, Eq. 5, at ``backoff_speed_mps``), and then takes up
+    its plan again; else the two would wait for each other. 0 = off: wait turning
+    towards the plan."""
     blocked_edge_s: float = 120.0
     """A stuck robot (``stuck_time_s``), or one Eq. 5 finds blocked after
     ``blocked_wait_s`` without progress, marks the plan's navigation-graph edges that
@@ -213,7 +224,7 @@ class NavigatorConfig:
             "backoff_check_m", "backoff_clearance_m", "corner_speed_mps", "corner_angle_rad", "corner_before_m",
             "map_blind_spots_m", "map_clearance_m", "proximity_speed_mps", "proximity_gap_m", "proximity_range_m",
             "corner_after_m", "corner_ramp_m", "near_wall_tol_m", "backoff_memory_s", "lane_shift_m", "lane_check_m",
-            "trail_s", "trail_tolerance_m", "blocked_edge_s", "blocked_wait_s", "blocked_check_m",
+            "trail_s", "trail_tolerance_m", "look_back_m", "blocked_edge_s", "blocked_wait_s", "blocked_check_m",
         )
         require_positive(self, "navigator.", "memory_cell_m", "memory_radius_m", "look_turn_rate_rad_s")
         # The memory merges cells on a dense grid over memory_radius_m + 0.5 (obstacle_memory.py).
@@ -295,6 +306,9 @@ class Navigator:
         self.plan_nodes: list[int] = []
         """The plan's graph nodes (the plan runs from the pose to the first of them, then on)."""
         self._waited_since: float | None = None
+        self._look_back: tuple[float, np.ndarray | None, float] | None = None
+        """A look back under way (``look_back_m``): the heading to face, where the drive
+        that way began (None while turning) and when it ends at the latest."""
         """The stuck clock's start when a blocked wait last re-planned to no avail."""
         self._t = 0.0
         """Time of the last frame (``command``)."""
@@ -714,6 +728,7 @@ class Navigator:
         self._progress_t = float(t)
         self._backoff_until = -1.0
         self._backoff_started = -np.inf
+        self._look_back = None
         return NavCommand(np.array([0.0, 0.0, self.cfg.look_turn_rate_rad_s]), "looking")
 
     def pose_jumped(self, pose: np.ndarray | None = None, t: float | None = None) -> None:
@@ -733,6 +748,7 @@ class Navigator:
         self._backoff_until = -1.0
         self._backoff_started = -np.inf
         self._stuck_backoff = False
+        self._look_back = None
         if pose is not None and self.goal is not None:
             self.replans += 1
             self.set_goal(self.goal, pose, self._t if t is None else float(t))
@@ -909,7 +925,10 @@ class Navigator:
         to_goal = float(np.hypot(*(goal_xy - xy)))
         if to_goal < cfg.arrival_radius_m:
             return NavCommand(np.zeros(3), "arrived", carrot=goal_xy)
-        backing = self._continue_backoff(pose, obstacles, t, obstacles if located is None else located)
+        if self._look_back is not None:
+            backing = self._continue_look_back(pose, obstacles, t)
+        else:
+            backing = self._continue_backoff(pose, obstacles, t, obstacles if located is None else located)
         if backing is not None:
             return backing
         s = self._project(xy)
@@ -971,7 +990,9 @@ class Navigator:
     def _start_recovery(self, pose: np.ndarray, obstacles: np.ndarray, t: float, located: np.ndarray | None = None) -> NavCommand:
         """Recovery: mark the edges what blocks the robot stands on (``located``, the
         obstacles whose place is known; :meth:`_mark_blocked`), re-plan without them,
-        and back off (or, where the robot may not, turn in place towards the plan)."""
+        and back off; where the robot may not (:meth:`_backoff_velocity`), turn in place
+        towards the new plan, or, when that still leads ahead, look back
+        (``look_back_m``, :meth:`_continue_look_back`)."""
         cfg = self.cfg
         self.recoveries += 1
         self._backoff_until = t + cfg.backoff_time_s
@@ -982,7 +1003,47 @@ class Navigator:
         self._mark_blocked(pose, obstacles if located is None else located, t)
         self.set_goal(self.goal, pose, t + cfg.backoff_time_s)
         v = self._backoff_velocity(pose, obstacles)
-        return NavCommand(v if v.any() else self._turn_to_plan(pose), "recovering")
+        if v.any():
+            return NavCommand(v, "recovering")
+        _, desired, omega = self._plan_direction(pose)
+        if cfg.look_back_m > 0 and abs(desired) <= cfg.turn_in_place_rad:
+            turn_s = math.pi / cfg.max_turn_rate_rad_s
+            drive_s = cfg.look_back_m / max(cfg.backoff_speed_mps, 1e-9)
+            self._look_back = (wrap_angle(float(pose[2]) + math.pi), None, t + 2.0 * turn_s + drive_s)
+            return self._continue_look_back(pose, obstacles, t) or NavCommand(np.array([0.0, 0.0, omega]), "recovering")
+        return NavCommand(np.array([0.0, 0.0, omega]), "recovering")
+
+    def _continue_look_back(self, pose: np.ndarray, obstacles: np.ndarray, t: float) -> NavCommand | None:
+        """The look back's command (``look_back_m``); None once it is over. Turn in place
+        to face the way back; then drive that way as forward driving does -- Eq. 5 on what
+        the camera, the memory and the near field show, in the camera's view only, at
+        ``backoff_speed_mps`` at most -- until ``look_back_m`` is behind, the way is
+        blocked or the time is up. The stuck clock starts again after it."""
+        cfg = self.cfg
+        assert self._look_back is not None
+        heading, start, until = self._look_back
+        self._progress_t = t
+        xy = np.asarray(pose[:2], dtype=np.float64)
+        err = wrap_angle(heading - float(pose[2]))
+        if t > until or (start is not None and math.hypot(xy[0] - start[0], xy[1] - start[1]) >= cfg.look_back_m):
+            self._look_back = None
+            return None
+        if start is None:
+            if abs(err) > _LOOK_BACK_FACING_RAD:
+                return NavCommand(np.array([0.0, 0.0, float(np.clip(cfg.heading_gain * err, -cfg.max_turn_rate_rad_s, cfg.max_turn_rate_rad_s))]), "recovering")
+            self._look_back = (heading, xy.copy(), until)
+        res = self._choose_direction(pose, obstacles, err)
+        if res.blocked:
+            self._look_back = None
+            return None
+        th = res.theta_star
+        omega = float(np.clip(cfg.heading_gain * th, -cfg.max_turn_rate_rad_s, cfg.max_turn_rate_rad_s))
+        fan = (res.angles, res.lengths)
+        if abs(th) > 0.5 * self.camera.fov_h_rad:
+            return NavCommand(np.array([0.0, 0.0, omega]), "recovering", theta_star_rad=th, open_length_m=res.open_length_m, fan=fan)
+        speed = min(cfg.backoff_speed_mps, res.safe_speed_mps)
+        v = np.array([speed * math.cos(th), speed * math.sin(th), omega])
+        return NavCommand(v, "recovering", theta_star_rad=th, open_length_m=res.open_length_m, fan=fan)
 
     def _carrot(self, pose: np.ndarray, s: float, located: np.ndarray) -> np.ndarray:
         """The carrot: ``lookahead_m`` ahead of arc length ``s`` on the plan, shifted

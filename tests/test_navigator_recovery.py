@@ -15,6 +15,7 @@ import pytest
 
 from autonomy.camera import KINECT_V1
 from autonomy.errors import InputError
+from autonomy.geometry import wrap_angles
 from autonomy.navigator import Navigator, NavigatorConfig, in_camera_view, wall_points
 from autonomy.planner import NoPathError, astar, edge_key
 from autonomy.vectormap import NavEdge, NavGraph, NavNode
@@ -53,12 +54,15 @@ def box_gap(xy: np.ndarray, box: tuple[float, float, float, float]) -> float:
     return math.hypot(max(x0 - xy[0], 0.0, xy[0] - x1), max(y0 - xy[1], 0.0, xy[1] - y1))
 
 
-def sense(pose: np.ndarray, world_pts: np.ndarray) -> np.ndarray:
-    """The world points the camera sees from the pose, robot frame."""
+def sense(pose: np.ndarray, world_pts: np.ndarray, near_field: bool = False) -> np.ndarray:
+    """The world points the camera sees from the pose, robot frame; ``near_field``: also
+    those in its field of view closer than its minimum range (as the near field tells)."""
     c, s = math.cos(pose[2]), math.sin(pose[2])
     rx, ry = world_pts[:, 0] - pose[0], world_pts[:, 1] - pose[1]
     bx, by = c * rx + s * ry, -s * rx + c * ry
     keep = in_camera_view(bx - KINECT_V1.forward_m, by, KINECT_V1)
+    if near_field:
+        keep |= (np.abs(np.arctan2(by, bx - KINECT_V1.forward_m)) < 0.5 * KINECT_V1.fov_h_rad) & (bx > 0.0)
     return np.column_stack([bx[keep], by[keep]])
 
 
@@ -200,6 +204,61 @@ def test_backs_off_only_along_its_trail() -> None:
     moved, closest, track = _corner_then_blocked(NavigatorConfig(), box)
     assert closest > 0.05
     assert np.all(np.abs(track[:, 1]) < NavigatorConfig().trail_tolerance_m) and np.all(track[:, 0] <= 1e-9)
+
+
+def _turned_round_and_blocked(cfg: NavigatorConfig, seconds: float = 25.0):
+    """As at a waypoint reached through a doorway: the robot came east along y = 0 to
+    x = -0.4 (its trail), turned round to go back west, and finds a person standing
+    0.7 m ahead (near field). East of it, where it never drove, stands a box 0.85 m away.
+    Returns the track (x, y, yaw per frame), the commands and the closest approach to
+    the person and to the box."""
+    walls = np.array([[-7.0, -1.0, 3.0, -1.0], [-7.0, 1.0, 3.0, 1.0]])
+    nodes = (NavNode(id=0, x=-6.0, y=0.0), NavNode(id=1, x=-3.0, y=0.0), NavNode(id=2, x=-0.4, y=0.0))
+    g = NavGraph(nodes=nodes, edges=(NavEdge(s0_id=0, s1_id=1), NavEdge(s0_id=1, s1_id=2)))
+    person, box = (-1.5, -1.1, -0.3, 0.3), (0.45, 0.85, -0.5, 0.5)
+    pts = np.vstack([wall_points(walls, 0.03), box_outline(person), box_outline(box)])
+    nav = Navigator(g, cfg, walls=walls)
+    nav.set_goal(2, np.array([-3.0, 0.0, 0.0]))
+    t = 0.0
+    for x in np.arange(-3.0, -0.4, 0.025):  # the way in, before the person stepped in behind
+        pose = np.array([x, 0.0, 0.0])
+        nav.command(pose, sense(pose, wall_points(walls, 0.03)), t)
+        t += 1.0 / RATE_HZ
+    pose = np.array([-0.4, 0.0, math.pi])
+    nav.set_goal(0, pose, t)
+    track, cmds, closest = [], [], [math.inf, math.inf]
+    for _ in range(int(seconds * RATE_HZ)):
+        cmd = nav.command(pose, sense(pose, pts, near_field=True), t)
+        cmds.append(cmd.velocity.copy())
+        pose = step(pose, cmd.velocity)
+        track.append(pose.copy())
+        closest = [min(closest[0], box_gap(pose[:2], person) - ROBOT_R), min(closest[1], box_gap(pose[:2], box) - ROBOT_R)]
+        t += 1.0 / RATE_HZ
+    return np.array(track), np.array(cmds), closest
+
+
+def test_a_robot_that_may_not_back_off_looks_back_and_drives_away_seeing() -> None:
+    """Blocked by a person right after turning round, with no trail behind it: the old
+    rule (trail_s = 0) backs off blind into the box it never saw; without the look back
+    the robot never moves east of where it turned (it waits for the person, who would
+    wait for it); looking back, it turns round first (it translates only while facing
+    east, the way back, or west, its plan), drives east until the box it now sees (the
+    near field) blocks the way, and touches nothing."""
+    track, _, closest = _turned_round_and_blocked(NavigatorConfig(trail_s=0.0))
+    assert closest[1] < 0.0, "the old rule was expected to back into the box"
+    track, cmds, closest = _turned_round_and_blocked(NavigatorConfig(look_back_m=0.0))
+    assert track[:, 0].max() <= -0.4 + 1e-9 and min(closest) > 0.0  # never east of where it turned
+    track, cmds, closest = _turned_round_and_blocked(NavigatorConfig())
+    assert min(closest) > 0.0 and track[:, 0].max() > -0.1
+    # Every move is where the camera looks, or back to where the robot has been.
+    moving = np.hypot(cmds[:, 0], cmds[:, 1]) > 0
+    before = np.vstack([[-0.4, 0.0, math.pi], track[:-1]])
+    in_view = np.abs(np.arctan2(cmds[:, 1], cmds[:, 0])) <= 0.5 * KINECT_V1.fov_h_rad
+    way_in = np.arange(-3.0, -0.4, 0.025)
+    been = np.vstack([np.column_stack([way_in, np.zeros(len(way_in))]), before[:, :2]])
+    for k in np.flatnonzero(moving & ~in_view):
+        assert np.min(np.hypot(*(been[: len(way_in) + k] - track[k, :2]).T)) <= NavigatorConfig().trail_tolerance_m, k
+    assert np.any(moving & (np.abs(wrap_angles(before[:, 2])) < math.radians(30.0)))  # drove facing east
 
 
 def test_the_trail_allows_the_way_the_robot_came_within_the_tolerance() -> None:

@@ -120,7 +120,9 @@ def test_slows_down_to_stop_before_an_obstacle() -> None:
 
 
 def test_no_progress_triggers_back_off_and_replan() -> None:
-    nav = Navigator(line_graph(), NavigatorConfig(stuck_time_s=2.0))
+    # No trail to back off along and the plan straight ahead: without look_back_m it
+    # turns towards the plan for backoff_time_s (tests/test_navigator_recovery.py looks back).
+    nav = Navigator(line_graph(), NavigatorConfig(stuck_time_s=2.0, look_back_m=0.0))
     nav.set_goal(5, np.zeros(3))
     states = [nav.command(np.zeros(3), np.zeros((0, 2)), t).state for t in np.arange(0, 5, 1 / 30)]
     assert "recovering" in states and nav.recoveries >= 1 and nav.replans >= 1
@@ -347,9 +349,10 @@ def test_a_robot_with_no_way_back_waits_instead_of_hanging_in_a_back_off() -> No
     """Something too close for the camera right ahead, a wall right behind: the robot
     cannot back off. It waits (blocked), recovers when stuck, and never stays in a
     motionless back-off for longer than a recovery's back-off time. It had stayed
-    'recovering' without moving for as long as the obstacle was there."""
+    'recovering' without moving for as long as the obstacle was there. (The pose is held:
+    a look back would turn for ever, look_back_m = 0.)"""
     wall = np.array([[-0.34, -2.0, -0.34, 2.0]])
-    nav = Navigator(line_graph(), walls=wall)
+    nav = Navigator(line_graph(), NavigatorConfig(look_back_m=0.0), walls=wall)
     pose = np.zeros(3)
     nav.set_goal(5, pose)
     ahead = np.array([[0.45, y] for y in np.linspace(-0.3, 0.3, 13)])  # 0.23 m from the camera

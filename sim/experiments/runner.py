@@ -386,8 +386,27 @@ def note_contacts(
             for b in ev["bodies"]:
                 if b.startswith("person_"):
                     ev["person_in_view_s_ago"] = round(t_next - float(run.last_in_view[int(b[7:])]), 2)
-        run.blackbox.on_events(new)
+        # Fault-placed furniture stands where the fault put it now, not where it was built.
+        run.blackbox.on_events(new, furniture=furniture_now(run) if run.faults is not None else ())
     run.collisions += frame.new_contacts
+
+
+def furniture_now(run: Run) -> list[tuple[float, float, float, tuple[float, float, float]]]:
+    """Every furniture piece as (x, y, yaw, dims) where its body stands now (a fault moves
+    some: a blockage's panels), for the incident figures."""
+    import mujoco
+
+    model = run.world.model
+    out = []
+    for i, f in enumerate(run.furniture):
+        b = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, f"furniture_{i}")
+        if b < 0:
+            out.append((f.x, f.y, f.yaw, f.dims))
+            continue
+        q = model.body_quat[b]
+        yaw = math.atan2(2.0 * (q[0] * q[3] + q[1] * q[2]), 1.0 - 2.0 * (q[2] ** 2 + q[3] ** 2))
+        out.append((float(model.body_pos[b][0]), float(model.body_pos[b][1]), yaw, f.dims))
+    return out
 
 
 def _people_in_view(run: Run, people: np.ndarray, pose: np.ndarray) -> np.ndarray:
@@ -760,7 +779,10 @@ def build_report(run: Run, metrics: dict, files: dict[str, str], interrupted: bo
         "map": {"segments": run.building.vectormap.n_segments, "nodes": len(graph.nodes), "edges": len(graph.edges)},
         "actors": {"furniture": len(run.furniture), "people": len(run.people)},
         "waypoints": run.mission.waypoints,
-        "navigation": {"states": run.nav_states, "replans": nav.replans, "recoveries": nav.recoveries, "near_field_frames": run.near_frames},
+        "navigation": {
+            "states": run.nav_states, "replans": nav.replans, "recoveries": nav.recoveries, "near_field_frames": run.near_frames,
+            "blocked_edges": nav.blocked_edges,
+        },
         "events": run.mission.events,
         "recovery": {"events": run.stack.events, "failures": run.failures, "faults": fault_report(run)},
         "collision_events": run.world.collision_log,

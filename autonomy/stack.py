@@ -98,11 +98,14 @@ class RecoveryConfig:
     belief to a place ``explore_m`` away (the modes agree on what is near, so the way
     there is the same in all of them), looking as it goes, until the scan decides."""
     explore_m: float = 6.0
-    """How far the exploring drive goes before the robot looks round again."""
+    """How far the exploring drive goes before the robot looks round again ..."""
+    explore_timeout_s: float = 20.0
+    """... or how long it may take (a drive that is blocked looks round again and then
+    tries another place)."""
 
     def __post_init__(self) -> None:
         require_non_negative(self, "recovery.", "restart_std_xy_m", "restart_std_theta_rad")
-        require_positive(self, "recovery.", "explore_after_s", "explore_m")
+        require_positive(self, "recovery.", "explore_after_s", "explore_m", "explore_timeout_s")
 
 
 @dataclass(frozen=True)
@@ -232,6 +235,8 @@ class RobotStack:
         self._confirmed = 0
         self._candidate: np.ndarray | None = None
         self._exploring_from: np.ndarray | None = None
+        self._explore_t0 = 0.0
+        self._explored: set[int] = set()
         self._goal: int | None = None
         self._last_depth_key: np.ndarray | None = None
         self._maybe_stale = False
@@ -445,6 +450,8 @@ class RobotStack:
         self._last_search_t = -math.inf
         self._searches = 0
         self._exploring_from = None
+        self._explore_t0 = t
+        self._explored: set[int] = set()
         self._confirmed = 0
         self._candidate: np.ndarray | None = None
         if self.health is not None:
@@ -572,9 +579,11 @@ class RobotStack:
             nav.pose_jumped()
             nav.set_goal(node, best, t)
             self._exploring_from = self.odom.copy()
+            self._explore_t0 = t
+            self._explored.add(node)
         cmd = nav.command(best, obstacles, t, near)
         gone = math.hypot(*(self.odom[:2] - self._exploring_from[:2]))
-        if cmd.state == "arrived" or gone >= rec.explore_m:
+        if cmd.state == "arrived" or gone >= rec.explore_m or t - self._explore_t0 > rec.explore_timeout_s:
             # Look round again from here (the scan keeps what it saw on the way).
             self._exploring_from = None
             self._reloc_t0 = t
@@ -585,13 +594,18 @@ class RobotStack:
 
     def _explore_node(self, pose: np.ndarray) -> int | None:
         """A navigation-graph node ``explore_m`` to twice that from the pose, the one most
-        nearly ahead (the robot goes on the way it faces)."""
+        nearly ahead (the robot goes on the way it faces) among those not tried yet in
+        this relocalization."""
         nav = self.navigator
         assert nav is not None
         xy = nav.graph.node_xy()
         d = np.hypot(xy[:, 0] - pose[0], xy[:, 1] - pose[1])
         m = self.cfg.recovery.explore_m
         cand = np.flatnonzero((d >= m) & (d <= 2 * m))
+        ids = np.array([nav.graph.nodes[int(k)].id for k in cand], dtype=np.int64)
+        fresh = ~np.isin(ids, np.array(sorted(self._explored), dtype=np.int64))
+        if fresh.any():  # a place not tried yet (the last one may have been blocked)
+            cand = cand[fresh]
         if not len(cand):
             return None
         bearing = np.abs(np.arctan2(np.sin(np.arctan2(xy[cand, 1] - pose[1], xy[cand, 0] - pose[0]) - pose[2]),

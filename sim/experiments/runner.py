@@ -443,7 +443,7 @@ def check_localization(run: Run, frame: SimFrame) -> None:
     open_ = run.failures[-1] if run.failures and run.failures[-1]["end_t"] is None else None
     t = frame.t
     if open_ is None:
-        if err > loc.reset_error_m and not (stack.relocalizing and loc.truth_reset_after_s > 0):
+        if err > loc.reset_error_m:
             run.failures.append(
                 {"t": round(t, 3), "x": round(float(frame.pose[0]), 3), "y": round(float(frame.pose[1]), 3), "max_error_m": round(err, 3),
                  "noticed_t": round(t, 3) if stack.relocalizing else None, "end_t": None, "ended_by": None,
@@ -451,11 +451,6 @@ def check_localization(run: Run, frame: SimFrame) -> None:
             )
             open_ = run.failures[-1]
             run.reset_points.append(frame.pose[:2].copy())
-        elif err > loc.reset_error_m:
-            # The stack is relocalizing (it knows it is lost): the estimate shown is its
-            # best mode so far, not a belief it drives on; a failure only if it accepts a
-            # wrong one.
-            return
     if open_ is None:
         return
     open_["max_error_m"] = max(open_["max_error_m"], round(err, 3))

@@ -15,7 +15,8 @@ augmented MCL does with the observation likelihood (Thrun, Burgard and Fox,
 "Probabilistic Robotics", Table 8.3: ``w_fast`` and ``w_slow``): a drop of the short-term
 explained fraction far below the long-term one means the world stopped matching the
 belief, while a low long-term level (an atrium with few walls in view) is normal there
-and raises no alarm. The monitor says **lost** when, for ``hold_s``, either
+and raises no alarm. The monitor says **lost** when, for ``hold_s`` (``ratio_hold_s`` for the second test),
+either
 
 1. the short-term contradiction fraction is above ``lost_through``, or
 2. the short-term explained fraction is below ``lost_ratio`` times the long-term one
@@ -63,7 +64,9 @@ class HealthConfig:
     lost_spread_m: float = 1.0
     """... or the particles' position spread is above this ..."""
     hold_s: float = 1.5
-    """... for this long."""
+    """... for this long (the ratio test for ``ratio_hold_s``: a robot turning from a
+    corridor to face an open hall's furniture sees little of the map for a few seconds)."""
+    ratio_hold_s: float = 4.0
     min_history_s: float = 5.0
     """The ratio test needs this much observed time behind the long-term average."""
     blind_s: float = 0.5
@@ -71,7 +74,7 @@ class HealthConfig:
 
     def __post_init__(self) -> None:
         require_positive(self, "health.", "explain_m", "through_m", "fast_s", "slow_s", "lost_spread_m", "blind_s")
-        require_non_negative(self, "health.", "lost_through", "lost_ratio", "hold_s", "min_history_s")
+        require_non_negative(self, "health.", "lost_through", "lost_ratio", "hold_s", "ratio_hold_s", "min_history_s")
         require_int(self, "health.", "min_points", minimum=1)
 
 
@@ -186,7 +189,8 @@ class HealthMonitor:
         if reason:
             if math.isnan(self.bad_since):
                 self.bad_since = t
-            state = "lost" if t - self.bad_since >= cfg.hold_s else ("blind" if t - self.last_evidence_t > cfg.blind_s else "ok")
+            hold = cfg.ratio_hold_s if reason == "explains little" else cfg.hold_s
+            state = "lost" if t - self.bad_since >= hold else ("blind" if t - self.last_evidence_t > cfg.blind_s else "ok")
         else:
             self.bad_since = math.nan
             state = "blind" if t - self.last_evidence_t > cfg.blind_s else "ok"

@@ -391,7 +391,13 @@ class RobotStack:
                 if np.all(np.isfinite(inc)):
                     self.pose = compose_pose(self.pose, inc)
             elif self.relocalizing:
-                self.pose = compose_pose(self.modes[0][0], self.odom) if self.modes else self.pose
+                # Until a mode is accepted the belief is the one before the alarm, dead
+                # reckoned (a false alarm leaves it right); without one (an unknown
+                # start), the best mode so far.
+                if self._prior is not None:
+                    self.pose = compose_pose(self._prior, self.odom)
+                elif self.modes:
+                    self.pose = compose_pose(self.modes[0][0], self.odom)
             else:
                 self.localizer.predict(inc)
                 if self.perception is not None and self._fresh:
@@ -495,7 +501,7 @@ class RobotStack:
         self._searches += 1
         inv = relative_pose(self.odom, np.zeros(3))
         self.modes = [(compose_pose(m.pose, inv), m.cost) for m in res.modes]
-        if self.modes:
+        if self.modes and self._prior is None:
             self.pose = compose_pose(self.modes[0][0], self.odom)
         self.last_search = res
         if prior is not None and res.modes:

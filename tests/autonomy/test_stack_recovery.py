@@ -255,7 +255,7 @@ def test_a_kidnap_is_noticed_and_the_robot_relocalizes_where_it_is(building) -> 
     kidnap = hc.min_history_s + 1.0
     lost = [e for e in stack.events if e["event"] == "lost"]
     assert len(lost) == 1 and lost[0]["why"] in ("sees through walls", "explains little", "spread"), lost
-    assert hc.hold_s <= lost[0]["t"] - kidnap <= hc.hold_s + 4.0
+    assert hc.hold_s <= lost[0]["t"] - kidnap <= hc.ratio_hold_s + 4.0
     # The estimate at the alarm was still START's (the belief it began with) ...
     assert math.hypot(lost[0]["estimate"][0] - START[0], lost[0]["estimate"][1] - START[1]) < 1.0
     # ... then the robot turned in place to look ...

@@ -38,6 +38,7 @@ import numba
 import numpy as np
 
 from autonomy.errors import require_int, require_non_negative, require_positive
+from autonomy.raycast import _ray_hit_kernel
 
 #: Health states, in the order of severity.
 STATES = ("ok", "blind", "lost")
@@ -73,16 +74,17 @@ class HealthConfig:
     """Blind when no usable frame has arrived for this long."""
 
     def __post_init__(self) -> None:
-        require_positive(self, "health.", "explain_m", "through_m", "fast_s", "slow_s", "lost_spread_m", "blind_s")
-        require_non_negative(self, "health.", "lost_through", "lost_ratio", "hold_s", "ratio_hold_s", "min_history_s")
-        require_int(self, "health.", "min_points", minimum=1)
+        require_positive(self, "recovery.health.", "explain_m", "through_m", "fast_s", "slow_s", "lost_spread_m", "blind_s")
+        require_non_negative(self, "recovery.health.", "lost_through", "lost_ratio", "hold_s", "ratio_hold_s", "min_history_s")
+        require_int(self, "recovery.health.", "min_points", minimum=1)
 
 
 @numba.njit(cache=True)
 def explain_points(lines, pose, pts, explain_m, through_m):  # pragma: no cover - numba
     """Per point (robot frame) at ``pose``: 1 explained, -1 contradicts (seen through a
     wall), 0 neither, against the first of ``lines`` (world frame) hit by its ray from
-    the robot's position. Points whose ray hits no line are neither."""
+    the robot's position (:func:`autonomy.raycast.ray_hit`'s kernel). Points whose ray
+    hits no line are neither."""
     x, y, th = pose[0], pose[1], pose[2]
     c, s = math.cos(th), math.sin(th)
     n = pts.shape[0]
@@ -93,20 +95,7 @@ def explain_points(lines, pose, pts, explain_m, through_m):  # pragma: no cover 
         r = math.sqrt(qx * qx + qy * qy)
         if r <= 0.0:
             continue
-        dx, dy = qx / r, qy / r
-        best_t = np.inf
-        bj = -1
-        for j in range(lines.shape[0]):
-            ax, ay = lines[j, 0] - x, lines[j, 1] - y
-            ex, ey = lines[j, 2] - lines[j, 0], lines[j, 3] - lines[j, 1]
-            den = dx * ey - dy * ex
-            if den == 0.0:
-                continue
-            t = (ax * ey - ay * ex) / den
-            u = (ax * dy - ay * dx) / den
-            if t > 0.0 and -1e-9 <= u <= 1.0 + 1e-9 and t < best_t:
-                best_t = t
-                bj = j
+        bj, best_t = _ray_hit_kernel(lines, x, y, qx / r, qy / r)
         if bj < 0:
             continue
         if r > best_t + through_m:

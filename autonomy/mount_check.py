@@ -136,15 +136,15 @@ class MountCheckConfig:
 
     def __post_init__(self) -> None:
         require_positive(
-            self, "mount_check.", "max_normal_tilt_rad", "max_height_offset_m", "inlier_m", "min_spread_m",
+            self, "recovery.mount_check.", "max_normal_tilt_rad", "max_height_offset_m", "inlier_m", "min_spread_m",
             "stable_deg", "max_spread_deg", "threshold_deg", "height_threshold_m",
         )
-        require_int(self, "mount_check.", "min_points", minimum=3)
-        require_int(self, "mount_check.", "window_frames", "min_frames")
+        require_int(self, "recovery.mount_check.", "min_points", minimum=3)
+        require_int(self, "recovery.mount_check.", "window_frames", "min_frames")
         if self.max_normal_tilt_rad >= math.pi / 2:
-            raise InputError(f"mount_check.max_normal_tilt_rad: expected an angle below pi/2, got {self.max_normal_tilt_rad!r}")
+            raise InputError(f"recovery.mount_check.max_normal_tilt_rad: expected an angle below pi/2, got {self.max_normal_tilt_rad!r}")
         if not isinstance(self.correct_height, bool):
-            raise InputError(f"mount_check.correct_height: expected a bool, got {self.correct_height!r}")
+            raise InputError(f"recovery.mount_check.correct_height: expected a bool, got {self.correct_height!r}")
 
 
 @dataclass(frozen=True)

@@ -101,16 +101,16 @@ class RelocalizationConfig:
 
     def __post_init__(self) -> None:
         require_positive(
-            self, "relocalization.", "grid_step_m", "heading_step_deg", "coarse_robust_m", "fine_robust_m",
+            self, "recovery.relocalization.", "grid_step_m", "heading_step_deg", "coarse_robust_m", "fine_robust_m",
             "mode_separation_m", "mode_separation_deg", "scan_cell_m", "accept_cost", "search_every_s", "min_travel_m",
             "accept_margin_points", "accept_margin",
         )
-        require_non_negative(self, "relocalization.", "min_sweep_deg", "max_through", "prior_cost", "explain_m", "through_m")
-        require_int(self, "relocalization.", "coarse_points", minimum=10)
-        require_int(self, "relocalization.", "modes", minimum=1)
-        require_int(self, "relocalization.", "confirmations", minimum=1)
-        require_int(self, "relocalization.", "max_scan_points", minimum=100)
-        require_int(self, "relocalization.", "min_scan_points", minimum=10)
+        require_non_negative(self, "recovery.relocalization.", "min_sweep_deg", "max_through", "prior_cost", "explain_m", "through_m")
+        require_int(self, "recovery.relocalization.", "coarse_points", minimum=10)
+        require_int(self, "recovery.relocalization.", "modes", minimum=1)
+        require_int(self, "recovery.relocalization.", "confirmations", minimum=1)
+        require_int(self, "recovery.relocalization.", "max_scan_points", minimum=100)
+        require_int(self, "recovery.relocalization.", "min_scan_points", minimum=10)
 
 
 @dataclass(frozen=True)
@@ -142,21 +142,24 @@ class SearchResult:
 # --------------------------------------------------------------------------- kernels
 
 
+@numba.njit(cache=True, inline="always")
+def _point_cost(dist, ox, oy, inv_cell, qx, qy, robust2):  # pragma: no cover - numba
+    """Robust cost min(d^2, c^2) / c^2 of one world point (1 off the grid)."""
+    ny, nx = dist.shape
+    j = int(math.floor((qx - ox) * inv_cell))
+    k = int(math.floor((qy - oy) * inv_cell))
+    if j < 0 or k < 0 or j >= nx or k >= ny:
+        return 1.0
+    d = dist[k, j]
+    d2 = d * d
+    return d2 / robust2 if d2 < robust2 else 1.0
+
+
 @numba.njit(cache=True)
 def _cost(dist, ox, oy, inv_cell, x, y, c, s, pts, robust2):  # pragma: no cover - numba
-    ny, nx = dist.shape
     acc = 0.0
     for i in range(pts.shape[0]):
-        qx = x + c * pts[i, 0] - s * pts[i, 1]
-        qy = y + s * pts[i, 0] + c * pts[i, 1]
-        j = int(math.floor((qx - ox) * inv_cell))
-        k = int(math.floor((qy - oy) * inv_cell))
-        if j < 0 or k < 0 or j >= nx or k >= ny:
-            acc += 1.0
-            continue
-        d = dist[k, j]
-        d2 = d * d
-        acc += d2 / robust2 if d2 < robust2 else 1.0
+        acc += _point_cost(dist, ox, oy, inv_cell, x + c * pts[i, 0] - s * pts[i, 1], y + s * pts[i, 0] + c * pts[i, 1], robust2)
     return acc / max(pts.shape[0], 1)
 
 
@@ -165,21 +168,13 @@ def _grid_costs(dist, ox, oy, inv_cell, xy, rot, robust2, out):  # pragma: no co
     """out[h, k]: mean robust cost of the points pre-rotated by heading k (rot[k]) at
     position xy[h] (a translation only: the rotation is shared by all positions). The
     positions are shared out over the cores (each writes its own rows)."""
-    ny, nx = dist.shape
     n = rot.shape[1]
     for h in numba.prange(xy.shape[0]):
         x, y = xy[h, 0], xy[h, 1]
         for k in range(rot.shape[0]):
             acc = 0.0
             for i in range(n):
-                j = int(math.floor((x + rot[k, i, 0] - ox) * inv_cell))
-                m = int(math.floor((y + rot[k, i, 1] - oy) * inv_cell))
-                if j < 0 or m < 0 or j >= nx or m >= ny:
-                    acc += 1.0
-                    continue
-                d = dist[m, j]
-                d2 = d * d
-                acc += d2 / robust2 if d2 < robust2 else 1.0
+                acc += _point_cost(dist, ox, oy, inv_cell, x + rot[k, i, 0], y + rot[k, i, 1], robust2)
             out[h, k] = acc / max(n, 1)
 
 

@@ -33,13 +33,12 @@ from autonomy.cgr import CGRConfig, CGRLocalizer
 from autonomy.errors import InputError, require_non_negative, require_positive
 from autonomy.freespace import FreeSpaceConfig, build_free_space
 from autonomy.fspf import FSPFConfig, FSPFResult, fspf
-from autonomy.geometry import compose_pose, relative_pose, wrap_angle
+from autonomy.geometry import compose_pose, relative_pose, wrap_angle, wrap_angles
 from autonomy.health import HealthConfig, HealthMonitor, HealthSample, explain_points
 from autonomy.mount_check import MountCheck, MountCheckConfig
 from autonomy.navigator import NavCommand, Navigator, NavigatorConfig
 from autonomy.nearfield import NearField
 from autonomy.observation import ObservationConfig, correspond
-from autonomy.planner import astar, path_points
 from autonomy.raycast import SceneQuery, VisibilityGridConfig, load_or_build
 from autonomy.relocalization import GlobalLocalizer, Mode, RelocalizationConfig, Scan
 from autonomy.vectormap import NavGraph, VectorMap
@@ -304,13 +303,13 @@ class RobotStack:
         if depth is None:
             return self._reject("dropped")
         depth = np.asarray(depth)
-        key = depth.ravel()[::STALE_SAMPLE_STRIDE]
-        if not np.isfinite(key).all() or not np.isfinite(depth).all():
+        finite = np.isfinite(depth)
+        if not finite.all():
             # A broken driver: its non-finite pixels count as invalid, the rest is used.
-            depth = np.where(np.isfinite(depth), depth, np.float32(0.0)).astype(np.float32, copy=False)
-            key = depth.ravel()[::STALE_SAMPLE_STRIDE]
+            depth = np.where(finite, depth, np.float32(0.0)).astype(np.float32, copy=False)
             self.frame_fault = "corrupt"
             self.frames_rejected["corrupt"] += 1
+        key = depth.ravel()[::STALE_SAMPLE_STRIDE]
         if not np.any(depth > 0):
             # Nothing valid: a camera that fails, or something closer than its minimum
             # range filling the view; the two look alike, and the near field reads both
@@ -614,8 +613,7 @@ class RobotStack:
             cand = cand[fresh]
         if not len(cand):
             return None
-        bearing = np.abs(np.arctan2(np.sin(np.arctan2(xy[cand, 1] - pose[1], xy[cand, 0] - pose[0]) - pose[2]),
-                                    np.cos(np.arctan2(xy[cand, 1] - pose[1], xy[cand, 0] - pose[0]) - pose[2])))
+        bearing = np.abs(wrap_angles(np.arctan2(xy[cand, 1] - pose[1], xy[cand, 0] - pose[0]) - pose[2]))
         return int(nav.graph.nodes[int(cand[int(np.argmin(bearing))])].id)
 
     def step(
@@ -637,10 +635,7 @@ class RobotStack:
         self._goal = int(node_id)
         at = self.pose if pose is None else pose
         if self.relocalizing and pose is None:
-            nav = self.navigator
-            nodes = astar(nav.graph, nav.nearest_reachable_node(np.asarray(at[:2])), int(node_id), exclude_stairs=nav.cfg.exclude_stairs)
-            pts = np.vstack([np.asarray(at[:2])[None, :], path_points(nav.graph, nodes)])
-            return float(np.hypot(*np.diff(pts, axis=0).T).sum())
+            return self.navigator.plan_length(int(node_id), at)
         return self.navigator.set_goal(node_id, at, t)
 
     # -- for viewers ---------------------------------------------------------------------

@@ -194,6 +194,11 @@ class Scenario:
     def __post_init__(self) -> None:
         # The stack avoids with the body the simulator drives: one radius, robot.radius_m.
         object.__setattr__(self, "avoidance", avoidance_for_body(self.avoidance, self.robot, "scenario"))
+        if not self.localization.start_known and not (self.localization.enabled and self.recovery.enabled):
+            raise InputError(
+                "localization.start_known = false: a robot that does not know where it starts must find itself on the map; "
+                "it needs localization.enabled and recovery.enabled"
+            )
 
     def stack_config(self) -> StackConfig:
         """The robot stack's configuration: the camera as the Kinect model defines it (one

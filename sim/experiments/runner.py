@@ -447,7 +447,7 @@ def check_localization(run: Run, frame: SimFrame) -> None:
             run.failures.append(
                 {"t": round(t, 3), "x": round(float(frame.pose[0]), 3), "y": round(float(frame.pose[1]), 3), "max_error_m": round(err, 3),
                  "noticed_t": round(t, 3) if stack.relocalizing else None, "end_t": None, "ended_by": None,
-                 "fault": fault_at(run, t)}
+                 "fault": fault_at(run, t) or unknown_start(run)}
             )
             open_ = run.failures[-1]
             run.reset_points.append(frame.pose[:2].copy())
@@ -622,6 +622,14 @@ def fault_report(run: Run) -> list[dict]:
         rec["contacts"] = sum(t0 <= c["t"] <= last for c in run.world.collision_log)
         out.append(rec)
     return out
+
+
+def unknown_start(run: Run) -> str | None:
+    """"unknown start" while a robot started without its pose has not yet found itself
+    (its error then is the search's, not a failure of the paper's kind); else None."""
+    if run.scn.localization.start_known or any(e["event"] == "relocalized" for e in run.stack.events) or run.truth_resets:
+        return None
+    return "unknown start"
 
 
 def recovery_metrics(run: Run) -> dict:

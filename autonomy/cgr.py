@@ -73,6 +73,13 @@ class CGRConfig:
     observation.sigma_m, correspondences are found again at the refined mean; if fewer
     than this fraction of the used points keep their line there, the others are dropped
     and the shared refinement is redone (0 = off)."""
+    prior_min_xy_m: float = 0.1
+    """The refinement climbs the likelihood times a Gaussian prior around each sample's
+    first-stage pose, whose spread is the belief's (position and heading) but at least
+    this ... (ours; 0 with prior_min_theta_rad = 0: the likelihood alone, unbounded)."""
+    prior_min_theta_rad: float = math.radians(2.0)
+    """... and this: a few points of one small face cannot turn the heading by degrees
+    in a frame, a wall in view still can (:func:`autonomy.observation.refine_all_m`)."""
     share_radius_m: float = 1.0
     """Particles within this distance (and share_angle_rad) of the proposal mean share its
     scene lines and correspondences; others get their own."""
@@ -88,7 +95,7 @@ class CGRConfig:
         require_int(self, "cgr.", "refinements", minimum=0)
         require_non_negative(
             self, "cgr.", "alpha1", "alpha2_rad_per_m", "alpha3", "min_translation_std_m", "min_rotation_std_rad",
-            "init_std_xy_m", "init_std_theta_rad", "gate_sigmas",
+            "init_std_xy_m", "init_std_theta_rad", "gate_sigmas", "prior_min_xy_m", "prior_min_theta_rad",
         )
         if not 0 <= self.consistent_fraction <= 1:
             raise InputError(f"cgr.consistent_fraction: expected a number in [0, 1], got {self.consistent_fraction!r}")
@@ -137,6 +144,8 @@ class _Frame(NamedTuple):
     """cos(theta_max): the normal-agreement test."""
     gate: float
     """Correspondence gate for this frame (:meth:`CGRLocalizer.gate`)."""
+    prior_info: np.ndarray
+    """1/sigma^2 (x, y, theta) of the refinement's prior (:meth:`CGRLocalizer.prior_info`)."""
 
 
 def circular_mean(theta: np.ndarray, w: np.ndarray | None = None) -> float:
@@ -175,6 +184,10 @@ class CGRLocalizer:
         self.refined_weights = self.weights.copy()
         """Their normalised importance weights (Alg. 1 line 7)."""
         self.last = UpdateStats()
+        self.last_lines: np.ndarray | None = None
+        """The scene lines the last update used, seen from its proposal mean (None: the
+        update stopped before querying them). The stack's health check reads them instead
+        of querying again a few centimetres away."""
 
     # -- belief ------------------------------------------------------------------------
     def reset(self, pose: np.ndarray, std_xy_m: float | None = None, std_theta_rad: float | None = None) -> None:
@@ -216,6 +229,18 @@ class CGRLocalizer:
         r = math.sqrt(float(np.mean(np.einsum("ij,ij->i", points, points))))
         return max(base, min(self.cfg.max_gate_m, k * (est.std_xy_m + r * est.std_theta_rad)))
 
+    def prior_info(self, est: Estimate) -> np.ndarray:
+        """Information (1/sigma^2 for x, y, theta) of the refinement's prior: the belief's
+        spread, floored at ``prior_min_xy_m`` and ``prior_min_theta_rad``; zeros when both
+        floors are 0 (no prior)."""
+        cfg = self.cfg
+        if cfg.prior_min_xy_m <= 0 and cfg.prior_min_theta_rad <= 0:
+            return np.zeros(3)
+        sxy = max(est.std_xy_m, cfg.prior_min_xy_m)
+        sth = max(est.std_theta_rad, cfg.prior_min_theta_rad)
+        ixy = 0.0 if sxy <= 0 else 1.0 / (sxy * sxy)
+        return np.array([ixy, ixy, 0.0 if sth <= 0 else 1.0 / (sth * sth)])
+
     # -- CGR steps ---------------------------------------------------------------------
     def predict(self, increment: np.ndarray) -> None:
         """Step 1: sample the motion model for an odometry increment (dx, dy, dtheta)."""
@@ -243,15 +268,17 @@ class CGRLocalizer:
         stats = UpdateStats(points=len(pts))
         self.before_refinement = self.particles.copy()
         self.last = stats
+        self.last_lines = None
         if len(pts) < self.obs.min_points:
             return stats
         est = self.estimate()
         lines = np.ascontiguousarray(self.scene_lines(float(est.pose[0]), float(est.pose[1])), dtype=np.float64).reshape(-1, 4)
+        self.last_lines = lines
         if len(lines) == 0:
             return stats
-        frame = _Frame(pts, nrm, use_n, math.cos(self.obs.theta_max_rad), self.gate(est, pts))
+        frame = _Frame(pts, nrm, use_n, math.cos(self.obs.theta_max_rad), self.gate(est, pts), self.prior_info(est))
         refined, lnp0, lnpr = self._refine(frame, est.pose, lines, stats)
-        lnp = self._accept(refined, lnp0, lnpr, stats)
+        lnp = self._accept(refined, lnp0, lnpr, stats, frame.prior_info)
         self._resample(lnp, stats)
         return stats
 
@@ -301,14 +328,14 @@ class CGRLocalizer:
         k, iters = obs.inv_two_f_sigma2, cfg.refinements
         o_p, o0, o1 = np.empty((len(first), 3)), np.empty(len(first)), np.empty(len(first))
         used = moments(frames, idx, fr.pts, m)
-        refine_all_m(m, used, first, k, iters, cfg.step_fraction, obs.min_points, o_p, o0, o1, cfg.trust_region_m)
+        refine_all_m(m, used, first, k, iters, cfg.step_fraction, obs.min_points, o_p, o0, o1, cfg.trust_region_m, fr.prior_info)
         if iters > 0 and used >= obs.min_points and cfg.consistent_fraction > 0:
             same = self._kept_associations(fr, shared_pose, lines, idx, o_p, m, used)
             if same is not None and same.sum() < cfg.consistent_fraction * used:
                 stats.dropped_points = int(used - same.sum())
                 idx[~same] = -1
                 used = moments(frames, idx, fr.pts, m)
-                refine_all_m(m, used, first, k, iters, cfg.step_fraction, obs.min_points, o_p, o0, o1, cfg.trust_region_m)
+                refine_all_m(m, used, first, k, iters, cfg.step_fraction, obs.min_points, o_p, o0, o1, cfg.trust_region_m, fr.prior_info)
                 stats.used_points = int(used)
         return o_p, o0, o1
 
@@ -344,16 +371,27 @@ class CGRLocalizer:
             frames = line_frames(own, p[0], p[1])
         used = moments(frames, idx, fr.pts, m)
         o_p, o0, o1 = np.empty((1, 3)), np.empty(1), np.empty(1)
-        refine_all_m(m, used, p[None, :].copy(), obs.inv_two_f_sigma2, cfg.refinements, cfg.step_fraction, obs.min_points, o_p, o0, o1, cfg.trust_region_m)
+        refine_all_m(
+            m, used, p[None, :].copy(), obs.inv_two_f_sigma2, cfg.refinements, cfg.step_fraction, obs.min_points, o_p, o0, o1,
+            cfg.trust_region_m, fr.prior_info,
+        )
         return o_p[0], o0[0], o1[0]
 
-    def _accept(self, refined: np.ndarray, lnp0: np.ndarray, lnpr: np.ndarray, stats: UpdateStats) -> np.ndarray:
+    def _accept(
+        self, refined: np.ndarray, lnp0: np.ndarray, lnpr: np.ndarray, stats: UpdateStats, prior_info: np.ndarray | None = None
+    ) -> np.ndarray:
         """Step 3: the acceptance test between each refined sample and its first-stage
-        version; returns the log-likelihood of the sample kept."""
+        version, on likelihood times the refinement's prior (centred on the first-stage
+        pose, so 1 there); returns the log-likelihood of the sample kept."""
         n = self.cfg.n_particles
         u = self.rng.uniform(size=n)
         with np.errstate(invalid="ignore", over="ignore"):
-            accept = np.isfinite(lnpr) & ((lnpr >= lnp0) | (np.log(np.maximum(u, 1e-300)) < lnpr - lnp0))
+            gain = lnpr - lnp0  # -inf - -inf is NaN: not accepted
+            if prior_info is not None and np.any(prior_info > 0):
+                d = refined - self.particles
+                d[:, 2] = wrap_angles(d[:, 2])
+                gain = gain - 0.5 * (d * d) @ prior_info
+            accept = np.isfinite(lnpr) & ((gain >= 0) | (np.log(np.maximum(u, 1e-300)) < gain))
         self.particles[accept] = refined[accept]
         self.particles[:, 2] = wrap_angles(self.particles[:, 2])
         stats.accepted_refinements = int(accept.sum()) if self.cfg.refinements > 0 else 0

@@ -315,7 +315,9 @@ def _trust_clip(pose, start, lever_m, trust_m):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True)
-def refine_all_m(m, n_used, poses, inv_2fs2, iters, kappa, min_points, out_poses, lnp0, lnpr, trust_m=np.inf):  # pragma: no cover
+def refine_all_m(
+    m, n_used, poses, inv_2fs2, iters, kappa, min_points, out_poses, lnp0, lnpr, trust_m=np.inf, prior_info=np.zeros(3)
+):  # pragma: no cover
     """CGR step 2 for every particle sharing one moment matrix: first-stage and refined
     log-likelihoods and the refined poses.
 
@@ -325,6 +327,12 @@ def refine_all_m(m, n_used, poses, inv_2fs2, iters, kappa, min_points, out_poses
     not constrain (a featureless corridor) both H and g vanish, so the sample does not
     move. The refined pose stays within ``trust_m`` of the first-stage pose
     (:func:`_trust_clip`).
+
+    ``prior_info`` (1/sigma^2 for x, y, theta) adds a Gaussian prior centred on each
+    sample's first-stage pose: the steps then climb ln p(y|x) + ln p(x), and a direction
+    the points hardly constrain (one pillar face: its slope trades heading for sideways
+    offset) stays where the motion model put the sample instead of leaping along it (ours;
+    zeros: the likelihood alone). ``lnpr`` stays the likelihood alone.
     """
     work = np.zeros(11)
     # m[0, 0] + m[1, 1] = sum (n . p)^2 + (n x p)^2 = sum |p|^2 over the used points.
@@ -341,6 +349,7 @@ def refine_all_m(m, n_used, poses, inv_2fs2, iters, kappa, min_points, out_poses
         loglik_grad_m(m, n_used, p, inv_2fs2, work)
         lnp0[i] = work[0]
         for _ in range(iters):
+            _add_prior(work, p, poses[i], prior_info)
             if not _gn_step(work, kappa, p):
                 break
             clipped = _trust_clip(p, poses[i], lever, trust_m)
@@ -348,6 +357,21 @@ def refine_all_m(m, n_used, poses, inv_2fs2, iters, kappa, min_points, out_poses
             if clipped:
                 break
         lnpr[i] = work[0]
+
+
+@numba.njit(cache=True)
+def _add_prior(work, pose, centre, info):  # pragma: no cover - numba
+    """Add a Gaussian prior's gradient and curvature (diagonal ``info``, centred on
+    ``centre``) to a loglik_grad output, in place (the log-likelihood itself unchanged)."""
+    dx = pose[0] - centre[0]
+    dy = pose[1] - centre[1]
+    dth = wrap_angle_nb(pose[2] - centre[2])
+    work[1] -= info[0] * dx
+    work[2] -= info[1] * dy
+    work[3] -= info[2] * dth
+    work[4] += info[0]
+    work[5] += info[1]
+    work[6] += info[2]
 
 
 def expected_ranges(lines: np.ndarray, pose: np.ndarray, angles: np.ndarray, max_range_m: float = np.inf) -> np.ndarray:

@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import argparse
 import math
+import signal
 import sys
+import threading
 from pathlib import Path
 
 from autonomy.errors import InputError
@@ -563,7 +565,22 @@ def _add_train_command(sub) -> None:
     c.set_defaults(func=cmd_train_ppo)
 
 
+def interrupt_on_signals() -> dict:
+    """SIGINT and SIGTERM stop a command the way Ctrl-C does (it keeps what finished).
+    A shell that starts a job in the background without job control sets SIGINT to be
+    ignored, and Python then installs no handler: ``kill -INT`` would do nothing.
+    Returns the handlers replaced (restored when the command ends)."""
+
+    def stop(signum, _frame):
+        raise KeyboardInterrupt(signal.Signals(signum).name)
+
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    return {sig: signal.signal(sig, stop) for sig in (signal.SIGINT, signal.SIGTERM)}
+
+
 def main(argv: list[str] | None = None) -> int:
+    before = interrupt_on_signals()
     try:
         args = build_parser().parse_args(argv)
         return int(args.func(args))
@@ -584,6 +601,9 @@ def main(argv: list[str] | None = None) -> int:
         where = f"{exc.filename}: " if exc.filename else ""
         print(f"depthnav: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return 2
+    finally:
+        for sig, handler in before.items():
+            signal.signal(sig, handler)
 
 
 if __name__ == "__main__":

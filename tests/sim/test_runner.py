@@ -3,6 +3,11 @@
 from __future__ import annotations
 
 import json
+import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -70,6 +75,33 @@ def test_interrupted_run_still_writes_its_report(tmp_path: Path, monkeypatch: py
     assert rep["interrupted"] is True
     assert rep["metrics"]["frames"] == 18  # call 1 is the frame captured before the loop
     assert json.loads((tmp_path / "report.json").read_text())["interrupted"] is True
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_background_run_stops_on_a_signal_and_keeps_its_report(tmp_path: Path, sig: int) -> None:
+    """A run started in the background by a shell without job control inherits SIGINT
+    ignored; ``kill -INT`` (or ``kill``) still stops it as Ctrl-C does: report kept."""
+    root = Path(__file__).resolve().parents[2]
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "sim.cli", "run", str(SCENARIOS_DIR / "demo.toml"), "--out", str(out)]
+    proc = subprocess.Popen(
+        cmd, cwd=root, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN),
+    )
+    try:
+        assert proc.stdout is not None
+        started = proc.stdout.readline()  # the first line comes once the world is built
+        assert "depth camera" in started, started
+        time.sleep(3.0)
+        os.kill(proc.pid, sig)
+        rest, _ = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.kill(proc.pid, signal.SIGKILL)
+            proc.wait(10)
+    assert proc.returncode == 130, rest
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["interrupted"] is True and rep["metrics"]["frames"] > 0
 
 
 @pytest.mark.slow

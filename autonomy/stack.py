@@ -234,6 +234,7 @@ class RobotStack:
         self._confirmed = 0
         self._candidate: np.ndarray | None = None
         self._exploring_from: np.ndarray | None = None
+        self._explore_T = np.zeros(3)
         self._explore_t0 = 0.0
         self._explored: set[int] = set()
         self._goal: int | None = None
@@ -583,16 +584,22 @@ class RobotStack:
         assert nav is not None
         if not self.modes or t - self._reloc_t0 < rec.explore_after_s:
             return nav.look_around(t)
-        best = compose_pose(self.modes[0][0], self.odom)
         if self._exploring_from is None:
+            best = compose_pose(self.modes[0][0], self.odom)
             node = self._explore_node(best)
             if node is None:
                 return nav.look_around(t)
             nav.pose_jumped()
             nav.set_goal(node, best, t)
             self._exploring_from = self.odom.copy()
+            self._explore_T = self.modes[0][0].copy()
             self._explore_t0 = t
             self._explored.add(node)
+        # One drive sees the world through the transform of the mode it set out on: the
+        # modes are re-scored every second and the best may change, but a plan, the
+        # obstacle memory and the map's walls in the camera's blind spots placed through
+        # one mode and then read through another would put walls where none are seen.
+        best = compose_pose(self._explore_T, self.odom)
         cmd = nav.command(best, obstacles, t, near)
         gone = math.hypot(*(self.odom[:2] - self._exploring_from[:2]))
         if cmd.state == "arrived" or gone >= rec.explore_m or t - self._explore_t0 > rec.explore_timeout_s:

@@ -350,3 +350,30 @@ def test_an_unknown_start_after_a_blackout_still_looks_round(building) -> None:
     assert stack.health_state == "blind"
     stack.reset(None)
     assert stack.decide(1.0).state == "looking"
+
+
+def test_an_exploring_drive_keeps_the_mode_it_set_out_on(building, monkeypatch) -> None:
+    """Undecided after explore_after_s, the robot drives on the best mode. When the
+    re-scored modes change their order mid-drive, the navigator goes on seeing the world
+    through the transform the drive began with (its plan, memory and blind-spot walls
+    were placed through it), until it looks round again."""
+    stack = make_stack(building, pose=None)
+    a = np.array([0.0, 0.0, 0.0])  # modes as map-from-odometry transforms
+    b = np.array([12.0, -4.0, math.pi / 2])
+    stack.modes = [(a, 0.1), (b, 0.11)]
+    stack.odom = START.copy()
+    seen: list[np.ndarray] = []
+    real = stack.navigator.command
+
+    def spy(pose, *args, **kwargs):
+        seen.append(np.array(pose))
+        return real(pose, *args, **kwargs)
+
+    monkeypatch.setattr(stack.navigator, "command", spy)
+    t = stack.cfg.recovery.explore_after_s + 1.0
+    assert stack.decide(t).state in ("exploring", "turning", "driving", "arrived")
+    stack.modes = [(b, 0.09), (a, 0.1)]  # re-scored: the other mode is best now
+    stack.odom = compose_pose(START, np.array([0.2, 0.0, 0.05]))
+    stack.decide(t + 0.1)
+    np.testing.assert_allclose(seen[0], compose_pose(a, START))
+    np.testing.assert_allclose(seen[-1], compose_pose(a, stack.odom))

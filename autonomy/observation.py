@@ -314,9 +314,13 @@ def _trust_clip(pose, start, lever_m, trust_m):  # pragma: no cover - numba
     return True
 
 
+#: ``refine_all_m``'s prior information when there is none: the likelihood alone.
+NO_PRIOR = np.zeros(3)
+
+
 @numba.njit(cache=True)
 def refine_all_m(
-    m, n_used, poses, inv_2fs2, iters, kappa, min_points, out_poses, lnp0, lnpr, trust_m=np.inf, prior_info=np.zeros(3)
+    m, n_used, poses, inv_2fs2, iters, kappa, min_points, out_poses, lnp0, lnpr, trust_m=np.inf, prior_info=NO_PRIOR
 ):  # pragma: no cover
     """CGR step 2 for every particle sharing one moment matrix: first-stage and refined
     log-likelihoods and the refined poses.

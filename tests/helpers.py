@@ -82,3 +82,23 @@ def err_line(capsys) -> str:
     assert len(lines) == 1, err
     assert "Traceback" not in err
     return lines[0]
+
+
+def interrupt(proc, sig: int, ready, timeout_s: float = 60.0) -> str:
+    """Wait until ``ready()`` is true, send ``sig`` to the child ``proc`` (as Ctrl-C or
+    ``kill`` would), and return the rest of its stderr (stdout if merged). A child
+    still running afterwards is killed, so no test leaves one behind."""
+    import signal
+    import time
+
+    try:
+        deadline = time.time() + timeout_s
+        while time.time() < deadline and not ready():
+            time.sleep(0.05)
+        os.kill(proc.pid, sig)
+        out, err = proc.communicate(timeout=timeout_s / 2)
+        return err if err is not None else out
+    finally:
+        if proc.poll() is None:
+            os.kill(proc.pid, signal.SIGKILL)
+            proc.wait(10)

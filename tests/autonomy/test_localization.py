@@ -276,8 +276,8 @@ def test_laser_model_converges_without_normals() -> None:
     assert expected_ranges(segs, np.array([3.5, 2.5, 0.0]), np.array([0.0]))[0] == pytest.approx(2.5)
 
 
-def _refine_once(segs, pose, pts, trust):
-    from autonomy.observation import moments, refine_all_m
+def _refine_once(segs, pose, pts, trust, prior_info=None):
+    from autonomy.observation import NO_PRIOR, moments, refine_all_m
 
     idx = np.empty(len(pts), dtype=np.int64)
     correspond(segs, pose, pts, np.zeros_like(pts), False, -1.0, 0.5, idx)
@@ -285,7 +285,7 @@ def _refine_once(segs, pose, pts, trust):
     used = moments(line_frames(segs, pose[0], pose[1]), idx, pts, m)
     out, l0, lr = np.empty((1, 3)), np.empty(1), np.empty(1)
     k = ObservationConfig().inv_two_f_sigma2
-    refine_all_m(m, used, pose[None, :].copy(), k, 6, 0.5, 10, out, l0, lr, trust)
+    refine_all_m(m, used, pose[None, :].copy(), k, 6, 0.5, 10, out, l0, lr, trust, NO_PRIOR if prior_info is None else prior_info)
     lever = math.sqrt(float(np.mean(np.sum(pts[idx >= 0] ** 2, axis=1))))
     moved = math.hypot(*(out[0, :2] - pose[:2])) + lever * abs(out[0, 2] - pose[2])
     return out[0], moved
@@ -382,18 +382,6 @@ def test_consistent_fraction_is_a_fraction() -> None:
         CGRConfig(consistent_fraction=1.5)
 
 
-def _refine_with_prior(segs, pose, pts, prior_info):
-    from autonomy.observation import moments, refine_all_m
-
-    idx = np.empty(len(pts), dtype=np.int64)
-    correspond(segs, pose, pts, np.zeros_like(pts), False, -1.0, 0.5, idx)
-    m = np.empty((5, 5))
-    used = moments(line_frames(segs, pose[0], pose[1]), idx, pts, m)
-    out, l0, lr = np.empty((1, 3)), np.empty(1), np.empty(1)
-    refine_all_m(m, used, pose[None, :].copy(), ObservationConfig().inv_two_f_sigma2, 6, 0.5, 10, out, l0, lr, 0.5, prior_info)
-    return out[0]
-
-
 def test_refinement_prior_holds_the_heading_on_one_small_face() -> None:
     """Thirty points of one 0.5 m pillar face 3 m ahead, seen 6 degrees askew (a
     Kinect's correlated error bends a small face by a centimetre or two). The face's
@@ -404,10 +392,10 @@ def test_refinement_prior_holds_the_heading_on_one_small_face() -> None:
     ys = np.linspace(-0.24, 0.24, 30)
     tilt = math.radians(6.0)
     pts = np.column_stack([3.0 + 0.02 + ys * math.sin(tilt), ys * math.cos(tilt)])  # 2 cm long, askew
-    free = _refine_with_prior(face, np.zeros(3), pts, np.zeros(3))
+    free = _refine_once(face, np.zeros(3), pts, 0.5)[0]
     assert abs(math.degrees(free[2])) > 3.0
     info = CGRLocalizer(lambda x, y: face).prior_info(CGRLocalizer(lambda x, y: face).estimate())
-    held = _refine_with_prior(face, np.zeros(3), pts, info)
+    held = _refine_once(face, np.zeros(3), pts, 0.5, info)[0]
     assert abs(math.degrees(held[2])) < 1.0
     assert abs(held[0] + 0.02) < 0.005  # the face's range is well observed: corrected
 
@@ -422,9 +410,9 @@ def test_refinement_prior_lets_a_room_correct_the_heading() -> None:
     pts, _ = observe(segs, true, rng)
     info = np.array([100.0, 100.0, 1.0 / math.radians(2.0) ** 2])
     start = true + [0.1, -0.05, math.radians(3.0)]
-    out = _refine_with_prior(segs, start, pts, info)
+    out = _refine_once(segs, start, pts, 0.5, info)[0]
     assert abs(math.degrees(out[2] - true[2])) < 1.5
     for _ in range(2):
-        out = _refine_with_prior(segs, out, pts, info)
+        out = _refine_once(segs, out, pts, 0.5, info)[0]
     assert math.hypot(*(out[:2] - true[:2])) < 0.01
     assert abs(math.degrees(out[2] - true[2])) < 0.3

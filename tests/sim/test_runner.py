@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
 import signal
 import subprocess
 import sys
@@ -16,6 +15,7 @@ import pytest
 from sim.cli import main
 from sim.experiments.runner import run_scenario
 from sim.scenario import SCENARIOS_DIR, load_scenario
+from tests.helpers import interrupt
 
 REQUIRED_METRICS = {"frames", "distance_m", "duration_s", "collisions", "waypoints_reached", "waypoints_failed", "realtime_factor"}
 
@@ -88,17 +88,11 @@ def test_background_run_stops_on_a_signal_and_keeps_its_report(tmp_path: Path, s
         cmd, cwd=root, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True,
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN),
     )
-    try:
-        assert proc.stdout is not None
-        started = proc.stdout.readline()  # the first line comes once the world is built
-        assert "depth camera" in started, started
-        time.sleep(3.0)
-        os.kill(proc.pid, sig)
-        rest, _ = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            os.kill(proc.pid, signal.SIGKILL)
-            proc.wait(10)
+    assert proc.stdout is not None
+    started = proc.stdout.readline()  # the first line comes once the world is built
+    assert "depth camera" in started, started
+    t0 = time.time()
+    rest = interrupt(proc, sig, lambda: time.time() - t0 > 3.0)
     assert proc.returncode == 130, rest
     rep = json.loads((out / "report.json").read_text())
     assert rep["interrupted"] is True and rep["metrics"]["frames"] > 0

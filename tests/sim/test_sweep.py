@@ -15,6 +15,7 @@ import pytest
 from autonomy.errors import InputError
 from sim.experiments import kinds as experiments
 from sim.experiments.sweep import SweepError, read_trials, run_sweep
+from tests.helpers import interrupt
 from tests.sim import sweep_kind
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -140,18 +141,9 @@ def test_ctrl_c_keeps_finished_trials_and_says_how_to_resume(tmp_path: Path) -> 
         f"sys.exit(main(['sweep', {str(scn)!r}, '--trials', '40', '--workers', '2', '--out', {str(out)!r}]))\n"
     )
     proc = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, start_new_session=True, stderr=subprocess.PIPE, text=True)
-    try:
-        deadline = time.time() + 60
-        while time.time() < deadline:
-            if (out / "trials.jsonl").is_file() and len((out / "trials.jsonl").read_text().splitlines()) >= 3:
-                break
-            time.sleep(0.05)
-        os.kill(proc.pid, signal.SIGINT)  # as Ctrl-C, to our own child
-        _, err = proc.communicate(timeout=30)
-    finally:
-        if proc.poll() is None:
-            os.kill(proc.pid, signal.SIGKILL)
-            proc.wait(10)
+    jsonl = out / "trials.jsonl"
+    # As Ctrl-C, to our own child.
+    err = interrupt(proc, signal.SIGINT, lambda: jsonl.is_file() and len(jsonl.read_text().splitlines()) >= 3)
     assert proc.returncode == 130, err
     assert "resume with: depthnav sweep" in err and "--resume" in err
     rep = json.loads((out / "report.json").read_text())

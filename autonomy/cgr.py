@@ -5,13 +5,16 @@ A particle filter over (x, y, theta). Each frame (IV-C, steps 1-4):
 1. the particles move through the motion model of an omnidirectional base driven by
    odometry increments: the first-stage proposal q0;
 2. each sample is refined in r iterations along the gradient of the observation
-   log-likelihood (:func:`autonomy.observation.refine_all_m`): q1 .. qr, within a trust
-   region of its first-stage pose (ours), on correspondences found within a gate that
+   log-likelihood (:func:`autonomy.observation.refine_all_m`) times a Gaussian prior
+   around the sample's first-stage pose (:meth:`CGRLocalizer.prior_info`, ours):
+   q1 .. qr, within a trust region of its first-stage pose (ours), on correspondences found within a gate that
    widens with the belief's spread (:meth:`CGRLocalizer.gate`, ours), and checked
    where it led: points whose line changes there are dropped (``consistent_fraction``,
    ours);
 3. an acceptance test chooses, per sample, between its refined and its first-stage
-   version: the refined one is kept with probability min(1, p(y|x_r) / p(y|x_0));
+   version: the refined one is kept with probability min(1, p(y|x_r) N(x_r) / p(y|x_0)),
+   N the refinement's prior around the first-stage pose (ours; 1 there, and 1 everywhere
+   without the prior);
 4. samples are weighted by their observation likelihood and resampled (low variance).
 
 With r = 0 this is plain Monte Carlo localization (MCL), kept as a baseline. The pose

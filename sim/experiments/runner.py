@@ -33,6 +33,7 @@ from sim.experiments.blackbox import (
     render_incidents,
     starts_incident,
 )
+from sim.experiments.columns import Column
 from sim.experiments.waypoints import Mission, close_leg, leg_timeout, plan_mission
 from sim.scenario import Scenario
 from sim.simulator import blueprints
@@ -154,16 +155,18 @@ class Run:
     frames: int = 0
     distance_m: float = 0.0
     collisions: int = 0
-    times: list[float] = field(default_factory=list)
-    truth: list[np.ndarray] = field(default_factory=list)
-    estimates: list[np.ndarray] = field(default_factory=list)
-    loc_errors: list[float] = field(default_factory=list)
-    heading_errors: list[float] = field(default_factory=list)
+    # Per-frame records are typed arrays (:mod:`sim.experiments.columns`): as lists of
+    # Python objects they grew a 4 km run's memory by some 170 MB.
+    times: Column = field(default_factory=Column)
+    truth: Column = field(default_factory=lambda: Column(3))
+    estimates: Column = field(default_factory=lambda: Column(3))
+    loc_errors: Column = field(default_factory=Column)
+    heading_errors: Column = field(default_factory=Column)
     reset_points: list[np.ndarray] = field(default_factory=list)
-    fspf_counts: list[tuple[int, int, int, int]] = field(default_factory=list)
+    fspf_counts: Column = field(default_factory=lambda: Column(4, np.int32))
     nav_states: dict[str, int] = field(default_factory=dict)
     near_frames: int = 0
-    timing: dict[str, list[float]] = field(default_factory=lambda: {k: [] for k in STAGES})
+    timing: dict[str, Column] = field(default_factory=lambda: {k: Column(None, np.float32) for k in STAGES})
     rss_mb: list[tuple[int, float, float]] = field(default_factory=list)
     """(frame, resident memory in MB, distance driven), sampled every ``RSS_EVERY`` frames."""
     last_in_view: np.ndarray = field(default_factory=lambda: np.zeros(0))

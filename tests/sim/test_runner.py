@@ -171,3 +171,28 @@ def test_the_incident_figure_draws_the_furniture_the_contact_names(tmp_path):
     inc = {"event": {"t": 5.0, "x": 1.5, "y": 2.0, "bodies": ["furniture_0"]}, "trace": []}
     walls = np.array([[0.0, 0.0, 4.0, 0.0]])
     assert render_incidents([inc], walls, tmp_path / "i.png", furniture=pieces).stat().st_size > 0
+
+
+def test_per_frame_records_cost_bytes_not_objects(tmp_path: Path) -> None:
+    """A 4 km run is 200,000 frames: what the loop keeps per frame must be raw values
+    (about 130 bytes), not Python objects (about 800)."""
+    from sim.experiments.runner import build_run, drive
+
+    run = build_run(_short_demo(["mission.max_duration_s=2.0"]), seed=5)
+    drive(run, None, progress=False)
+    per_frame = [run.times, run.truth, run.estimates, run.loc_errors, run.heading_errors, run.fspf_counts, *run.timing.values()]
+    assert all(len(c) >= run.frames for c in per_frame)
+    assert sum(_deep_size(c) for c in per_frame) / run.frames < 200
+    assert _deep_size([np.zeros(3) for _ in range(100)]) / 100 > 100  # what a list of poses costs
+    run.camera.close()
+
+
+def _deep_size(obj) -> int:
+    """Bytes an object holds, counting a container's items (a column's rows)."""
+    from sim.experiments.columns import Column
+
+    if isinstance(obj, Column):
+        return obj.values.nbytes
+    if isinstance(obj, (list, tuple)):
+        return sys.getsizeof(obj) + sum(_deep_size(x) for x in obj)
+    return sys.getsizeof(obj)

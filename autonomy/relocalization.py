@@ -15,13 +15,19 @@ The scan is then matched against the whole map (ours; the papers re-localized by
    the point to the nearest wall, read from the free space's distance transform (a
    likelihood field: one table look-up per point, no ray casting). People and furniture
    cost the same at every hypothesis; the cost saturates so they cannot dominate.
-2. **Modes.** The best hypotheses, at least ``mode_separation_m`` or
-   ``mode_separation_deg`` apart (non-maximum suppression), are refined coarse to fine
-   on the same field with all scan points.
+2. **Modes.** The best hypotheses are refined coarse to fine on the same field with all
+   scan points, and **scored**: the cost plus ``through_weight`` times the fraction of
+   the scan's points that the mode sees through the map's walls (each point's ray
+   from where the robot stood when it saw it, marched over the distance transform).
+   The likelihood field alone favours places with many walls: a hall's furniture fits
+   some office's walls better than the hall's own few. Clutter can only hide walls,
+   never show what lies behind them, so sight through walls rules such places out.
+   The best-scored, at least ``mode_separation_m`` or ``mode_separation_deg`` apart
+   (non-maximum suppression), are the modes.
 3. **Decision.** The best mode is accepted when it explains the scan
-   (cost at most ``accept_cost``), the latest frame does not see through the map's walls
+   (score at most ``accept_cost``), the latest frame does not see through the map's walls
    from it (:func:`autonomy.health.explain_points` on its visible scene lines), and no
-   other mode comes within ``accept_margin`` of its cost per point nor within
+   other mode comes within ``accept_margin`` of its score per point nor within
    ``accept_margin_points`` over the whole scan. Otherwise the modes are kept
    and the robot looks on (a symmetric corridor is resolved by what it sees next, not by
    a guess). The belief the robot had before it was lost competes as one more mode, so a
@@ -98,6 +104,17 @@ class RelocalizationConfig:
     prior_cost: float = 0.45
     """A false alarm: the belief before the alarm is kept when it explains the scan at
     least this well and within ``accept_margin`` of the best mode."""
+    prior_lead_cost: float = 0.8
+    """... or, scoring worse than ``prior_cost`` (up to this: a hall full of furniture the
+    map lacks), when every mode elsewhere scores worse by the acceptance margins. A
+    kidnapped robot's old belief loses to the place it is at by far more (0.5 or more
+    on the tuning runs)."""
+    through_weight: float = 3.0
+    """A mode's score is its cost plus this times the fraction of the scan's points it
+    sees through the map's walls (each point's ray from where the robot stood when it
+    saw it). Clutter can only hide walls, so one point seen through a wall speaks
+    against a mode more than an unexplained one: scans in open halls full of furniture
+    otherwise fit the many walls of offices elsewhere better than the hall itself."""
 
     def __post_init__(self) -> None:
         require_positive(
@@ -105,7 +122,10 @@ class RelocalizationConfig:
             "mode_separation_m", "mode_separation_deg", "scan_cell_m", "accept_cost", "search_every_s", "min_travel_m",
             "accept_margin_points", "accept_margin",
         )
-        require_non_negative(self, "recovery.relocalization.", "min_sweep_deg", "max_through", "prior_cost", "explain_m", "through_m")
+        require_non_negative(
+            self, "recovery.relocalization.", "min_sweep_deg", "max_through", "prior_cost", "prior_lead_cost", "explain_m", "through_m",
+            "through_weight",
+        )
         require_int(self, "recovery.relocalization.", "coarse_points", minimum=10)
         require_int(self, "recovery.relocalization.", "modes", minimum=1)
         require_int(self, "recovery.relocalization.", "confirmations", minimum=1)
@@ -123,6 +143,16 @@ class Mode:
     """Mean robust cost of the scan there (0 = every point on a wall, 1 = none near one)."""
     through: float = math.nan
     """Fraction of the latest frame's points seen through a mapped wall from there."""
+    scan_through: float = math.nan
+    """Fraction of the scan's points seen through a mapped wall from there (NaN: the
+    scan's viewpoints were not given)."""
+    score: float = math.nan
+    """What the modes are ranked and decided by: ``cost`` plus ``through_weight`` times
+    ``scan_through`` (``cost`` when that is NaN)."""
+
+    def __post_init__(self) -> None:
+        if math.isnan(self.score):
+            object.__setattr__(self, "score", self.cost)
 
 
 @dataclass(frozen=True)
@@ -178,6 +208,98 @@ def _grid_costs(dist, ox, oy, inv_cell, xy, rot, robust2, out):  # pragma: no co
             out[h, k] = acc / max(n, 1)
 
 
+#: Cell size of the segment index that confirms the grid's wall hits exactly.
+SEGMENT_INDEX_CELL_M = 1.0
+
+
+def segment_index(seg: np.ndarray, x0: float, y0: float, cell: float, ny: int, nx: int) -> tuple[np.ndarray, np.ndarray]:
+    """CSR index (start (ny * nx + 1,), ids) of the segments passing through each cell of
+    a (ny, nx) grid with lower-left corner (x0, y0): the segments of cell k are
+    ``ids[start[k]:start[k + 1]]``."""
+    seg = np.asarray(seg, dtype=np.float64).reshape(-1, 4)
+    n = np.maximum(2, np.ceil(np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1]) / (0.25 * cell)).astype(np.int64) + 1)
+    sid = np.repeat(np.arange(len(seg)), n)
+    t = np.concatenate([np.linspace(0.0, 1.0, k) for k in n]) if len(seg) else np.zeros(0)
+    px = seg[sid, 0] + t * (seg[sid, 2] - seg[sid, 0])
+    py = seg[sid, 1] + t * (seg[sid, 3] - seg[sid, 1])
+    j = np.clip(np.floor((px - x0) / cell).astype(np.int64), 0, nx - 1)
+    k = np.clip(np.floor((py - y0) / cell).astype(np.int64), 0, ny - 1)
+    key = np.unique((k * nx + j) * max(len(seg), 1) + sid)
+    cells, ids = key // max(len(seg), 1), key % max(len(seg), 1)
+    start = np.searchsorted(cells, np.arange(ny * nx + 1)).astype(np.int64)
+    return start, ids.astype(np.int64)
+
+
+@numba.njit(cache=True, inline="always")
+def _crosses(seg, start, ids, ix0, iy0, inv_icell, iny, inx, ax, ay, ux, uy, hx, hy, end):  # pragma: no cover - numba
+    """Whether the ray from (ax, ay) along unit (ux, uy) meets a segment before ``end``,
+    among the indexed segments around (hx, hy) (the cell of a grid wall hit and its
+    eight neighbours)."""
+    cj = int(math.floor((hx - ix0) * inv_icell))
+    ck = int(math.floor((hy - iy0) * inv_icell))
+    for dk in range(-1, 2):
+        for dj in range(-1, 2):
+            j, k = cj + dj, ck + dk
+            if j < 0 or k < 0 or j >= inx or k >= iny:
+                continue
+            cell = k * inx + j
+            for q in range(start[cell], start[cell + 1]):
+                m = ids[q]
+                px, py = seg[m, 0], seg[m, 1]
+                ex, ey = seg[m, 2] - px, seg[m, 3] - py
+                den = ux * ey - uy * ex
+                if den == 0.0:
+                    continue
+                wx, wy = px - ax, py - ay
+                tt = (wx * ey - wy * ex) / den
+                lam = (wx * uy - wy * ux) / den
+                if 0.0 <= tt <= end and -1e-9 <= lam <= 1.0 + 1e-9:
+                    return True
+    return False
+
+
+@numba.njit(cache=True)
+def _through_count(
+    dist, ox, oy, inv_cell, x, y, c, s, origins, pts, margin, seg, start, ids, ix0, iy0, inv_icell, iny, inx
+):  # pragma: no cover - numba
+    """How many robot-frame points ``pts``, seen from robot-frame ``origins``, lie more
+    than ``margin`` beyond the first wall on their ray at pose (x, y, theta = atan2(s, c)).
+    The ray is marched over the distance transform (sphere tracing: each step is the
+    free distance around the sample less a cell, so no wall cell is stepped over); a
+    wall cell has distance 0. A grid wall is a cell thick, so a ray through a door
+    beside its jamb can clip one: each hit is confirmed on the map's segments around
+    it (``segment_index``; none given, ``start`` empty: the grid decides). Rays leaving
+    the grid meet no wall."""
+    ny, nx = dist.shape
+    cell = 1.0 / inv_cell
+    exact = start.shape[0] > 1
+    n = 0
+    for i in range(pts.shape[0]):
+        ax = x + c * origins[i, 0] - s * origins[i, 1]
+        ay = y + s * origins[i, 0] + c * origins[i, 1]
+        dx = c * (pts[i, 0] - origins[i, 0]) - s * (pts[i, 1] - origins[i, 1])
+        dy = s * (pts[i, 0] - origins[i, 0]) + c * (pts[i, 1] - origins[i, 1])
+        r = math.sqrt(dx * dx + dy * dy)
+        if r <= margin:
+            continue
+        ux, uy = dx / r, dy / r
+        t, end = 0.0, r - margin
+        # A wall just before ``end`` can lie in a grid cell the ray enters just after it.
+        limit = end + 2.0 * cell if exact else end
+        while t < limit:
+            j = int(math.floor((ax + t * ux - ox) * inv_cell))
+            k = int(math.floor((ay + t * uy - oy) * inv_cell))
+            if j < 0 or k < 0 or j >= nx or k >= ny:
+                break
+            d = dist[k, j]
+            if d < 0.5 * cell:
+                if not exact or _crosses(seg, start, ids, ix0, iy0, inv_icell, iny, inx, ax, ay, ux, uy, ax + t * ux, ay + t * uy, end):
+                    n += 1
+                    break
+            t += max(d - cell, 0.5 * cell)
+    return n
+
+
 @numba.njit(cache=True)
 def _refine(dist, ox, oy, inv_cell, pose, pts, robust2, step_m, step_rad, levels):  # pragma: no cover - numba
     """Coarse-to-fine pattern search around ``pose``: at each level try the 26 neighbours
@@ -221,6 +343,8 @@ class Scan:
 
     def clear(self) -> None:
         self.points = np.zeros((0, 2))
+        self.origins = np.zeros((0, 2))
+        """Where the robot stood (dead reckoning) when it saw each point."""
         self.turned_rad = 0.0
         self.travelled_m = 0.0
         self._last: np.ndarray | None = None
@@ -240,17 +364,27 @@ class Scan:
         c, s = math.cos(p[2]), math.sin(p[2])
         w = np.column_stack([p[0] + c * q[:, 0] - s * q[:, 1], p[1] + s * q[:, 0] + c * q[:, 1]])
         allp = np.vstack([w, self.points])  # newest first: np.unique keeps the first of a cell
+        allo = np.vstack([np.broadcast_to(p[:2], w.shape), self.origins])
         key = np.floor(allp / self.cell_m).astype(np.int64)
         _, first = np.unique(key[:, 0] * 1_000_003 + key[:, 1], return_index=True)
         first.sort()
-        self.points = allp[first[: self.max_points]]
+        keep = first[: self.max_points]
+        self.points, self.origins = allp[keep], allo[keep]
 
     def in_robot_frame(self, odom_pose: np.ndarray) -> np.ndarray:
         """The scan relative to the robot now (at ``odom_pose``)."""
-        p = np.asarray(odom_pose, dtype=np.float64)
-        d = self.points - p[:2]
-        c, s = math.cos(p[2]), math.sin(p[2])
-        return np.ascontiguousarray(np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]]))
+        return _to_robot_frame(self.points, odom_pose)
+
+    def origins_in_robot_frame(self, odom_pose: np.ndarray) -> np.ndarray:
+        """Where each point was seen from, relative to the robot now."""
+        return _to_robot_frame(self.origins, odom_pose)
+
+
+def _to_robot_frame(xy: np.ndarray, odom_pose: np.ndarray) -> np.ndarray:
+    p = np.asarray(odom_pose, dtype=np.float64)
+    d = xy - p[:2]
+    c, s = math.cos(p[2]), math.sin(p[2])
+    return np.ascontiguousarray(np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]]))
 
 
 # --------------------------------------------------------------------------- the search
@@ -259,12 +393,26 @@ class Scan:
 class GlobalLocalizer:
     """The coarse search, modes and decision of the module docstring, on one map."""
 
-    def __init__(self, free_space: FreeSpace, robot_radius_m: float, cfg: RelocalizationConfig = RelocalizationConfig()) -> None:
+    def __init__(
+        self, free_space: FreeSpace, robot_radius_m: float, cfg: RelocalizationConfig = RelocalizationConfig(),
+        segments: np.ndarray | None = None,
+    ) -> None:
+        """``segments``: the map's walls the free space was built from, to confirm the
+        scan's sight through walls exactly (without them the grid decides, and a ray
+        through a door beside its jamb can count as seen through the wall)."""
         self.cfg = cfg
         self.fs = free_space
         self.dist = np.ascontiguousarray(free_space.dist, dtype=np.float32)
         self.origin = free_space.origin
         self.inv_cell = 1.0 / free_space.cell_m
+        ny, nx = self.dist.shape
+        ic = SEGMENT_INDEX_CELL_M
+        self._ishape = (max(1, int(math.ceil(ny * free_space.cell_m / ic))), max(1, int(math.ceil(nx * free_space.cell_m / ic))))
+        if segments is None:
+            self._seg, self._start, self._ids = np.zeros((0, 4)), np.zeros(1, np.int64), np.zeros(0, np.int64)
+        else:
+            self._seg = np.ascontiguousarray(segments, dtype=np.float64).reshape(-1, 4)
+            self._start, self._ids = segment_index(self._seg, self.origin[0], self.origin[1], ic, *self._ishape)
         rows, cols = free_space.free_cells(robot_radius_m, region=None)
         step = max(1, int(round(cfg.grid_step_m / free_space.cell_m)))
         keep = (rows % step == step // 2) & (cols % step == step // 2)
@@ -280,6 +428,20 @@ class GlobalLocalizer:
             _cost(self.dist, self.origin[0], self.origin[1], self.inv_cell, p[0], p[1], math.cos(p[2]), math.sin(p[2]),
                   np.ascontiguousarray(pts, dtype=np.float64), r * r)
         )
+
+    def scan_through(self, pose: np.ndarray, origins: np.ndarray, pts: np.ndarray) -> float:
+        """Fraction of robot-frame points ``pts``, seen from robot-frame ``origins``, that
+        lie more than ``through_m`` beyond the first wall on their ray at ``pose``."""
+        p = np.asarray(pose, dtype=np.float64)
+        pts = np.ascontiguousarray(pts, dtype=np.float64).reshape(-1, 2)
+        if not len(pts):
+            return 0.0
+        n = _through_count(
+            self.dist, self.origin[0], self.origin[1], self.inv_cell, p[0], p[1], math.cos(p[2]), math.sin(p[2]),
+            np.ascontiguousarray(origins, dtype=np.float64).reshape(-1, 2), pts, self.cfg.through_m,
+            self._seg, self._start, self._ids, self.origin[0], self.origin[1], 1.0 / SEGMENT_INDEX_CELL_M, *self._ishape,
+        )
+        return n / len(pts)
 
     def coarse(self, pts: np.ndarray) -> np.ndarray:
         """Costs (H, K) of every coarse hypothesis for robot-frame points ``pts``."""
@@ -311,11 +473,12 @@ class GlobalLocalizer:
         return picked
 
     def search(
-        self, pts: np.ndarray, frame_pts: np.ndarray | None = None, scene_lines=None, prior: np.ndarray | None = None
+        self, pts: np.ndarray, frame_pts: np.ndarray | None = None, scene_lines=None, prior: np.ndarray | None = None,
+        origins: np.ndarray | None = None,
     ) -> SearchResult:
-        """Match robot-frame scan points ``pts`` against the whole map: coarse search,
-        then :meth:`rescore` of the best distinct hypotheses (``prior``, the belief before
-        the robot was lost, competes with them)."""
+        """Match robot-frame scan points ``pts`` (seen from ``origins``) against the whole
+        map: coarse search, then :meth:`rescore` of the best distinct hypotheses
+        (``prior``, the belief before the robot was lost, competes with them)."""
         cfg = self.cfg
         pts = np.ascontiguousarray(pts, dtype=np.float64).reshape(-1, 2)
         if len(pts) < cfg.min_scan_points:
@@ -327,17 +490,22 @@ class GlobalLocalizer:
         if prior is not None:
             seeds = np.vstack([np.asarray(prior, dtype=np.float64)[None, :], seeds])
         picked = self._distinct(seeds, np.arange(len(seeds)), 2 * cfg.modes)
-        res = self.rescore(seeds[picked], pts, frame_pts, scene_lines)
+        res = self.rescore(seeds[picked], pts, frame_pts, scene_lines, origins)
         return SearchResult(res.modes, res.accepted, res.reason, int(costs.size))
 
-    def rescore(self, poses: np.ndarray, pts: np.ndarray, frame_pts: np.ndarray | None = None, scene_lines=None) -> SearchResult:
+    def rescore(
+        self, poses: np.ndarray, pts: np.ndarray, frame_pts: np.ndarray | None = None, scene_lines=None,
+        origins: np.ndarray | None = None,
+    ) -> SearchResult:
         """Refine each hypothesis (robot poses in the map) on the scan ``pts`` (robot
-        frame), merge those that meet, check the latest frame's points ``frame_pts`` for
-        sight through walls with ``scene_lines(x, y)``, and decide (module docstring)."""
+        frame), score it with the scan's sight through walls (from ``origins``, where each
+        point was seen), merge those that meet, check the latest frame's points
+        ``frame_pts`` for sight through walls with ``scene_lines(x, y)``, and decide
+        (module docstring)."""
         cfg = self.cfg
         pts = np.ascontiguousarray(pts, dtype=np.float64).reshape(-1, 2)
         r2 = cfg.fine_robust_m**2
-        refined, rc = [], []
+        refined, rc, st = [], [], []
         for p0 in np.asarray(poses, dtype=np.float64).reshape(-1, 3):
             p, c = _refine(
                 self.dist, self.origin[0], self.origin[1], self.inv_cell, p0.copy(), pts, r2,
@@ -346,10 +514,12 @@ class GlobalLocalizer:
             p[2] = wrap_angle(float(p[2]))
             refined.append(p)
             rc.append(c)
+            st.append(math.nan if origins is None else self.scan_through(p, origins, pts))
         if not refined:
             return SearchResult((), None, "no hypothesis", 0)
         refined_a = np.array(refined)
-        order = np.argsort(np.array(rc), kind="stable")
+        score = np.array([c if math.isnan(t) else c + cfg.through_weight * t for c, t in zip(rc, st, strict=True)])
+        order = np.argsort(score, kind="stable")
         modes = []
         for i in self._distinct(refined_a, order, cfg.modes):
             through = math.nan
@@ -358,20 +528,39 @@ class GlobalLocalizer:
                 lines = np.ascontiguousarray(scene_lines(float(at[0]), float(at[1])), dtype=np.float64).reshape(-1, 4)
                 v = explain_points(lines, at, np.ascontiguousarray(frame_pts, dtype=np.float64), cfg.explain_m, cfg.through_m)
                 through = float(np.count_nonzero(v < 0)) / len(v)
-            modes.append(Mode(refined_a[i].copy(), float(rc[i]), through))
+            modes.append(Mode(refined_a[i].copy(), float(rc[i]), through, float(st[i]), float(score[i])))
         return SearchResult(tuple(modes), *self._decide(modes, len(pts)), hypotheses=len(refined))
+
+    def keeps_prior(self, prior: Mode, modes: tuple[Mode, ...] | list[Mode], n_points: int) -> bool:
+        """A false alarm: does the belief before the alarm (``prior``, re-scored on the
+        scan) still explain the scan? Yes when it scores at most ``prior_cost`` and within
+        ``accept_margin`` of the best of ``modes``, or at most ``prior_lead_cost`` and
+        better than every mode elsewhere by the acceptance margins."""
+        cfg = self.cfg
+        sep = math.radians(cfg.mode_separation_deg)
+        elsewhere = [
+            m.score for m in modes
+            if math.hypot(m.pose[0] - prior.pose[0], m.pose[1] - prior.pose[1]) >= cfg.mode_separation_m
+            or abs(wrap_angle(float(m.pose[2] - prior.pose[2]))) >= sep
+        ]
+        if prior.score <= cfg.prior_cost:
+            return not modes or prior.score <= min(m.score for m in modes) + cfg.accept_margin
+        if prior.score > cfg.prior_lead_cost:
+            return False
+        gap = (min(elsewhere) - prior.score) if elsewhere else math.inf
+        return gap >= cfg.accept_margin and gap * n_points >= cfg.accept_margin_points
 
     def _decide(self, modes: list[Mode], n_points: int) -> tuple[Mode | None, str]:
         cfg = self.cfg
         if not modes:
             return None, "no mode"
         best = modes[0]
-        if best.cost > cfg.accept_cost:
-            return None, f"best mode explains too little (cost {best.cost:.2f} > {cfg.accept_cost})"
+        if best.score > cfg.accept_cost:
+            return None, f"best mode explains too little (score {best.score:.2f} > {cfg.accept_cost})"
         if not math.isnan(best.through) and best.through > cfg.max_through:
             return None, f"best mode sees through walls ({best.through:.2f} of the frame)"
         if len(modes) > 1:
-            gap = modes[1].cost - best.cost
+            gap = modes[1].score - best.score
             if gap < cfg.accept_margin or gap * n_points < cfg.accept_margin_points:
                 return None, f"ambiguous: {len(modes)} modes, the second within {gap:.3f} ({gap * n_points:.1f} points)"
-        return best, f"cost {best.cost:.3f}, next {modes[1].cost:.3f}" if len(modes) > 1 else f"cost {best.cost:.3f}"
+        return best, f"score {best.score:.3f}, next {modes[1].score:.3f}" if len(modes) > 1 else f"score {best.score:.3f}"

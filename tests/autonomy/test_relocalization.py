@@ -13,7 +13,7 @@ from autonomy.errors import InputError
 from autonomy.freespace import FreeSpaceConfig, build_free_space
 from autonomy.geometry import compose_pose, wrap_angle
 from autonomy.raycast import SceneQuery, rays_hit
-from autonomy.relocalization import GlobalLocalizer, RelocalizationConfig, Scan
+from autonomy.relocalization import GlobalLocalizer, Mode, RelocalizationConfig, Scan
 from sim.simulator.blueprints import load_blueprint
 
 CELL = 0.05
@@ -95,6 +95,23 @@ def test_turned_and_travelled_accumulate_across_the_wrap() -> None:
     assert scan.turned_rad == scan.travelled_m == 0.0 and scan.frames == 0
 
 
+def test_the_scan_remembers_where_each_point_was_seen() -> None:
+    rng = np.random.default_rng(3)
+    scan = Scan(CELL, 6000)
+    world = cell_centres(rng, 200)
+    a, b = np.array([0.3, -0.2, 0.4]), np.array([2.5, 1.0, -2.0])
+    scan.add(a, robot_from_world(a, world[:100]))
+    scan.add(b, robot_from_world(b, world[100:]))
+    assert scan.origins.shape == scan.points.shape
+    seen_from = {tuple(np.round(q / CELL - 0.5).astype(int)): o for q, o in zip(scan.points, scan.origins, strict=True)}
+    for k, q in enumerate(world):
+        np.testing.assert_allclose(seen_from[tuple(np.round(q / CELL - 0.5).astype(int))], (a if k < 100 else b)[:2])
+    now = np.array([-1.0, 4.0, 2.2])
+    np.testing.assert_allclose(scan.origins_in_robot_frame(now), robot_from_world(now, scan.origins), atol=1e-12)
+    scan.clear()
+    assert scan.origins.shape == (0, 2)
+
+
 # --------------------------------------------------------------------------- the search
 
 
@@ -102,7 +119,7 @@ def test_turned_and_travelled_accumulate_across_the_wrap() -> None:
 def building():
     vm = load_blueprint("corridor_loop").vectormap
     r = AvoidanceConfig().robot_radius_m  # as the stack builds its localizer
-    gl = GlobalLocalizer(build_free_space(vm, FreeSpaceConfig(robot_radius_m=r)), r)
+    gl = GlobalLocalizer(build_free_space(vm, FreeSpaceConfig(robot_radius_m=r)), r, segments=vm.segments)
     return gl, SceneQuery(vm)
 
 
@@ -236,6 +253,91 @@ def test_a_mode_whose_latest_frame_sees_through_walls_is_not_accepted(building) 
     through = frame * (1.0 + 1.0 / np.hypot(frame[:, 0], frame[:, 1]))[:, None]
     bad = gl.rescore(truth[None, :], pts, through, lines_at)
     assert bad.accepted is None and "sees through walls" in bad.reason and bad.modes[0].through > 0.9
+
+
+def test_scan_through_agrees_with_rays_cast_on_the_map_segments(building) -> None:
+    """The grid march with its hits confirmed on the segments, against an exact ray
+    cast on every wall segment, for rays from scattered viewpoints at random poses. The
+    grid alone (no segments) counts some rays through doors beside their jambs as seen
+    through the wall, never fewer."""
+    gl, scene = building
+    grid_only = GlobalLocalizer(gl.fs, AvoidanceConfig().robot_radius_m)
+    rng = np.random.default_rng(70)
+    seg = np.ascontiguousarray(scene.vm.segments, dtype=np.float64)
+    margin, checked, grid_extra = gl.cfg.through_m, 0, 0
+    for _ in range(30):
+        pose = np.array([*gl.candidates[rng.integers(len(gl.candidates))], rng.uniform(-math.pi, math.pi)])
+        origins = rng.uniform(-0.1, 0.1, (200, 2))
+        a = rng.uniform(-math.pi, math.pi, 200)
+        r = rng.uniform(0.1, 7.0, 200)
+        pts = origins + np.column_stack([r * np.cos(a), r * np.sin(a)])
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        ow = pose[:2] + origins @ np.array([[c, s], [-s, c]])
+        d = np.column_stack([np.cos(a + pose[2]), np.sin(a + pose[2])])
+        hits = [rays_hit(seg, float(o[0]), float(o[1]), dd[None, :]) for o, dd in zip(ow, d, strict=True)]
+        j = np.array([h[0][0] for h in hits])
+        t = np.array([h[1][0] if h[0][0] >= 0 else np.inf for h in hits])
+        # Left out: points within two grid walls' thickness of the margin (a cell-thick
+        # wall met at a glancing angle is 1 / sin(angle) cells thick along the ray).
+        u = seg[np.maximum(j, 0), 2:] - seg[np.maximum(j, 0), :2]
+        sin = np.abs(d[:, 0] * u[:, 1] - d[:, 1] * u[:, 0]) / np.linalg.norm(u, axis=1)
+        clear = np.abs(r - (t + margin)) > 2 * CELL / np.maximum(sin, 0.1)
+        want = (r > t + margin)[clear]
+        got = np.array([gl.scan_through(pose, origins[i : i + 1], pts[i : i + 1]) for i in np.flatnonzero(clear)])
+        np.testing.assert_array_equal(got == 1.0, want)
+        assert gl.scan_through(pose, origins[clear], pts[clear]) == pytest.approx(want.mean())
+        grid = np.array([grid_only.scan_through(pose, origins[i : i + 1], pts[i : i + 1]) for i in np.flatnonzero(clear)])
+        assert np.all(grid >= got)
+        grid_extra += int(np.sum(grid > got))
+        checked += int(clear.sum())
+    assert checked > 5000 and grid_extra > 0
+
+
+def test_a_cluttered_hall_keeps_its_place_against_offices_elsewhere(building) -> None:
+    """An open hall seen through a lot of furniture: the points fit the many walls of
+    offices elsewhere better than the hall's few (on cost alone another place ranks
+    first), but from there the robot would see through walls. Scored with the scan's
+    viewpoints, the hall ranks first by a wide margin."""
+    gl, scene = building
+    hall = np.array([24.9, 10.9, 1.5])
+    pts = panorama(scene, hall, np.random.default_rng(80), max_range_m=6.0, clutter=0.6)
+    on_cost = gl.search(pts, prior=hall)
+    assert not is_at(on_cost.modes[0].pose, hall) and pose_error(on_cost.modes[0].pose, hall)[0] > 5.0
+    scored = gl.search(pts, prior=hall, origins=np.zeros_like(pts))
+    assert is_at(scored.modes[0].pose, hall), pose_error(scored.modes[0].pose, hall)
+    assert scored.modes[0].scan_through < 0.01 and scored.modes[1].score > scored.modes[0].score + 0.2
+    assert scored.modes[0].score == pytest.approx(scored.modes[0].cost + gl.cfg.through_weight * scored.modes[0].scan_through)
+    assert all(a.score <= b.score for a, b in zip(scored.modes, scored.modes[1:], strict=False))
+
+
+def test_the_belief_before_the_alarm_is_kept_when_it_explains_the_scan_or_leads(building) -> None:
+    """A false alarm ends on the belief before it when that scores low and about as well
+    as the best mode, or, in a hall full of furniture (a high score), when every mode
+    elsewhere scores worse by the acceptance margins; a kidnapped robot's old belief,
+    beaten by the place it is at, is not kept."""
+    gl, _ = building
+    cfg = gl.cfg
+    here, there = np.array([30.0, 12.0, 0.3]), np.array([8.7, 27.2, -1.5])
+    near = here + np.array([0.3, -0.2, 0.05])  # the same mode
+    n = 500
+
+    def mode(pose, score):
+        return Mode(pose, score, score=score)
+
+    # Low score, within accept_margin of the best (itself or another place): kept.
+    assert gl.keeps_prior(mode(here, 0.30), [mode(here, 0.30), mode(there, 0.45)], n)
+    assert gl.keeps_prior(mode(here, 0.30), [mode(there, 0.30 - 0.5 * cfg.accept_margin)], n)
+    assert not gl.keeps_prior(mode(here, 0.30), [mode(there, 0.30 - 2 * cfg.accept_margin)], n)
+    # A high score: kept only when leading every mode elsewhere by both margins.
+    lead = max(cfg.accept_margin, cfg.accept_margin_points / n) * 1.5
+    s = 0.5 * (cfg.prior_cost + cfg.prior_lead_cost)
+    assert gl.keeps_prior(mode(here, s), [mode(near, s - 0.1), mode(there, s + lead)], n)
+    assert not gl.keeps_prior(mode(here, s), [mode(there, s + 0.5 * lead)], n)
+    assert not gl.keeps_prior(mode(here, s), [mode(there, s + lead)], int(0.5 * cfg.accept_margin_points / lead))  # too few points
+    assert not gl.keeps_prior(mode(here, cfg.prior_lead_cost + 0.01), [mode(there, 2.0)], n)
+    # The measured kidnappings: the old belief scored 0.53 or more, the place the robot
+    # was at 0.2 or less.
+    assert not gl.keeps_prior(mode(there, 0.53), [mode(here, 0.2)], n)
 
 
 def test_too_few_points_or_too_poor_a_match_is_no_decision(building) -> None:

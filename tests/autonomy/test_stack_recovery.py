@@ -332,7 +332,19 @@ def test_an_unknown_start_pose_is_found_by_looking_round(found) -> None:
     assert states[0] == "looking" and set(states) <= {"looking", "exploring", "turning", "driving"}
     err = relative_pose(truth, stack.pose)
     assert math.hypot(err[0], err[1]) < 0.15 and abs(wrap_angle(err[2])) < math.radians(3.0), err
-    assert not stack.relocalizing and stack.health_state == "ok" and stack.decide(t).state != "looking"
+    assert not stack.relocalizing and stack.health_state == "ok"
+
+
+def test_after_a_relocalization_the_robot_turns_in_place_before_driving_on(found) -> None:
+    """CGR restarts around the accepted mode; the robot goes on turning in place for
+    settle_s while it converges, then the navigator drives again."""
+    stack, _, t, _, _ = found
+    settle_s = stack.cfg.recovery.settle_s
+    assert settle_s > 0
+    for dt in (0.0, 0.5 * settle_s, settle_s - 0.05):
+        cmd = stack.decide(t + dt)
+        assert cmd.state == "settling" and np.array_equal(cmd.velocity[:2], [0.0, 0.0]) and cmd.velocity[2] > 0
+    assert stack.decide(t + settle_s + 0.05).state not in ("settling", "looking")
 
 
 def test_an_unknown_start_pose_is_found_while_still_turning_in_place(found) -> None:

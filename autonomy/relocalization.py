@@ -14,7 +14,9 @@ The scan is then matched against the whole map (ours; the papers re-localized by
    ``min(d^2, c^2) / c^2`` of a subsample of the scan's points, ``d`` the distance from
    the point to the nearest wall, read from the free space's distance transform (a
    likelihood field: one table look-up per point, no ray casting). People and furniture
-   cost the same at every hypothesis; the cost saturates so they cannot dominate.
+   cost the same at every hypothesis; the cost saturates so they cannot dominate. The
+   best are re-ranked with their sight through walls (below) before the distinct ones
+   are refined: a room's corner fits hundreds of places on cost alone.
 2. **Modes.** The best hypotheses are refined coarse to fine on the same field with all
    scan points, and **scored**: the cost plus ``through_weight`` times the fraction of
    the scan's points that the mode sees through the map's walls (each point's ray
@@ -300,6 +302,18 @@ def _through_count(
     return n
 
 
+@numba.njit(cache=True, parallel=True)
+def _through_counts(
+    dist, ox, oy, inv_cell, poses, origins, pts, margin, seg, start, ids, ix0, iy0, inv_icell, iny, inx, out
+):  # pragma: no cover - numba
+    """:func:`_through_count` at each of ``poses`` (shared out over the cores)."""
+    for i in numba.prange(poses.shape[0]):
+        out[i] = _through_count(
+            dist, ox, oy, inv_cell, poses[i, 0], poses[i, 1], math.cos(poses[i, 2]), math.sin(poses[i, 2]), origins, pts,
+            margin, seg, start, ids, ix0, iy0, inv_icell, iny, inx,
+        )
+
+
 @numba.njit(cache=True)
 def _refine(dist, ox, oy, inv_cell, pose, pts, robust2, step_m, step_rad, levels):  # pragma: no cover - numba
     """Coarse-to-fine pattern search around ``pose``: at each level try the 26 neighbours
@@ -432,22 +446,33 @@ class GlobalLocalizer:
     def scan_through(self, pose: np.ndarray, origins: np.ndarray, pts: np.ndarray) -> float:
         """Fraction of robot-frame points ``pts``, seen from robot-frame ``origins``, that
         lie more than ``through_m`` beyond the first wall on their ray at ``pose``."""
-        p = np.asarray(pose, dtype=np.float64)
+        return float(self.scan_through_at(np.asarray(pose, dtype=np.float64)[None, :], origins, pts)[0])
+
+    def scan_through_at(self, poses: np.ndarray, origins: np.ndarray, pts: np.ndarray, margin_m: float | None = None) -> np.ndarray:
+        """:meth:`scan_through` at each of ``poses`` (N, 3), the points more than
+        ``margin_m`` (default ``through_m``) beyond the wall."""
+        poses = np.ascontiguousarray(poses, dtype=np.float64).reshape(-1, 3)
         pts = np.ascontiguousarray(pts, dtype=np.float64).reshape(-1, 2)
+        out = np.zeros(len(poses), dtype=np.int64)
         if not len(pts):
-            return 0.0
-        n = _through_count(
-            self.dist, self.origin[0], self.origin[1], self.inv_cell, p[0], p[1], math.cos(p[2]), math.sin(p[2]),
-            np.ascontiguousarray(origins, dtype=np.float64).reshape(-1, 2), pts, self.cfg.through_m,
-            self._seg, self._start, self._ids, self.origin[0], self.origin[1], 1.0 / SEGMENT_INDEX_CELL_M, *self._ishape,
+            return out.astype(np.float64)
+        _through_counts(
+            self.dist, self.origin[0], self.origin[1], self.inv_cell, poses,
+            np.ascontiguousarray(origins, dtype=np.float64).reshape(-1, 2), pts,
+            self.cfg.through_m if margin_m is None else float(margin_m),
+            self._seg, self._start, self._ids, self.origin[0], self.origin[1], 1.0 / SEGMENT_INDEX_CELL_M, *self._ishape, out,
         )
-        return n / len(pts)
+        return out / len(pts)
+
+    def _coarse_subsample(self, n: int) -> np.ndarray:
+        """Indices of the even subsample of ``n`` scan points the coarse pass scores."""
+        return np.linspace(0, n - 1, min(n, self.cfg.coarse_points)).astype(np.int64)
 
     def coarse(self, pts: np.ndarray) -> np.ndarray:
         """Costs (H, K) of every coarse hypothesis for robot-frame points ``pts``."""
         cfg = self.cfg
         n = len(pts)
-        sub = pts[np.linspace(0, n - 1, min(n, cfg.coarse_points)).astype(np.int64)] if n else pts
+        sub = pts[self._coarse_subsample(n)] if n else pts
         c, s = np.cos(self.headings), np.sin(self.headings)
         rot = np.empty((len(self.headings), len(sub), 2))
         rot[:, :, 0] = c[:, None] * sub[None, :, 0] - s[:, None] * sub[None, :, 1]
@@ -487,9 +512,19 @@ class GlobalLocalizer:
         flat = np.argsort(costs, axis=None)[: 40 * cfg.modes]
         h, k = np.unravel_index(flat, costs.shape)
         seeds = np.column_stack([self.candidates[h], self.headings[k]])
+        order = np.arange(len(seeds))
+        if origins is not None:
+            # A few walls seen (a room's corner) fit hundreds of places on cost alone; the
+            # coarse hypotheses that see through walls drop back before the distinct
+            # ones are picked (with the coarse pass's saturation as the margin: a coarse
+            # hypothesis is up to half a grid step off).
+            sub = self._coarse_subsample(len(pts))
+            thr = self.scan_through_at(seeds, np.asarray(origins, dtype=np.float64)[sub], pts[sub], max(cfg.through_m, cfg.coarse_robust_m))
+            order = np.argsort(costs.ravel()[flat] + cfg.through_weight * thr, kind="stable")
         if prior is not None:
             seeds = np.vstack([np.asarray(prior, dtype=np.float64)[None, :], seeds])
-        picked = self._distinct(seeds, np.arange(len(seeds)), 2 * cfg.modes)
+            order = np.concatenate([[0], order + 1])
+        picked = self._distinct(seeds, order, 2 * cfg.modes)
         res = self.rescore(seeds[picked], pts, frame_pts, scene_lines, origins)
         return SearchResult(res.modes, res.accepted, res.reason, int(costs.size))
 

@@ -55,6 +55,8 @@ STALE_MOTION_M = 1e-3
 STALE_MOTION_RAD = 1e-3
 #: While relocalizing the modes are re-scored each search, and the whole map searched
 #: again every this many searches (the scan has grown; a mode dropped early may win).
+#: A mode is only accepted on a search of the whole map: one that passes the decision
+#: when re-scored brings the next whole-map search forward.
 FULL_SEARCH_EVERY = 5
 
 
@@ -236,6 +238,7 @@ class RobotStack:
         self._settle_until = -math.inf
         self._last_search_t = -math.inf
         self._searches = 0
+        self._search_whole_map = False
         self._confirmed = 0
         self._candidate: np.ndarray | None = None
         self._exploring_from: np.ndarray | None = None
@@ -469,6 +472,7 @@ class RobotStack:
         self._reloc_t0 = t
         self._last_search_t = -math.inf
         self._searches = 0
+        self._search_whole_map = False
         self._exploring_from = None
         self._explore_t0 = t
         self._explored: set[int] = set()
@@ -506,7 +510,9 @@ class RobotStack:
         origins = self.scan.origins_in_robot_frame(self.odom)
         frame_pts = per.points_2d if (self._fresh and per is not None) else None
         prior = None if self._prior is None else compose_pose(self._prior, self.odom)
-        if not self.modes or self._searches % FULL_SEARCH_EVERY == 0:
+        full = not self.modes or self._searches % FULL_SEARCH_EVERY == 0 or self._search_whole_map
+        self._search_whole_map = False
+        if full:
             res = gl.search(pts, frame_pts, lambda x, y: query.scene_lines(x, y)[0], prior, origins)
         else:
             poses = [compose_pose(T, self.odom) for T, _ in self.modes]
@@ -538,7 +544,12 @@ class RobotStack:
         self._confirmed = self._confirmed + 1 if same else 1
         self._candidate = cand
         if self._confirmed >= rc.confirmations:
-            self._accept(acc, t, res.reason, len(res.modes))
+            if full:
+                self._accept(acc, t, res.reason, len(res.modes))
+            else:
+                # Re-scoring sees only the modes kept so far; the place the robot is at
+                # may not be among them (a room's corner fits hundreds of places).
+                self._search_whole_map = True
 
     def _accept(self, mode: Mode, t: float, reason: str, n_modes: int) -> None:
         """Restart CGR on the accepted mode; the navigator re-plans to its goal from there."""

@@ -356,6 +356,38 @@ def test_an_unknown_start_pose_is_found_while_still_turning_in_place(found) -> N
     assert swept <= t <= swept + rc.confirmations * rc.search_every_s + 2 / fps
 
 
+def test_a_mode_is_accepted_only_on_a_search_of_the_whole_map(building, monkeypatch) -> None:
+    """Re-scoring sees only the modes kept so far: one that passes the decision there
+    brings the next whole-map search forward, and is accepted only if it passes that."""
+    from autonomy.relocalization import GlobalLocalizer
+
+    calls: list[tuple[str, bool]] = []
+    for name in ("search", "rescore"):
+        original = getattr(GlobalLocalizer, name)
+
+        def wrapped(self, *args, _original=original, _name=name, **kwargs):
+            res = _original(self, *args, **kwargs)
+            if _name == "search" or len(args[0]) > 1:  # not the prior's own re-scoring
+                calls.append((_name, res.accepted is not None))
+            return res
+
+        monkeypatch.setattr(GlobalLocalizer, name, wrapped)
+    stack = make_stack(building, pose=None)
+    truth, inc = START.copy(), None
+    for k in range(200):
+        stack.perceive(render(building[1], truth))
+        stack.localize(inc, k / 10.0)
+        if not stack.relocalizing:
+            break
+        inc = stack.decide(k / 10.0).velocity / 10.0
+        truth = compose_pose(truth, inc)
+    assert not stack.relocalizing and calls, calls
+    assert calls[-1] == ("search", True), calls  # accepted on a whole-map search
+    passed = [i for i, (name, ok) in enumerate(calls) if ok]
+    assert len(passed) >= stack.cfg.recovery.relocalization.confirmations
+    assert any(name == "rescore" for name, _ in calls[:-1]), calls  # a re-score passed first, then the search came
+
+
 def test_an_unknown_start_after_a_blackout_still_looks_round(building) -> None:
     stack = make_stack(building)
     drive(stack, [None] * 30)

@@ -51,6 +51,34 @@ def compose_pose(a: np.ndarray, inc: np.ndarray) -> np.ndarray:
     )
 
 
+def points_in_frame(pose: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """World points (N, 2) expressed in the frame of ``pose`` (C-contiguous)."""
+    p = np.asarray(pose, dtype=np.float64)
+    d = np.asarray(xy, dtype=np.float64).reshape(-1, 2) - p[:2]
+    c, s = math.cos(p[2]), math.sin(p[2])
+    return np.ascontiguousarray(np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]]))
+
+
+def polyline_clear(path: np.ndarray, points: np.ndarray, length_m: float, clearance_m: float) -> bool:
+    """Whether the first ``length_m`` of the polyline ``path`` (K, 2) passes farther than
+    ``clearance_m`` from every one of ``points`` (N, 2)."""
+    path = np.asarray(path, dtype=np.float64).reshape(-1, 2)
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    if len(path) < 2 or not len(pts):
+        return True
+    seg = np.hstack([path[:-1], path[1:]])
+    lengths = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1])
+    start = np.concatenate([[0.0], np.cumsum(lengths)[:-1]])
+    keep = start < length_m
+    if not keep.any():
+        return True
+    seg, lengths, start = seg[keep], lengths[keep], start[keep]
+    # The last segment kept is cut at length_m.
+    f = np.clip((length_m - start[-1]) / max(lengths[-1], 1e-12), 0.0, 1.0)
+    seg[-1, 2:] = seg[-1, :2] + f * (seg[-1, 2:] - seg[-1, :2])
+    return bool(np.min(point_segment_distance(pts, seg)) > clearance_m)
+
+
 def point_segment_projection(p: np.ndarray, segments: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Point p (2,) projected on each segment (N, 4): the fraction t in [0, 1] along it
     of the nearest point, and the distance to that point. A zero-length segment is its

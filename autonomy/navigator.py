@@ -396,14 +396,19 @@ class Navigator:
         except NoPathError:
             return None
 
-    def plan_length(self, goal_id: int, pose: np.ndarray) -> float:
-        """Length (m) of the plan :meth:`set_goal` would make from the pose, without
-        making it (the stack asks while it relocalizes)."""
+    def plan_points(self, goal_id: int, pose: np.ndarray) -> np.ndarray:
+        """The polyline (K, 2) of the plan :meth:`set_goal` would make from the pose (the
+        pose's position first), without making it."""
         xy = np.asarray(pose[:2], dtype=np.float64)
         nodes = self._route(goal_id, xy)
         if nodes is None:
             nodes = astar(self.graph, self.nearest_reachable_node(xy), goal_id, exclude_stairs=self.cfg.exclude_stairs)
-        pts = np.vstack([xy[None, :], path_points(self.graph, nodes)])
+        return np.vstack([xy[None, :], path_points(self.graph, nodes)])
+
+    def plan_length(self, goal_id: int, pose: np.ndarray) -> float:
+        """Length (m) of the plan :meth:`set_goal` would make from the pose, without
+        making it (the stack asks while it relocalizes)."""
+        pts = self.plan_points(goal_id, pose)
         return float(np.hypot(*np.diff(pts, axis=0).T).sum())
 
     def _set_plan(self, goal_id: int, nodes: list[int], pose: np.ndarray, t: float) -> None:

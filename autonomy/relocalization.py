@@ -46,7 +46,7 @@ import numpy as np
 
 from autonomy.errors import require_int, require_non_negative, require_positive
 from autonomy.freespace import FreeSpace
-from autonomy.geometry import wrap_angle
+from autonomy.geometry import points_in_frame, wrap_angle
 from autonomy.health import explain_points
 
 
@@ -387,18 +387,11 @@ class Scan:
 
     def in_robot_frame(self, odom_pose: np.ndarray) -> np.ndarray:
         """The scan relative to the robot now (at ``odom_pose``)."""
-        return _to_robot_frame(self.points, odom_pose)
+        return points_in_frame(odom_pose, self.points)
 
     def origins_in_robot_frame(self, odom_pose: np.ndarray) -> np.ndarray:
         """Where each point was seen from, relative to the robot now."""
-        return _to_robot_frame(self.origins, odom_pose)
-
-
-def _to_robot_frame(xy: np.ndarray, odom_pose: np.ndarray) -> np.ndarray:
-    p = np.asarray(odom_pose, dtype=np.float64)
-    d = xy - p[:2]
-    c, s = math.cos(p[2]), math.sin(p[2])
-    return np.ascontiguousarray(np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]]))
+        return points_in_frame(odom_pose, self.origins)
 
 
 # --------------------------------------------------------------------------- the search

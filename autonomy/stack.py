@@ -33,7 +33,14 @@ from autonomy.cgr import CGRConfig, CGRLocalizer
 from autonomy.errors import InputError, require_non_negative, require_positive
 from autonomy.freespace import FreeSpaceConfig, build_free_space
 from autonomy.fspf import FSPFConfig, FSPFResult, fspf
-from autonomy.geometry import compose_pose, relative_pose, wrap_angle, wrap_angles
+from autonomy.geometry import (
+    compose_pose,
+    points_in_frame,
+    polyline_clear,
+    relative_pose,
+    wrap_angle,
+    wrap_angles,
+)
 from autonomy.health import HealthConfig, HealthMonitor, HealthSample, explain_points
 from autonomy.mount_check import MountCheck, MountCheckConfig
 from autonomy.navigator import NavCommand, Navigator, NavigatorConfig
@@ -58,6 +65,9 @@ STALE_MOTION_RAD = 1e-3
 #: A mode is only accepted on a search of the whole map: one that passes the decision
 #: when re-scored brings the next whole-map search forward.
 FULL_SEARCH_EVERY = 5
+#: An exploring plan may pass this much closer to a scan point than the robot's radius
+#: (the Kinect's noise on walls beside the path).
+EXPLORE_CLEAR_SLACK_M = 0.05
 
 
 @dataclass(frozen=True)
@@ -94,6 +104,9 @@ class RecoveryConfig:
     """CGR restarts around an accepted mode with this position spread ..."""
     restart_std_theta_rad: float = math.radians(4.0)
     """... and this heading spread."""
+    explore_check_m: float = 3.0
+    """An exploring drive's plan must be clear of the scan's points for this far (robot
+    radius less a little Kinect noise)."""
     settle_s: float = 2.0
     """After a relocalization the robot turns in place this long before it drives on,
     while CGR, restarted around the mode, converges: the map's walls in the camera's
@@ -110,7 +123,7 @@ class RecoveryConfig:
 
     def __post_init__(self) -> None:
         require_non_negative(self, "recovery.", "restart_std_xy_m", "restart_std_theta_rad", "settle_s")
-        require_positive(self, "recovery.", "explore_after_s", "explore_m", "explore_timeout_s")
+        require_positive(self, "recovery.", "explore_after_s", "explore_m", "explore_timeout_s", "explore_check_m")
 
 
 @dataclass(frozen=True)
@@ -636,14 +649,20 @@ class RobotStack:
         return cmd
 
     def _explore_node(self, pose: np.ndarray) -> int | None:
-        """A navigation-graph node ``explore_m`` to twice that from the pose, the one most
-        nearly ahead (the robot goes on the way it faces) among those not tried yet in
-        this relocalization."""
+        """A navigation-graph node ``explore_m`` to twice that from the pose, among those
+        not tried yet in this relocalization: the one most nearly ahead (the robot goes on
+        the way it faces) whose plan's first ``explore_check_m`` the scan shows clear.
+
+        The plan is made on the best mode's map. Where the modes disagree about the way
+        out of a room (offices that mirror each other), a wrong mode's plan can lead into
+        a wall the robot has already seen; the scan rules such plans out, and when it
+        rules out all of them the one most nearly ahead is tried."""
         nav = self.navigator
         assert nav is not None
+        rec = self.cfg.recovery
         xy = nav.graph.node_xy()
         d = np.hypot(xy[:, 0] - pose[0], xy[:, 1] - pose[1])
-        m = self.cfg.recovery.explore_m
+        m = rec.explore_m
         cand = np.flatnonzero((d >= m) & (d <= 2 * m))
         ids = np.array([nav.graph.nodes[int(k)].id for k in cand], dtype=np.int64)
         fresh = ~np.isin(ids, np.array(sorted(self._explored), dtype=np.int64))
@@ -652,7 +671,17 @@ class RobotStack:
         if not len(cand):
             return None
         bearing = np.abs(wrap_angles(np.arctan2(xy[cand, 1] - pose[1], xy[cand, 0] - pose[0]) - pose[2]))
-        return int(nav.graph.nodes[int(cand[int(np.argmin(bearing))])].id)
+        order = cand[np.argsort(bearing, kind="stable")]
+        seen = self.scan.in_robot_frame(self.odom)
+        for k in order:
+            node = int(nav.graph.nodes[int(k)].id)
+            try:
+                path = nav.plan_points(node, pose)
+            except InputError:  # no path from here on this mode's map
+                continue
+            if polyline_clear(points_in_frame(pose, path), seen, rec.explore_check_m, self.cfg.avoidance.robot_radius_m - EXPLORE_CLEAR_SLACK_M):
+                return node
+        return int(nav.graph.nodes[int(order[0])].id)
 
     def step(
         self, depth: np.ndarray | None, increment: np.ndarray | None, t: float, pose: np.ndarray | None = None

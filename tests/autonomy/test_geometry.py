@@ -6,12 +6,16 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from autonomy.geometry import (
     compose_pose,
     crosses_any,
     point_segment_distance,
     point_segment_projection,
+    points_in_frame,
+    polyline_clear,
     relative_pose,
     segments_cross_nb,
     wrap_angle,
@@ -74,3 +78,44 @@ def test_crossing_is_proper_and_the_kernel_agrees(seg: tuple[float, ...], want: 
     p, q = np.array([-1.0, 0.0]), np.array([1.0, 0.0])
     assert crosses_any(p, q, np.array([seg])) is want
     assert segments_cross_nb(p[0], p[1], q[0], q[1], *seg) is want
+
+
+@given(st.tuples(*[st.floats(-20, 20)] * 2, st.floats(-4, 4)), st.lists(st.tuples(st.floats(-20, 20), st.floats(-20, 20)), min_size=1, max_size=20))
+def test_points_in_frame_undo_compose_pose(pose, pts) -> None:
+    pose, pts = np.array(pose), np.array(pts)
+    local = points_in_frame(pose, pts)
+    assert local.flags.c_contiguous and local.shape == pts.shape
+    back = np.array([compose_pose(pose, np.array([q[0], q[1], 0.0]))[:2] for q in local])
+    np.testing.assert_allclose(back, pts, atol=1e-9)
+
+
+coord = st.floats(-5, 5, allow_nan=False)
+
+
+@settings(max_examples=200)
+@given(
+    st.lists(st.tuples(coord, coord), min_size=2, max_size=6),
+    st.lists(st.tuples(coord, coord), min_size=1, max_size=15),
+    st.floats(0.1, 12.0),
+    st.floats(0.05, 1.0),
+)
+def test_polyline_clear_against_dense_sampling(path, pts, length, clearance) -> None:
+    """The first ``length`` of the path, sampled every millimetre, against each point."""
+    path, pts = np.array(path), np.array(pts)
+    seg_len = np.hypot(*np.diff(path, axis=0).T)
+    s = np.arange(0.0, min(length, seg_len.sum()) + 1e-12, 0.001)
+    cum = np.concatenate([[0.0], np.cumsum(seg_len)])
+    k = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(seg_len) - 1)
+    f = np.where(seg_len[k] > 0, (s - cum[k]) / np.where(seg_len[k] > 0, seg_len[k], 1.0), 0.0)
+    samples = path[k] + f[:, None] * (path[k + 1] - path[k])
+    d = np.min(np.hypot(samples[:, None, 0] - pts[None, :, 0], samples[:, None, 1] - pts[None, :, 1]))
+    if abs(d - clearance) > 2e-3:  # the sampling's resolution
+        assert polyline_clear(path, pts, length, clearance) == (d > clearance)
+
+
+def test_polyline_clear_without_points_or_path_is_clear() -> None:
+    assert polyline_clear(np.array([[0.0, 0.0], [1.0, 0.0]]), np.zeros((0, 2)), 1.0, 0.3)
+    assert polyline_clear(np.array([[0.0, 0.0]]), np.array([[0.0, 0.0]]), 1.0, 0.3)
+    # A point beyond the length checked does not count.
+    assert polyline_clear(np.array([[0.0, 0.0], [10.0, 0.0]]), np.array([[5.0, 0.0]]), 3.0, 0.3)
+    assert not polyline_clear(np.array([[0.0, 0.0], [10.0, 0.0]]), np.array([[2.9, 0.1]]), 3.0, 0.3)

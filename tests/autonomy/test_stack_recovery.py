@@ -421,3 +421,35 @@ def test_an_exploring_drive_keeps_the_mode_it_set_out_on(building, monkeypatch) 
     stack.decide(t + 0.1)
     np.testing.assert_allclose(seen[0], compose_pose(a, START))
     np.testing.assert_allclose(seen[-1], compose_pose(a, stack.odom))
+
+
+def test_an_exploring_drive_does_not_set_out_into_walls_the_scan_has_seen(building) -> None:
+    """The exploring drive's node is the one most nearly ahead whose plan (on the best
+    mode's map) starts clear of the scan's points; a wrong mode's way out of a room can
+    lead into a wall the robot has seen. With every way blocked, the one ahead is tried."""
+    from autonomy.geometry import points_in_frame
+
+    stack = make_stack(building, pose=None)
+    stack.odom = np.zeros(3)
+    pose = START.copy()  # the best mode's belief
+    ahead = stack._explore_node(pose)
+    assert ahead is not None
+    path = points_in_frame(pose, stack.navigator.plan_points(ahead, pose))
+    # A wall across that plan, 1.5 m along it, in the scan.
+    seg_len = np.hypot(*np.diff(path, axis=0).T)
+    k = int(np.searchsorted(np.cumsum(seg_len), 1.5))
+    f = (1.5 - (np.cumsum(seg_len)[k] - seg_len[k])) / seg_len[k]
+    at = path[k] + f * (path[k + 1] - path[k])
+    u = (path[k + 1] - path[k]) / seg_len[k]
+    wall = at + np.outer(np.linspace(-1.0, 1.0, 41), [-u[1], u[0]])
+    stack.scan.add(np.zeros(3), wall)
+    other = stack._explore_node(pose)
+    assert other is not None and other != ahead
+    from autonomy.geometry import polyline_clear
+
+    r = stack.cfg.avoidance.robot_radius_m
+    assert polyline_clear(points_in_frame(pose, stack.navigator.plan_points(other, pose)), wall, stack.cfg.recovery.explore_check_m, r - 0.05)
+    # Walled in all round: the node ahead after all.
+    ring = 0.9 * np.column_stack([np.cos(np.linspace(0, 2 * np.pi, 200)), np.sin(np.linspace(0, 2 * np.pi, 200))])
+    stack.scan.add(np.zeros(3), ring)
+    assert stack._explore_node(pose) == ahead

@@ -469,6 +469,13 @@ class RobotStack:
             prior = compose_pose(self.pose, relative_pose(self.odom, np.zeros(3)))
             self._start_relocalizing(t, prior, sample.reason)
 
+    def prepare_recovery(self) -> None:
+        """Build the relocalization's map search now (the free-space grid, the coarse
+        hypotheses and the segment index) rather than at the first alarm: a long run's
+        memory is then steady from its start, and the first search does not wait for it."""
+        if self.health is not None:
+            self._global_localizer()
+
     def _global_localizer(self) -> GlobalLocalizer:
         if self._global is None:
             r = self.cfg.avoidance.robot_radius_m

@@ -74,15 +74,18 @@ def resident_mb() -> float:
         return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e3
 
 
-def resources(run: Run) -> dict[str, float]:
+def resources(run: Run) -> dict:
     """Memory and per-frame time at the start and the end of a run, to show nothing grows
     over a long one: resident MB at the first and last samples and at the peak (and, from
-    2 km on, the median over the first and over the last kilometre), and the median
-    frame time (all stages) over the first and last ``ENDS_FRAMES`` frames."""
-    out: dict[str, float] = {}
+    2 km on, the median over the first and over the last kilometre), the samples against
+    the distance driven, and the median frame time (all stages) over the first and last
+    ``ENDS_FRAMES`` frames."""
+    out: dict = {}
     if run.rss_mb:
         mb = [m for _, m, _ in run.rss_mb]
         out.update(rss_start_mb=round(mb[0], 1), rss_end_mb=round(mb[-1], 1), rss_peak_mb=round(max(mb), 1))
+        # The curve itself, every RSS_EVERY frames: [distance m, resident MB].
+        out["rss_by_distance"] = [[round(d, 1), round(m, 1)] for _, m, d in run.rss_mb]
         # The first and the last kilometre of a long run (the start includes the warm-up).
         if run.distance_m >= 2000.0:
             first = [m for _, m, d in run.rss_mb if d <= 1000.0]
@@ -219,6 +222,7 @@ def build_run(scn: Scenario, seed: int) -> Run:
     stack = RobotStack(
         building.vectormap, graph, scn.stack_config(), rng=seeds.localization, fspf_seed=seeds.fspf_seed, map_path=building.map_path
     )
+    stack.prepare_recovery()
     stack.reset(mission.start_pose if scn.localization.start_known or stack.health is None else None)
     use_estimate = scn.mission.follower == "navigator" and stack.localizer is not None
     run = Run(scn, seed, seeds, building, furniture, people, mission, world, sim, stack, use_estimate)

@@ -10,6 +10,7 @@ default Kinect mount, the frame the camera would see at a known pose.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -453,3 +454,16 @@ def test_an_exploring_drive_does_not_set_out_into_walls_the_scan_has_seen(buildi
     ring = 0.9 * np.column_stack([np.cos(np.linspace(0, 2 * np.pi, 200)), np.sin(np.linspace(0, 2 * np.pi, 200))])
     stack.scan.add(np.zeros(3), ring)
     assert stack._explore_node(pose) == ahead
+
+
+def test_prepare_recovery_builds_the_map_search_up_front(building) -> None:
+    stack = make_stack(building)
+    assert stack._global is None
+    stack.prepare_recovery()
+    gl = stack._global
+    assert gl is not None and len(gl.candidates) > 1000
+    stack.prepare_recovery()
+    assert stack._global is gl  # once
+    off = make_stack(building, recovery=replace(stack.cfg.recovery, enabled=False))
+    off.prepare_recovery()
+    assert off._global is None

@@ -145,6 +145,7 @@ def test_resources_report_memory_and_frame_time_at_both_ends():
     timing["render"] = [0.002] * (ENDS_FRAMES + 500) + [0.004] * ENDS_FRAMES  # the last frames slower
     r = resources(SimpleNamespace(rss_mb=[(1, 300.0, 0.0), (901, 320.0, 20.0), (1801, 310.0, 40.0)], timing=timing, distance_m=40.0))
     assert r["rss_start_mb"] == 300.0 and r["rss_end_mb"] == 310.0 and r["rss_peak_mb"] == 320.0
+    assert r["rss_by_distance"] == [[0.0, 300.0], [20.0, 320.0], [40.0, 310.0]]
     assert "rss_first_km_mb" not in r  # a short run has no first and last kilometre
     # A 3 km run: the medians over the first and the last kilometre.
     rss = [(1 + 900 * k, 300.0 + k, 100.0 * k) for k in range(31)]

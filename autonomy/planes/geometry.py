@@ -85,9 +85,11 @@ class Plane:
 
 
 def plane_spherical(normal: np.ndarray, rho: float) -> tuple[float, float, float]:
-    """(rho, theta, phi) of a normal (Eq. 1): theta from +z in [0, pi], phi in (-pi, pi]."""
-    nz = max(-1.0, min(1.0, float(normal[2])))
-    return float(rho), math.acos(nz), math.atan2(float(normal[1]), float(normal[0]))
+    """(rho, theta, phi) of a normal (Eq. 1): theta from +z in [0, pi], phi in (-pi, pi].
+    theta is atan2 of the horizontal and vertical parts: acos of the vertical part alone
+    loses half the digits near the poles (a normal 1e-9 rad from +z came back as 0)."""
+    nx, ny, nz = float(normal[0]), float(normal[1]), float(normal[2])
+    return float(rho), math.atan2(math.hypot(nx, ny), nz), math.atan2(ny, nx)
 
 
 def spherical_normal(theta: float, phi: float) -> np.ndarray:

@@ -22,10 +22,12 @@ server starts its own on first use (the pipes belong to the parent).
 from __future__ import annotations
 
 import atexit
+import contextlib
 import math
 import mmap
 import os
 import pickle
+import signal
 import struct
 import subprocess
 import sys
@@ -99,6 +101,37 @@ class _Layout:
         return xpos, xmat, cpos, cmat, depth
 
 
+#: Signals held back while a request and its reply cross the pipes.
+_HELD_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+@contextlib.contextmanager
+def _signals_held():
+    """Hold Ctrl-C and ``kill`` back until the block ends, then act on them as before.
+    Their KeyboardInterrupt raised halfway through a message would leave the pipes out of
+    step, and the next request, such as the one closing the camera for a run's report,
+    would wait for ever. (Python runs signal handlers in the main thread only, so
+    handlers that note the signal defer it; masking the signal would not, another thread
+    would take it.)"""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[tuple[int, Any]] = []
+    old = {s: signal.signal(s, lambda signum, frame: caught.append((signum, frame))) for s in _HELD_SIGNALS}
+    try:
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h if h is not None else signal.SIG_DFL)
+        if caught:
+            signum, frame = caught[0]
+            h = old[signum]
+            if callable(h):
+                h(signum, frame)
+            elif h == signal.SIG_DFL:
+                os.kill(os.getpid(), signum)
+
+
 class RenderServer:
     """The client side of one render server process (see the module docstring)."""
 
@@ -123,7 +156,7 @@ class RenderServer:
         self._next = 0
 
     def request(self, op: str, *args: Any) -> Any:
-        with self._lock:
+        with self._lock, _signals_held():
             try:
                 _send(self._w, (op, *args))
                 ok, value = _recv(self._r)

@@ -175,3 +175,43 @@ def test_this_test_process_never_loaded_mesa() -> None:
         maps = f.read()
     assert "libLLVM" not in maps and "swrast_dri" not in maps and "libgallium" not in maps
     _room_backend.close()
+
+
+def test_ctrl_c_during_a_request_waits_for_its_reply() -> None:
+    """SIGINT delivered between a request and its reply raises KeyboardInterrupt only
+    after the reply is read: the pipes stay in step and the next request (a run's
+    report closes the camera) is answered instead of waiting for ever."""
+    r = _python(
+        """
+        import os, signal, numpy as np
+        signal.signal(signal.SIGINT, signal.default_int_handler)  # a test runner's worker may ignore it
+        from autonomy.camera import CameraIntrinsics
+        from autonomy.vectormap import VectorMap
+        from sim.simulator import render_process as rp
+        from sim.simulator.world import WorldConfig, build_world
+        vm = VectorMap.from_segments(np.array([[0, 0, 8, 0], [8, 0, 8, 5], [8, 5, 0, 5], [0, 5, 0, 0]], dtype=np.float64))
+        w = build_world(vm, world=WorldConfig(), intrinsics=CameraIntrinsics().scaled(160, 120), start_pose=(1.0, 2.5, 0.2))
+        cam = rp.ProcessGLDepth(w.model, w.camera_id, CameraIntrinsics().scaled(160, 120))
+        first = cam.render(w.data).copy()
+        real = rp._recv
+        def recv_after_ctrl_c(fd):
+            os.kill(os.getpid(), signal.SIGINT)  # arrives while the reply is on its way
+            return real(fd)
+        rp._recv = recv_after_ctrl_c
+        try:
+            cam.render(w.data)
+            print("NOT INTERRUPTED")
+        except KeyboardInterrupt:
+            print("INTERRUPTED AFTER THE REPLY")
+        rp._recv = real
+        again = cam.render(w.data)
+        print("SAME", bool(np.array_equal(first, again) and (first > 0).mean() > 0.3))
+        # In step: no reply is left waiting in the pipe after a request is answered.
+        import select
+        print("PENDING", bool(select.select([rp.server()._r], [], [], 0.5)[0]))
+        cam.close()
+        """,
+        timeout=120,
+    )
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "INTERRUPTED AFTER THE REPLY" in r.stdout and "SAME True" in r.stdout and "PENDING False" in r.stdout, r.stdout

@@ -533,7 +533,7 @@ class GlobalLocalizer:
         cfg = self.cfg
         pts = np.ascontiguousarray(pts, dtype=np.float64).reshape(-1, 2)
         r2 = cfg.fine_robust_m**2
-        refined, rc, st = [], [], []
+        refined, rc = [], []
         for p0 in np.asarray(poses, dtype=np.float64).reshape(-1, 3):
             p, c = _refine(
                 self.dist, self.origin[0], self.origin[1], self.inv_cell, p0.copy(), pts, r2,
@@ -542,10 +542,11 @@ class GlobalLocalizer:
             p[2] = wrap_angle(float(p[2]))
             refined.append(p)
             rc.append(c)
-            st.append(math.nan if origins is None else self.scan_through(p, origins, pts))
         if not refined:
             return SearchResult((), None, "no hypothesis", 0)
         refined_a = np.array(refined)
+        # All hypotheses' sight through walls in one kernel call (shared over the cores).
+        st = [math.nan] * len(refined) if origins is None else list(self.scan_through_at(refined_a, origins, pts))
         score = np.array([c if math.isnan(t) else c + cfg.through_weight * t for c, t in zip(rc, st, strict=True)])
         order = np.argsort(score, kind="stable")
         modes = []

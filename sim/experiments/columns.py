@@ -1,48 +1,89 @@
-"""Growable typed arrays for a run's per-frame records.
+"""Per-frame records of a run, kept on disk past a fixed amount of memory.
 
 A 4 km run is over 200,000 frames. Kept as Python lists, each frame's floats, tuples and
-pose arrays cost about 800 bytes of objects, and the process grows by some 170 MB over
-the run. A :class:`Column` keeps the same records as raw values in one numpy array that
-doubles when full: a few bytes per value, and a list-like interface (``append``,
-``len``, indexing, ``np.asarray``) for the code that reads them.
+pose arrays cost about 800 bytes of objects, and the process grew by some 170 MB over
+the run; kept as raw values in memory they still grew it by some 30 MB (128 bytes a
+frame), in steps as the arrays doubled. A :class:`Column` keeps the newest rows in one
+fixed chunk and appends each full chunk to an anonymous temporary file, so the memory a
+run holds for its records does not depend on its length. It reads like the list it
+replaces (``append``, ``len``, indexing, ``np.asarray``); reading the whole column maps
+the file back.
 """
 
 from __future__ import annotations
 
+import tempfile
 from collections.abc import Iterator
 
 import numpy as np
 
+#: Rows kept in memory per column before they are written to disk.
+CHUNK_ROWS = 8192
+
 
 class Column:
-    """Rows of ``width`` values (scalars when ``width`` is None) of one dtype."""
+    """Rows of ``width`` values (scalars when ``width`` is None) of one dtype; the newest
+    ``chunk`` rows in memory, the older ones in a temporary file."""
 
-    def __init__(self, width: int | None = None, dtype: type | np.dtype = np.float64, capacity: int = 1024) -> None:
-        shape = (max(1, capacity),) if width is None else (max(1, capacity), width)
-        self._data = np.empty(shape, dtype=dtype)
+    def __init__(self, width: int | None = None, dtype: type | np.dtype = np.float64, chunk: int = CHUNK_ROWS) -> None:
+        self._row_shape: tuple[int, ...] = () if width is None else (int(width),)
+        self._chunk = np.empty((max(1, int(chunk)),) + self._row_shape, dtype=dtype)
         self._n = 0
+        """Rows in the in-memory chunk."""
+        self._spilled = 0
+        """Rows written to the file."""
+        self._file = None
+
+    @property
+    def dtype(self) -> np.dtype:
+        return self._chunk.dtype
 
     def append(self, row) -> None:
         """Add one row (a scalar, or ``width`` values)."""
-        if self._n == len(self._data):
-            grown = np.empty((2 * len(self._data),) + self._data.shape[1:], dtype=self._data.dtype)
-            grown[: self._n] = self._data[: self._n]
-            self._data = grown
-        self._data[self._n] = row
+        if self._n == len(self._chunk):
+            self._spill()
+        self._chunk[self._n] = row
         self._n += 1
+
+    def _spill(self) -> None:
+        if self._file is None:
+            self._file = tempfile.TemporaryFile(prefix="depthnav-column-")
+        self._file.seek(0, 2)
+        self._file.write(self._chunk[: self._n].tobytes())
+        self._spilled += self._n
+        self._n = 0
+
+    def _on_disk(self) -> np.ndarray:
+        if not self._spilled:
+            return self._chunk[:0]
+        self._file.flush()
+        return np.memmap(self._file, dtype=self.dtype, mode="r", shape=(self._spilled,) + self._row_shape)
 
     @property
     def values(self) -> np.ndarray:
-        """The rows so far (a view: copy it to keep it past the next ``append``)."""
-        return self._data[: self._n]
+        """All rows so far, in one array (a copy once rows are on disk; a view of the
+        chunk before: copy it to keep it past the next ``append``)."""
+        if not self._spilled:
+            return self._chunk[: self._n]
+        return np.concatenate([self._on_disk(), self._chunk[: self._n]])
 
     def __len__(self) -> int:
-        return self._n
+        return self._spilled + self._n
 
     def __bool__(self) -> bool:
-        return self._n > 0
+        return len(self) > 0
 
     def __getitem__(self, i):
+        if isinstance(i, (int, np.integer)):
+            # One row (the loop reads the newest each frame): from the chunk when it is there.
+            n = len(self)
+            k = int(i) + n if i < 0 else int(i)
+            if not 0 <= k < n:
+                raise IndexError(f"row {i} out of range for a column of {n} rows")
+            if k >= self._spilled:
+                return self._chunk[k - self._spilled]
+            row = self._on_disk()[k]
+            return np.array(row) if self._row_shape else self.dtype.type(row)
         return self.values[i]
 
     def __iter__(self) -> Iterator:

@@ -158,8 +158,8 @@ class Run:
     frames: int = 0
     distance_m: float = 0.0
     collisions: int = 0
-    # Per-frame records are typed arrays (:mod:`sim.experiments.columns`): as lists of
-    # Python objects they grew a 4 km run's memory by some 170 MB.
+    # Per-frame records are typed columns that keep all but their newest rows on disk
+    # (:mod:`sim.experiments.columns`), so a run's memory does not grow with its length.
     times: Column = field(default_factory=Column)
     truth: Column = field(default_factory=lambda: Column(3))
     estimates: Column = field(default_factory=lambda: Column(3))
@@ -178,8 +178,8 @@ class Run:
     """Localization failures (error above ``reset_error_m``): when, how large, how they ended."""
     truth_resets: int = 0
     """Failures ended by re-initialising at the true pose (the robot did not recover itself)."""
-    health_states: list[str] = field(default_factory=list)
-    """The stack's health state at each frame (for the alarms' check against the truth)."""
+    health_frames: dict[str, int] = field(default_factory=dict)
+    """Frames spent in each of the stack's health states."""
     faults: FaultInjector | None = None
     """The fault injector when the scenario has faults."""
     rejected: list[tuple[float, str]] = field(default_factory=list)
@@ -446,7 +446,7 @@ def check_localization(run: Run, frame: SimFrame) -> None:
     run.loc_errors.append(err)
     run.heading_errors.append(abs(wrap_angle(est[2] - frame.pose[2])))
     run.estimates.append(est.copy())
-    run.health_states.append(stack.health_state)
+    run.health_frames[stack.health_state] = run.health_frames.get(stack.health_state, 0) + 1
     open_ = run.failures[-1] if run.failures and run.failures[-1]["end_t"] is None else None
     t = frame.t
     if open_ is None:
@@ -670,8 +670,8 @@ def recovery_metrics(run: Run) -> dict:
         "frames_stale": stack.frames_rejected["stale"],
         "frames_invalid": stack.frames_rejected["invalid"],
         "frames_corrupt": stack.frames_rejected["corrupt"],
-        "relocalizing_frames": sum(s == "relocalizing" for s in run.health_states),
-        "blind_frames": sum(s == "blind" for s in run.health_states),
+        "relocalizing_frames": run.health_frames.get("relocalizing", 0),
+        "blind_frames": run.health_frames.get("blind", 0),
         **fault_metrics(fault_report(run)),
     }
 

@@ -192,6 +192,12 @@ class Run:
         return sum(f.get("fault") is None for f in self.failures)
 
     @property
+    def recovering(self) -> bool:
+        """A localization failure is open (by the truth) or the robot is relocalizing."""
+        open_failure = bool(self.failures) and self.failures[-1]["end_t"] is None
+        return open_failure or self.stack.relocalizing
+
+    @property
     def localizing(self) -> bool:
         return self.stack.localizer is not None
 
@@ -229,7 +235,9 @@ def build_run(scn: Scenario, seed: int) -> Run:
     run.last_in_view = np.full(len(world.people.people), -np.inf)
     run.blackbox = FlightRecorder(scn.report.incident_seconds, scn.kinect.rate_hz)
     if scn.faults.enabled:
-        run.faults = FaultInjector(scn.faults, world, building, fault_rng(seed), sim.odometry, scn.robot.radius_m)
+        run.faults = FaultInjector(
+            scn.faults, world, building, fault_rng(seed), sim.odometry, scn.robot.radius_m, until_m=scn.mission.target_distance_m
+        )
     run.estimates.append(mission.start_pose.copy())
     return run
 
@@ -364,6 +372,7 @@ def next_leg(
     close_leg(
         mission, scn.mission, run.building.navgraph, arrived=nav.state == "arrived", timed_out=timed_out, truth_xy=pose[:2],
         t=t, distance_m=run.distance_m, arrival_radius_m=scn.navigator.arrival_radius_m, rng=run.seeds.mission,
+        recovering=run.recovering,
     )
     if mission.done:
         return None

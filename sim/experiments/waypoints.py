@@ -133,10 +133,12 @@ def leg_timeout(m: MissionConfig, length_m: float, cruise_speed_mps: float) -> f
 
 def close_leg(
     mission: Mission, m: MissionConfig, graph: NavGraph, *, arrived: bool, timed_out: bool, truth_xy: np.ndarray, t: float,
-    distance_m: float, arrival_radius_m: float, rng: np.random.Generator,
+    distance_m: float, arrival_radius_m: float, rng: np.random.Generator, recovering: bool = False,
 ) -> None:
     """Count the current waypoint (reached, timeout or wrong place), log the event, and
-    move on; a long run short of its distance draws the next random waypoint."""
+    move on; a long run short of its distance draws the next random waypoint, and so does
+    one past it while ``recovering`` (a localization failure or a relocalization under
+    way), so that the run sees the recovery to its end instead of cutting it off."""
     node = mission.goal
     goal_xy = graph.node_xy()[graph.index_of(node)]
     ok = arrived and np.hypot(*(goal_xy - truth_xy)) < arrival_radius_m + ARRIVAL_TRUTH_MARGIN_M
@@ -153,7 +155,7 @@ def close_leg(
     )
     mission.current += 1
     mission.started_at = t
-    if m.target_distance_m > 0 and distance_m < m.target_distance_m and mission.done:
+    if m.target_distance_m > 0 and (distance_m < m.target_distance_m or recovering) and mission.done:
         ids = mission.pool or [int(i) for i in graph.node_ids()]
         if len(ids) < 2:
             return

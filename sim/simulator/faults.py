@@ -329,11 +329,14 @@ def fault_actors(cfg: FaultsConfig) -> tuple[tuple[Furniture, ...], tuple[Person
 
 class FaultSchedule:
     """Which faults are due: explicit events once each, and one every ``every_m`` metres
-    from ``start_m``, the kinds in a shuffled order drawn from ``rng`` each round."""
+    from ``start_m`` up to (not including) ``until_m``, the kinds in a shuffled order drawn
+    from ``rng`` each round. ``until_m`` is a long run's distance: a run that goes on past
+    it to see a recovery to its end gets no new periodic faults."""
 
-    def __init__(self, cfg: FaultsConfig, rng: np.random.Generator) -> None:
+    def __init__(self, cfg: FaultsConfig, rng: np.random.Generator, until_m: float = math.inf) -> None:
         self.cfg = cfg
         self.rng = rng
+        self.until_m = float(until_m) if until_m > 0 else math.inf
         self._pending = list(range(len(cfg.events)))
         self._next_m = (cfg.start_m or cfg.every_m) if cfg.every_m > 0 else math.inf
         self._order: list[str] = []
@@ -348,7 +351,7 @@ class FaultSchedule:
                 if (ev.at_m != UNSET and distance_m >= ev.at_m) or (ev.at_s != UNSET and t >= ev.at_s - TIME_EPS_S):
                     self._pending.remove(i)
                     out.append((ev.kind, self.cfg.params_of(ev), f"events[{i}]"))
-        if distance_m >= self._next_m:
+        if distance_m >= self._next_m and self._next_m < self.until_m:
             self._next_m += self.cfg.every_m
             if not self._order:
                 self._order = [str(k) for k in self.rng.permutation(np.array(self.cfg.kinds))]
@@ -405,7 +408,8 @@ class FaultInjector:
     """
 
     def __init__(
-        self, cfg: FaultsConfig, world: World, building: Building, rng: np.random.Generator, odometry: Odometry, robot_radius_m: float
+        self, cfg: FaultsConfig, world: World, building: Building, rng: np.random.Generator, odometry: Odometry, robot_radius_m: float,
+        until_m: float = math.inf,
     ) -> None:
         self.cfg = cfg
         self.world = world
@@ -416,7 +420,7 @@ class FaultInjector:
         self.events: list[dict] = []
         """Every fault: kind, t_start, t_end (None while active), distance_m, truth_before,
         truth_after, params, trigger, and what the kind reports (where, skipped ...)."""
-        self.schedule = FaultSchedule(cfg, np.random.default_rng(rng.integers(2**63)) if cfg.enabled else rng)
+        self.schedule = FaultSchedule(cfg, np.random.default_rng(rng.integers(2**63)) if cfg.enabled else rng, until_m)
         self._active: dict[str, _Active] = {}
         self._walls = np.ascontiguousarray(building.vectormap.segments, dtype=np.float64).reshape(-1, 4)
         model = world.model

@@ -182,6 +182,14 @@ def test_every_m_cycles_through_all_kinds_in_a_seeded_order() -> None:
     assert a[:n] != list(FAULT_KINDS) or a[n:] != list(FAULT_KINDS)
 
 
+def test_periodic_faults_stop_at_the_runs_distance() -> None:
+    s = FaultSchedule(FaultsConfig(every_m=60.0), np.random.default_rng(0), until_m=700.0)
+    fired = [d for d in np.arange(0.0, 900.0, 1.0) for _ in s.due(0.0, float(d))]
+    assert fired == [60.0 * k for k in range(1, 12)]
+    open_ended = FaultSchedule(FaultsConfig(every_m=60.0), np.random.default_rng(0), until_m=0.0)
+    assert len([d for d in np.arange(0.0, 900.0, 1.0) for _ in open_ended.due(0.0, float(d))]) == 14  # 60 ... 840
+
+
 def test_explicit_events_fire_once_at_their_distance_or_time() -> None:
     cfg = FaultsConfig(events=(FaultEvent(kind="blackout", at_m=10.0, blackout_s=1.0), FaultEvent(kind="stale", at_s=2.0)))
     s = FaultSchedule(cfg, np.random.default_rng(0))

@@ -495,7 +495,7 @@ class Navigator:
 
     def _point_at(self, s: float) -> np.ndarray:
         s = min(max(s, 0.0), float(self._cum[-1]))
-        k = int(np.clip(np.searchsorted(self._cum, s, side="right") - 1, 0, len(self.path) - 2))
+        k = min(max(int(np.searchsorted(self._cum, s, side="right")) - 1, 0), len(self.path) - 2)
         L = self._cum[k + 1] - self._cum[k]
         a = 0.0 if L == 0 else (s - self._cum[k]) / L
         return self.path[k] + a * (self.path[k + 1] - self.path[k])

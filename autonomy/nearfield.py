@@ -117,6 +117,8 @@ class NearField:
         self.rows = rows[keep_rows]
         self.cols = cols
         self.expected = expected[keep_rows]
+        self._flat = (self.rows[:, None] * intr.width + self.cols[None, :]).astype(np.intp)
+        """The sampled pixels' indices into a flattened frame (one gather a frame)."""
         self.n_expected = self.expected.sum(axis=0)
         self.active = bool(cfg.enabled)
         # min_run_px is in pixels of an f = 580 px camera: a shadow's width scales with f.
@@ -145,7 +147,7 @@ class NearField:
             return np.zeros(len(self.cols), dtype=bool)
         if depth.shape != (self.intr.height, self.intr.width):
             raise InputError(f"near field: depth image shape {depth.shape} does not match the camera's {(self.intr.height, self.intr.width)}")
-        d = depth[np.ix_(self.rows, self.cols)]
+        d = np.ravel(depth).take(self._flat)
         missing = ~(d >= self.min_range_m) & self.expected  # 0, NaN or too near
         frac = missing.sum(axis=0) / np.maximum(self.n_expected, 1)
         blocked = (frac >= self.cfg.min_invalid_fraction) & (self.n_expected > 0)

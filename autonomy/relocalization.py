@@ -27,7 +27,8 @@ The scan is then matched against the whole map (ours; the papers re-localized by
    The best-scored, at least ``mode_separation_m`` or ``mode_separation_deg`` apart
    (non-maximum suppression), are the modes.
 3. **Decision.** The best mode is accepted when it explains the scan
-   (score at most ``accept_cost``), the latest frame does not see through the map's walls
+   (score at most ``accept_cost``, or at most ``accept_lead_cost`` and leading every
+   other mode by ``accept_lead``), the latest frame does not see through the map's walls
    from it (:func:`autonomy.health.explain_points` on its visible scene lines), and no
    other mode comes within ``accept_margin`` of its score per point nor within
    ``accept_margin_points`` over the whole scan. Otherwise the modes are kept
@@ -90,6 +91,16 @@ class RelocalizationConfig:
     wall in one mode and off every wall in the other add up to) ..."""
     accept_margin: float = 0.02
     """... and at least this much more per point."""
+    accept_lead_cost: float = 0.4
+    """A best mode scoring worse than ``accept_cost`` (up to this) is accepted when every
+    other mode scores worse by ``accept_lead`` per point (and ``accept_margin_points``
+    over the scan): a long look's scan, placed by dead reckoning over metres of
+    exploring, fits no place sharply, and clutter raises every mode's score alike; what
+    tells the place is the lead."""
+    accept_lead: float = 0.15
+    """The lead a mode scoring between ``accept_cost`` and ``accept_lead_cost`` needs over
+    every other mode. Wrong modes led by up to 0.14 on the tuning runs, each scoring
+    under ``accept_cost``."""
     max_through: float = 0.1
     """... and at most this fraction of the latest frame's points may lie beyond the map's
     walls seen from it."""
@@ -122,7 +133,7 @@ class RelocalizationConfig:
         require_positive(
             self, "recovery.relocalization.", "grid_step_m", "heading_step_deg", "coarse_robust_m", "fine_robust_m",
             "mode_separation_m", "mode_separation_deg", "scan_cell_m", "accept_cost", "search_every_s", "min_travel_m",
-            "accept_margin_points", "accept_margin",
+            "accept_margin_points", "accept_margin", "accept_lead_cost", "accept_lead",
         )
         require_non_negative(
             self, "recovery.relocalization.", "min_sweep_deg", "max_through", "prior_cost", "prior_lead_cost", "explain_m", "through_m",
@@ -584,12 +595,17 @@ class GlobalLocalizer:
         if not modes:
             return None, "no mode"
         best = modes[0]
-        if best.score > cfg.accept_cost:
-            return None, f"best mode explains too little (score {best.score:.2f} > {cfg.accept_cost})"
+        gap = modes[1].score - best.score if len(modes) > 1 else math.inf
+        if best.score > max(cfg.accept_cost, cfg.accept_lead_cost):
+            return None, f"best mode explains too little (score {best.score:.2f} > {max(cfg.accept_cost, cfg.accept_lead_cost)})"
+        if best.score > cfg.accept_cost and gap < cfg.accept_lead:
+            return None, (
+                f"best mode explains too little (score {best.score:.2f} > {cfg.accept_cost}) "
+                f"and leads by {gap:.3f} < {cfg.accept_lead}"
+            )
         if not math.isnan(best.through) and best.through > cfg.max_through:
             return None, f"best mode sees through walls ({best.through:.2f} of the frame)"
         if len(modes) > 1:
-            gap = modes[1].score - best.score
             if gap < cfg.accept_margin or gap * n_points < cfg.accept_margin_points:
                 return None, f"ambiguous: {len(modes)} modes, the second within {gap:.3f} ({gap * n_points:.1f} points)"
         return best, f"score {best.score:.3f}, next {modes[1].score:.3f}" if len(modes) > 1 else f"score {best.score:.3f}"

@@ -359,11 +359,34 @@ def test_the_belief_before_the_alarm_is_kept_when_it_explains_the_scan_or_leads(
     assert not gl.keeps_prior(mode(there, 0.53), [mode(here, 0.2)], n)
 
 
+def test_a_poorer_match_is_accepted_only_with_a_clear_lead(building) -> None:
+    """A best mode scoring over accept_cost (a long look's smeared scan) is accepted when
+    it leads every other mode by accept_lead; one scoring over accept_lead_cost never."""
+    gl, _ = building
+    cfg = gl.cfg
+    here, there = np.array([30.0, 12.0, 0.3]), np.array([8.7, 27.2, -1.5])
+    n = 1500
+
+    def modes(best, second):
+        return [Mode(here, best, through=0.0, score=best), Mode(there, second, through=0.0, score=second)]
+
+    s = 0.5 * (cfg.accept_cost + cfg.accept_lead_cost)
+    assert gl._decide(modes(s, s + cfg.accept_lead + 0.01), n)[0] is not None
+    got, why = gl._decide(modes(s, s + 0.8 * cfg.accept_lead), n)
+    assert got is None and "leads by" in why
+    assert gl._decide(modes(cfg.accept_lead_cost + 0.01, 2.0), n)[0] is None
+    # Under accept_cost the ordinary margins decide, as before.
+    assert gl._decide(modes(0.1, 0.1 + 2 * cfg.accept_margin), n)[0] is not None
+    # The measured case: a kidnapped robot in an edge office, 1,500 points, its place
+    # scoring 0.25 against 0.45 elsewhere.
+    assert gl._decide(modes(0.25, 0.45), n)[0] is not None
+
+
 def test_too_few_points_or_too_poor_a_match_is_no_decision(building) -> None:
     gl, scene = building
     res = gl.search(np.zeros((gl.cfg.min_scan_points - 1, 2)))
     assert res.modes == () and res.accepted is None and res.hypotheses == 0 and "need 150" in res.reason
-    strict = GlobalLocalizer(gl.fs, AvoidanceConfig().robot_radius_m, RelocalizationConfig(accept_cost=0.1))
+    strict = GlobalLocalizer(gl.fs, AvoidanceConfig().robot_radius_m, RelocalizationConfig(accept_cost=0.1, accept_lead_cost=0.1))
     truth = UNIQUE[0]
     res = strict.rescore(truth[None, :], panorama(scene, truth, np.random.default_rng(60), clutter=0.3))
     assert res.accepted is None and "explains too little" in res.reason

@@ -99,8 +99,9 @@ class RelocalizationConfig:
     tells the place is the lead."""
     accept_lead: float = 0.15
     """The lead a mode scoring between ``accept_cost`` and ``accept_lead_cost`` needs over
-    every other mode. Wrong modes led by up to 0.14 on the tuning runs, each scoring
-    under ``accept_cost``."""
+    every other mode (and the belief before the alarm must be ruled out:
+    :meth:`GlobalLocalizer.lead_allowed`). Wrong modes led by up to 0.14 on the tuning
+    runs, each scoring under ``accept_cost``."""
     max_through: float = 0.1
     """... and at most this fraction of the latest frame's points may lie beyond the map's
     walls seen from it."""
@@ -589,6 +590,15 @@ class GlobalLocalizer:
             return False
         gap = (min(elsewhere) - prior.score) if elsewhere else math.inf
         return gap >= cfg.accept_margin and gap * n_points >= cfg.accept_margin_points
+
+    def lead_allowed(self, mode: Mode, prior: Mode | None) -> bool:
+        """May ``mode``, accepted by the decision, be taken while ``prior`` (the belief
+        before the alarm, re-scored on the scan) stands? A mode scoring over
+        ``accept_cost``, accepted on its lead alone, is not taken while the prior still
+        scores within ``prior_lead_cost``: a hall's clutter can fit an office elsewhere
+        better than the hall, whereas a robot carried away leaves a prior that scores
+        worse than that (1.0 or more on the measured kidnapping)."""
+        return mode.score <= self.cfg.accept_cost or prior is None or prior.score > self.cfg.prior_lead_cost
 
     def _decide(self, modes: list[Mode], n_points: int) -> tuple[Mode | None, str]:
         cfg = self.cfg

@@ -545,6 +545,7 @@ class RobotStack:
         if self.modes and self._prior is None:
             self.pose = compose_pose(self.modes[0][0], self.odom)
         self.last_search = res
+        prior_mode = None
         if prior is not None and res.modes:
             # A false alarm ends where it began: the belief before the alarm, if it still
             # explains the scan about as well as the best mode.
@@ -552,7 +553,10 @@ class RobotStack:
             if kept and gl.keeps_prior(kept[0], res.modes, len(pts)):
                 self._accept(kept[0], t, f"the belief before the alarm explains the scan (score {kept[0].score:.3f})", len(res.modes))
                 return
+            prior_mode = kept[0] if kept else None
         acc = res.accepted
+        if acc is not None and not gl.lead_allowed(acc, prior_mode):
+            acc = None
         if acc is None:
             self._confirmed = 0
             return

@@ -378,8 +378,13 @@ def test_a_poorer_match_is_accepted_only_with_a_clear_lead(building) -> None:
     # Under accept_cost the ordinary margins decide, as before.
     assert gl._decide(modes(0.1, 0.1 + 2 * cfg.accept_margin), n)[0] is not None
     # The measured case: a kidnapped robot in an edge office, 1,500 points, its place
-    # scoring 0.25 against 0.45 elsewhere.
-    assert gl._decide(modes(0.25, 0.45), n)[0] is not None
+    # scoring 0.25 against 0.45 elsewhere and 1.0 at the belief before the alarm.
+    best = gl._decide(modes(0.25, 0.45), n)[0]
+    assert best is not None and gl.lead_allowed(best, Mode(there, 1.0, score=1.0)) and gl.lead_allowed(best, None)
+    # While the belief before the alarm still scores within prior_lead_cost (a hall's
+    # clutter fitting an office elsewhere), a lead alone does not move the robot there.
+    assert not gl.lead_allowed(best, Mode(there, 0.6, score=0.6))
+    assert gl.lead_allowed(Mode(here, 0.1, score=0.1), Mode(there, 0.6, score=0.6))
 
 
 def test_too_few_points_or_too_poor_a_match_is_no_decision(building) -> None:

@@ -120,19 +120,37 @@ class AvoidanceResult:
     """True when d(theta*) <= stop distance: no direction in the fan is open."""
 
 
-def obstacle_points(points3d: np.ndarray, cfg: AvoidanceConfig | None = None) -> np.ndarray:
+@numba.njit(cache=True)
+def _band_kernel(a, b, lo, hi, out):  # pragma: no cover - numba
+    m = 0
+    for src in (a, b):
+        for i in range(src.shape[0]):
+            x, y, z = src[i, 0], src[i, 1], src[i, 2]
+            if z >= lo and z <= hi and math.isfinite(x) and math.isfinite(y) and math.isfinite(z):
+                out[m, 0] = x
+                out[m, 1] = y
+                m += 1
+    return m
+
+
+def obstacle_points(points3d: np.ndarray, cfg: AvoidanceConfig | None = None, also: np.ndarray | None = None) -> np.ndarray:
     """(n, 3) robot-frame points (P u O) -> (k, 2) floor-plane obstacles inside the height band.
 
     Points with z outside [min_height_m, max_height_m] (floor, overhead) and non-finite
-    points are dropped; the rest are down-projected to (x, y) (Section V).
+    points are dropped; the rest are down-projected to (x, y) (Section V). ``also`` is
+    a second (m, 3) cloud taken after the first (FSPF's outliers O after its plane points
+    P), without stacking the two.
     """
     cfg = AvoidanceConfig() if cfg is None else cfg
-    pts = np.asarray(points3d, dtype=np.float64)
-    if pts.ndim != 2 or pts.shape[1] != 3:
-        raise InputError(f"obstacle_points: expected an (n, 3) array, got shape {pts.shape}")
-    z = pts[:, 2]
-    keep = (z >= cfg.min_height_m) & (z <= cfg.max_height_m) & np.isfinite(pts).all(axis=1)
-    return np.ascontiguousarray(pts[keep, :2])
+    clouds = []
+    for name, c in (("points3d", points3d), ("also", np.zeros((0, 3)) if also is None else also)):
+        arr = np.ascontiguousarray(c, dtype=np.float64)
+        if arr.ndim != 2 or arr.shape[1] != 3:
+            raise InputError(f"obstacle_points: expected {name} as an (n, 3) array, got shape {arr.shape}")
+        clouds.append(arr)
+    out = np.empty((len(clouds[0]) + len(clouds[1]), 2))
+    m = _band_kernel(clouds[0], clouds[1], float(cfg.min_height_m), float(cfg.max_height_m), out)
+    return out[:m]
 
 
 @numba.njit(cache=True)

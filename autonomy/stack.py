@@ -353,7 +353,7 @@ class RobotStack:
         p2d, n2d = planes.projected(cfg.fspf.max_vertical_normal_angle_rad)
         t1 = time.perf_counter()
         if self.navigator is not None:
-            obstacles = obstacle_points(np.vstack([planes.points, planes.outliers]), cfg.avoidance)
+            obstacles = obstacle_points(planes.points, cfg.avoidance, also=planes.outliers)
             assert self.near_field is not None
             near = self.near_field.sight_lines(depth)
         else:

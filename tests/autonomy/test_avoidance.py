@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
 
 from autonomy.avoidance import (
     AvoidanceConfig,
@@ -237,6 +238,18 @@ def test_obstacle_points_height_band() -> None:
     out = obstacle_points(pts, cfg)
     np.testing.assert_array_equal(out, [[1.2, 0.2], [1.3, 0.3], [1.4, 0.4]])
     assert obstacle_points(np.zeros((0, 3)), cfg).shape == (0, 2)
+    # A second cloud is taken after the first, as if stacked.
+    np.testing.assert_array_equal(obstacle_points(pts[:3], cfg, also=pts[3:]), out)
+
+
+@given(arrays(np.float64, st.tuples(st.integers(0, 40), st.just(3)), elements=st.sampled_from([0.0, 0.05, 0.3, 1.1, 2.0, -1.0, np.nan, np.inf])),
+       st.integers(0, 40))
+def test_obstacle_points_match_a_numpy_mask(pts: np.ndarray, split: int) -> None:
+    cfg = AvoidanceConfig(min_height_m=0.05, max_height_m=1.1)
+    z = pts[:, 2]
+    keep = (z >= cfg.min_height_m) & (z <= cfg.max_height_m) & np.isfinite(pts).all(axis=1)
+    k = min(split, len(pts))
+    np.testing.assert_array_equal(obstacle_points(pts[:k], cfg, also=pts[k:]), pts[keep, :2])
 
 
 def test_obstacle_points_feed_choose_direction() -> None:

@@ -176,6 +176,33 @@ def backproject(depth: np.ndarray, intr: CameraIntrinsics) -> np.ndarray:
     return out
 
 
+@numba.njit(cache=True)
+def _frame_checks(flat, stride, last):  # pragma: no cover - numba
+    valid = False
+    for i in range(flat.size):
+        v = flat[i]
+        if v > 0.0 and v < np.inf:
+            valid = True
+            break
+    n = (flat.size + stride - 1) // stride
+    same = last.size == n
+    if same:
+        for k in range(n):
+            if flat[k * stride] != last[k]:
+                same = False
+                break
+    return valid, same
+
+
+def frame_checks(depth: np.ndarray, stride: int, last_key: np.ndarray | None) -> tuple[bool, bool]:
+    """(any finite positive pixel, the pixels every ``stride`` of the flattened frame equal
+    ``last_key``) of a depth image; both stop at the first pixel that decides them."""
+    flat = np.ascontiguousarray(depth).ravel()
+    last = np.zeros(0, dtype=flat.dtype) if last_key is None else np.ascontiguousarray(last_key, dtype=flat.dtype)
+    valid, same = _frame_checks(flat, int(stride), last)
+    return bool(valid), bool(same) and last_key is not None
+
+
 def pixel_rays(intr: CameraIntrinsics) -> np.ndarray:
     """Optical-frame ray directions with unit z for every pixel, shape (H, W, 3)."""
     u = (np.arange(intr.width) - intr.cx) / intr.fx

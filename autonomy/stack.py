@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from autonomy.avoidance import AvoidanceConfig, obstacle_points
-from autonomy.camera import DepthCamera
+from autonomy.camera import DepthCamera, frame_checks
 from autonomy.cgr import CGRConfig, CGRLocalizer
 from autonomy.errors import InputError, require_non_negative, require_positive
 from autonomy.freespace import FreeSpaceConfig, build_free_space
@@ -333,16 +333,15 @@ class RobotStack:
             depth = np.where(finite, depth, np.float32(0.0)).astype(np.float32, copy=False)
             self.frame_fault = "corrupt"
             self.frames_rejected["corrupt"] += 1
-        key = depth.ravel()[::STALE_SAMPLE_STRIDE]
-        if not np.any(depth > 0):
+        valid, repeats = frame_checks(depth, STALE_SAMPLE_STRIDE, self._last_depth_key)
+        if not valid:
             # Nothing valid: a camera that fails, or something closer than its minimum
             # range filling the view; the two look alike, and the near field reads both
             # as "blocked right ahead" (it never drives into either). Counted, and used.
-            self._last_depth_key = None
             self.frame_fault = "invalid"
             self.frames_rejected["invalid"] += 1
-        self._maybe_stale = self._last_depth_key is not None and np.array_equal(key, self._last_depth_key)
-        self._last_depth_key = key.copy() if self.frame_fault != "invalid" else None
+        self._maybe_stale = valid and repeats
+        self._last_depth_key = depth.ravel()[::STALE_SAMPLE_STRIDE].copy() if valid else None
         t0 = time.perf_counter()
         planes = fspf(depth, cam.intrinsics, cfg.fspf, seed=s, mount=self.mount)
         if self.mount_check is not None:

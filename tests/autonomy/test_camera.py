@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from autonomy.camera import (
@@ -14,6 +14,7 @@ from autonomy.camera import (
     CameraMount,
     DepthCamera,
     backproject,
+    frame_checks,
     pixel_rays,
     transform_points,
 )
@@ -96,3 +97,24 @@ def test_depth_camera_rejects_a_range_that_is_not_increasing(kwargs: dict, field
     with pytest.raises(InputError, match=field) as err:
         DepthCamera(**kwargs)
     assert "\n" not in str(err.value)
+
+
+@settings(deadline=None)
+@given(
+    st.lists(st.sampled_from([0.0, -1.0, 0.5, 3.0, float("nan"), float("inf")]), min_size=1, max_size=50),
+    st.integers(1, 6),
+    st.booleans(),
+    st.booleans(),
+)
+def test_frame_checks_match_numpy(values: list[float], stride: int, with_key: bool, change: bool) -> None:
+    depth = np.array(values, dtype=np.float32).reshape(1, -1)
+    key = None
+    if with_key:
+        key = depth.ravel()[::stride].copy()
+        if change:
+            key[-1] = np.float32(7.0) if key[-1] != 7.0 else np.float32(8.0)
+    valid = bool(np.any(np.isfinite(depth) & (depth > 0)))
+    same = key is not None and bool(np.array_equal(depth.ravel()[::stride], key))
+    assert frame_checks(depth, stride, key) == (valid, same)
+    n = len(depth.ravel()[::stride])
+    assert frame_checks(depth, stride, np.zeros(n + 1, np.float32))[1] is False  # a key of another length

@@ -83,8 +83,9 @@ class RelocalizationConfig:
     min_travel_m: float = 2.0
     """Distance that counts as looking as much as the sweep."""
     accept_cost: float = 0.2
-    """The best mode must explain the scan this well (mean robust cost, 0 = every point on
-    a wall) ..."""
+    """The best mode must explain the scan this well (its score: the mean robust cost, 0 =
+    every point on a wall, plus the sight-through-walls term), or up to
+    ``accept_lead_cost`` with a clear lead ..."""
     accept_margin_points: float = 40.0
     """... and every other mode must cost at least this much more in total over the scan
     (the mean cost difference times the scan's points: what that many points lying on a

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from autonomy.active_localization import ActiveLocalizationConfig, drive_value
 from autonomy.avoidance import AvoidanceConfig, obstacle_points
 from autonomy.camera import DepthCamera, frame_checks
 from autonomy.cgr import CGRConfig, CGRLocalizer
@@ -120,6 +121,8 @@ class RecoveryConfig:
     explore_timeout_s: float = 20.0
     """... or how long it may take (a drive that is blocked looks round again and then
     tries another place)."""
+    active: ActiveLocalizationConfig = field(default_factory=ActiveLocalizationConfig)
+    """Which exploring drive tells the modes apart (:mod:`autonomy.active_localization`)."""
 
     def __post_init__(self) -> None:
         require_non_negative(self, "recovery.", "restart_std_xy_m", "restart_std_theta_rad", "settle_s")
@@ -647,6 +650,12 @@ class RobotStack:
         # obstacle memory and the map's walls in the camera's blind spots placed through
         # one mode and then read through another would put walls where none are seen.
         best = compose_pose(self._explore_T, self.odom)
+        if self._ruled_out(best):
+            # The scan has ruled out the mode this drive set out on: its plan leads
+            # nowhere the robot is. Set out at once on the best mode now (the scan
+            # already holds the surroundings; no new look round is needed).
+            self._exploring_from = None
+            return self._search_motion(t, obstacles, near)
         cmd = nav.command(best, obstacles, t, near)
         gone = math.hypot(*(self.odom[:2] - self._exploring_from[:2]))
         if cmd.state == "arrived" or gone >= rec.explore_m or t - self._explore_t0 > rec.explore_timeout_s:
@@ -658,10 +667,28 @@ class RobotStack:
         cmd.state = "exploring" if cmd.state in ("driving", "turning") else cmd.state
         return cmd
 
+    def _ruled_out(self, pose: np.ndarray) -> bool:
+        """Whether no mode near ``pose`` (within the modes' separation) scores within
+        ``recovery.active.abandon_margin`` of the best mode."""
+        if not self.modes:
+            return False
+        rc = self.cfg.recovery.relocalization
+        limit = self.modes[0][1] + self.cfg.recovery.active.abandon_margin
+        sep = math.radians(rc.mode_separation_deg)
+        for T, score in self.modes:
+            if score > limit:
+                break
+            p = compose_pose(T, self.odom)
+            if math.hypot(p[0] - pose[0], p[1] - pose[1]) < rc.mode_separation_m and abs(wrap_angle(float(p[2] - pose[2]))) < sep:
+                return False
+        return True
+
     def _explore_node(self, pose: np.ndarray) -> int | None:
         """A navigation-graph node ``explore_m`` to twice that from the pose, among those
-        not tried yet in this relocalization: the one most nearly ahead (the robot goes on
-        the way it faces) whose plan's first ``explore_check_m`` the scan shows clear.
+        not tried yet in this relocalization, whose plan's first ``explore_check_m`` the
+        scan shows clear: the one whose drive tells the most modes apart
+        (:func:`autonomy.active_localization.drive_value`), the one most nearly ahead (the
+        robot goes on the way it faces) among equals.
 
         The plan is made on the best mode's map. Where the modes disagree about the way
         out of a room (offices that mirror each other), a wrong mode's plan can lead into
@@ -683,15 +710,44 @@ class RobotStack:
         bearing = np.abs(wrap_angles(np.arctan2(xy[cand, 1] - pose[1], xy[cand, 0] - pose[0]) - pose[2]))
         order = cand[np.argsort(bearing, kind="stable")]
         seen = self.scan.in_robot_frame(self.odom)
+        modes = self._compared_modes(pose)
+        best, best_value = None, -1.0
         for k in order:
             node = int(nav.graph.nodes[int(k)].id)
             try:
                 path = nav.plan_points(node, pose)
             except InputError:  # no path from here on this mode's map
                 continue
-            if polyline_clear(points_in_frame(pose, path), seen, rec.explore_check_m, self.cfg.avoidance.robot_radius_m - EXPLORE_CLEAR_SLACK_M):
+            if not polyline_clear(points_in_frame(pose, path), seen, rec.explore_check_m, self.cfg.avoidance.robot_radius_m - EXPLORE_CLEAR_SLACK_M):
+                continue
+            if len(modes) < 2:
                 return node
+            value = self._drive_value(path, modes)
+            if value > best_value + 1e-9:
+                best, best_value = node, value
+        if best is not None:
+            return best
         return int(nav.graph.nodes[int(order[0])].id)
+
+    def _compared_modes(self, pose: np.ndarray) -> np.ndarray:
+        """The modes an exploring drive should tell apart (M, 3), ``pose`` (the best
+        mode's, which the drive is planned on) first; fewer than two: none to compare."""
+        act = self.cfg.recovery.active
+        if not act.enabled or not self.modes:
+            return np.zeros((0, 3))
+        top = self.modes[0][1]
+        others = [compose_pose(T, self.odom) for T, s in self.modes[1 : act.modes] if s <= top + act.score_margin]
+        return np.array([pose, *others]).reshape(-1, 3)
+
+    def _drive_value(self, path: np.ndarray, modes: np.ndarray) -> float:
+        """What a drive along ``path`` is worth to tell ``modes`` apart."""
+        assert self.scene is not None
+        query = self.scene
+        cam = self.cfg.camera
+        return drive_value(
+            lambda x, y: query.scene_lines(x, y)[0], path, modes, self.cfg.recovery.active,
+            self.cfg.recovery.explore_m, cam.fov_h_rad, cam.max_range_m,
+        )
 
     def step(
         self, depth: np.ndarray | None, increment: np.ndarray | None, t: float, pose: np.ndarray | None = None

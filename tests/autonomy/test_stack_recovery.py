@@ -424,6 +424,70 @@ def test_an_exploring_drive_keeps_the_mode_it_set_out_on(building, monkeypatch) 
     np.testing.assert_allclose(seen[-1], compose_pose(a, stack.odom))
 
 
+def test_an_exploring_drive_on_a_mode_the_scan_rules_out_sets_out_again_on_the_best(building, monkeypatch) -> None:
+    """Once the mode a drive set out on scores worse than the best by more than
+    ``abandon_margin`` (or is no longer kept), the robot does not drive on through it
+    until the drive times out: it sets out at once on the best mode, without a new look."""
+    stack = make_stack(building, pose=None)
+    a = np.array([0.0, 0.0, 0.0])  # modes as map-from-odometry transforms
+    b = compose_pose(np.array([18.0, 6.3, math.pi]), relative_pose(START, np.zeros(3)))  # the south corridor
+    stack.modes = [(a, 0.1), (b, 0.11)]
+    stack.odom = START.copy()
+    seen: list[np.ndarray] = []
+    real = stack.navigator.command
+
+    def spy(pose, *args, **kwargs):
+        seen.append(np.array(pose))
+        return real(pose, *args, **kwargs)
+
+    monkeypatch.setattr(stack.navigator, "command", spy)
+    t = stack.cfg.recovery.explore_after_s + 1.0
+    stack.decide(t)
+    margin = stack.cfg.recovery.active.abandon_margin
+    stack.modes = [(b, 0.1), (a, 0.1 + 0.5 * margin)]  # within the margin: drive on
+    stack.decide(t + 0.1)
+    np.testing.assert_allclose(seen[-1], compose_pose(a, stack.odom))
+    stack.modes = [(b, 0.1), (a, 0.1 + 2.0 * margin)]  # ruled out
+    cmd = stack.decide(t + 0.2)
+    np.testing.assert_allclose(seen[-1], compose_pose(b, stack.odom))
+    assert cmd.state != "looking"
+    np.testing.assert_allclose(stack._explore_T, b)
+    stack.modes = [(b, 0.1)]  # a is no longer kept at all; b's drive goes on
+    stack.decide(t + 0.3)
+    np.testing.assert_allclose(seen[-1], compose_pose(b, stack.odom))
+
+
+def test_an_exploring_drive_goes_where_the_modes_predict_different_walls(building) -> None:
+    """Two modes 4 m apart in the long corridor south of the offices, both facing west,
+    see the same two parallel walls. The drive chosen is the one, of all the robot could
+    set out on, that tells them apart best on the map; the node most nearly ahead (the
+    choice without active localization) would hardly tell them apart."""
+    pose = np.array([18.0, 6.3, math.pi])
+    other = np.array([22.0, 6.3, math.pi])
+    stacks = []
+    for enabled in (True, False):
+        rec = StackConfig().recovery
+        stack = make_stack(building, pose=None, recovery=replace(rec, active=replace(rec.active, enabled=enabled)))
+        stack.odom = np.zeros(3)  # modes as map-from-odometry transforms: the poses
+        stack.modes = [(pose, 0.05), (other, 0.052)]
+        stacks.append(stack)
+    active, plain = stacks
+    assert plain._compared_modes(pose).shape == (0, 3)
+    modes = active._compared_modes(pose)
+    assert len(modes) == 2
+    nav = active.navigator
+
+    def value(node: int) -> float:
+        return active._drive_value(nav.plan_points(node, pose), modes)
+
+    chosen, ahead = active._explore_node(pose), plain._explore_node(pose)
+    xy = nav.graph.node_xy()
+    d = np.hypot(xy[:, 0] - pose[0], xy[:, 1] - pose[1])
+    values = [value(int(nav.graph.nodes[int(k)].id)) for k in np.flatnonzero((d >= 6.0) & (d <= 12.0))]
+    assert value(chosen) == pytest.approx(max(values))
+    assert value(ahead) < 0.5 * value(chosen)
+
+
 def test_an_exploring_drive_does_not_set_out_into_walls_the_scan_has_seen(building) -> None:
     """The exploring drive's node is the one most nearly ahead whose plan (on the best
     mode's map) starts clear of the scan's points; a wrong mode's way out of a room can

@@ -10,10 +10,9 @@ frames will explain one of them worse than the other.
 
 A drive is worth the pairs of modes it tells apart: for each pair, the fraction of
 predicted rays whose ranges differ by more than ``differ_m``, counted as one whole pair
-once it reaches ``told_apart``. This is the idea of choosing the action whose expected
-observations separate the hypotheses (Fox, Burgard and Thrun, "Active Markov
-localization for mobile robots", 1998), scored by ray casting instead of entropy, since
-the modes are few and the map is exact.
+once it reaches ``told_apart``. This is active Markov localization's idea (Fox1998:
+choose the motion whose observations tell the hypotheses apart), scored by ray casting
+instead of expected entropy, since the modes are few and the map is exact.
 """
 
 from __future__ import annotations

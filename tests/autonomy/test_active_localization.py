@@ -10,7 +10,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from autonomy.active_localization import ActiveLocalizationConfig, drive_value, predicted_ranges, view_poses
+from autonomy.active_localization import (
+    ActiveLocalizationConfig,
+    drive_value,
+    predicted_ranges,
+    view_poses,
+)
 from autonomy.errors import InputError
 from autonomy.raycast import scene_lines
 

@@ -322,6 +322,8 @@ class Navigator:
         self._mem = np.zeros((0, 2))
         self._mem_t = np.zeros(0)
         self._mem_all = np.zeros((0, 2))
+        self._seen = np.zeros((0, 2))
+        """Points seen before (robot frame) given to this frame's :meth:`command`."""
         self._side = 0
         self._lane = 0.0
         self._corners = np.zeros(0)
@@ -552,10 +554,17 @@ class Navigator:
         """The map's walls within ``radius_m`` of the pose as points every
         ``WALL_STEP_M``, in the robot frame: what is known to be there even where the
         camera cannot look. The walls are sampled once; the points near the robot are
-        cached and re-selected only after it has moved ``_LOCAL_MARGIN_M``."""
+        cached and re-selected only after it has moved ``_LOCAL_MARGIN_M``. The points
+        this frame's :meth:`command` was given as ``seen`` within the radius join them:
+        a pose on a wrong relocalization mode puts the map's walls where none are, and the
+        robot's own sight of the walls around it is then the only knowledge it has."""
         rel = self._near_walls(pose, radius_m)
         c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
-        return np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]])
+        pts = np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]])
+        seen = self._seen
+        if len(seen):
+            pts = np.vstack([pts, seen[seen[:, 0] * seen[:, 0] + seen[:, 1] * seen[:, 1] < radius_m * radius_m]])
+        return pts
 
     def _near_walls(self, pose: np.ndarray, radius_m: float) -> np.ndarray:
         """:meth:`map_points` relative to the robot's position, in world axes."""
@@ -908,13 +917,19 @@ class Navigator:
             lines = lines[~(gap < self.cfg.near_wall_tol_m).any(axis=0)]
         return line_points(lines, self.avoid.near_field.point_step_m)
 
-    def command(self, pose: np.ndarray, obstacles: np.ndarray, t: float, near_lines: np.ndarray | None = None) -> NavCommand:
+    def command(
+        self, pose: np.ndarray, obstacles: np.ndarray, t: float, near_lines: np.ndarray | None = None, seen: np.ndarray | None = None
+    ) -> NavCommand:
         """Body-frame velocity for this frame from the pose estimate and sensed obstacles.
 
         ``near_lines``: this frame's near-field sight lines (:mod:`autonomy.nearfield`),
         obstacles closer than the camera's minimum range; they join the obstacles for this
         frame only (the next frame tells again whether they are still there).
+        ``seen``: wall points the robot has seen before, robot frame (the relocalization's
+        scan while it explores on a mode whose map may be wrong); they count with the
+        map's walls where the camera cannot look (:meth:`map_points`).
         """
+        self._seen = np.zeros((0, 2)) if seen is None else np.asarray(seen, dtype=np.float64).reshape(-1, 2)
         self._t = float(t)
         self._record_trail(pose, t)
         if self.blocked:

@@ -656,7 +656,10 @@ class RobotStack:
             # already holds the surroundings; no new look round is needed).
             self._exploring_from = None
             return self._search_motion(t, obstacles, near)
-        cmd = nav.command(best, obstacles, t, near)
+        # The scan's walls count with the map's where the camera cannot look: the map is
+        # placed through a mode that may be wrong (a door beside the robot that the
+        # mode's map has elsewhere).
+        cmd = nav.command(best, obstacles, t, near, seen=self.scan.in_robot_frame(self.odom))
         gone = math.hypot(*(self.odom[:2] - self._exploring_from[:2]))
         if cmd.state == "arrived" or gone >= rec.explore_m or t - self._explore_t0 > rec.explore_timeout_s:
             # Look round again from here (the scan keeps what it saw on the way).

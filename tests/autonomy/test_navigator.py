@@ -327,6 +327,24 @@ def test_map_walls_the_camera_cannot_see_steer_the_robot_off_them() -> None:
     assert far.command(np.zeros(3), np.zeros((0, 2)), 0.0).theta_star_rad == pytest.approx(0.0)
 
 
+def test_walls_seen_before_count_with_the_map_in_the_blind_spots() -> None:
+    """The same wall 0.33 m to the right, now unknown to the map but given as points seen
+    before (a relocalization's scan): the robot steers away from it as from a mapped
+    wall. Given to one frame, they are not kept for the next."""
+    wall = np.column_stack([np.linspace(-2.0, 3.0, 201), np.full(201, -0.33)])
+    nav = Navigator(line_graph(), NavigatorConfig(lane_shift_m=0.0), walls=np.zeros((0, 4)))
+    nav.set_goal(5, np.zeros(3))
+    cmd = nav.command(np.zeros(3), np.zeros((0, 2)), 0.0, seen=wall)
+    assert cmd.state == "driving" and cmd.theta_star_rad > math.radians(5)
+    pts = nav.map_points(np.zeros(3), 1.0)
+    assert len(pts) and np.all(np.hypot(pts[:, 0], pts[:, 1]) < 1.0)
+    nav2 = Navigator(line_graph(), NavigatorConfig(lane_shift_m=0.0), walls=np.zeros((0, 4)))
+    nav2.set_goal(5, np.zeros(3))
+    assert nav2.command(np.zeros(3), np.zeros((0, 2)), 0.0).theta_star_rad == pytest.approx(0.0)
+    nav.command(np.zeros(3), np.zeros((0, 2)), 0.1)
+    assert len(nav.map_points(np.zeros(3), 1.0)) == 0
+
+
 def test_slows_down_passing_close_to_an_obstacle() -> None:
     """With proximity_speed_mps 0.4, a person 0.55 m to the side, 1 m ahead: outside the
     avoidance corridor (0.4 m), so the robot drives straight on, but within

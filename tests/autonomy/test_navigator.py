@@ -216,6 +216,27 @@ def test_backs_off_away_from_a_wall_behind_it_and_not_into_one() -> None:
     assert v[0] < 0
 
 
+def test_backs_through_a_door_only_near_its_centre() -> None:
+    """A 0.92 m door leaves 0.16 m beside the robot; the map's jambs are placed through a
+    pose estimate that is a few cm off, so the robot backs straight through only within
+    ``backoff_clearance_m`` of the door's centre. 0.1 m off it, with its back in the
+    doorway, straight back would pass the jamb 5.8 cm beyond its radius: it backs off
+    towards the centre instead."""
+    cfg = NavigatorConfig(stuck_time_s=0.5, trail_s=0.0)
+    half = 0.46
+    door = np.array([[-3.0, 0.0, -half, 0.0], [half, 0.0, 3.0, 0.0]])
+    nav = Navigator(line_graph(), cfg, walls=door)
+    centred = nav._backoff_velocity(np.array([0.0, 0.3, math.pi / 2]), np.zeros((0, 2)))
+    np.testing.assert_allclose(centred, [-cfg.backoff_speed_mps, 0.0, 0.0], atol=1e-12)  # robot frame
+    off = nav._backoff_velocity(np.array([0.1, 0.3, math.pi / 2]), np.zeros((0, 2)))
+    assert off[0] < 0.0 and off[1] > 0.2 * cfg.backoff_speed_mps  # back and to its left: world south-west
+    # The jamb (0.46, 0) is kept beyond the robot radius plus the clearance over 0.4 m.
+    u = np.array([-off[1], off[0]]) / np.hypot(off[0], off[1])  # world axes
+    rel = np.array([half - 0.1, -0.3])
+    along = np.clip(rel @ u, 0.0, cfg.backoff_check_m)
+    assert np.hypot(*(rel - along * u)) >= nav.avoid.robot_radius_m + cfg.backoff_clearance_m
+
+
 def test_in_camera_view_is_the_cone_between_the_ranges() -> None:
 
     cam = DepthCamera()

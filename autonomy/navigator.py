@@ -760,6 +760,43 @@ class Navigator:
         self._look_back = None
         return NavCommand(np.array([0.0, 0.0, self.cfg.look_turn_rate_rad_s]), "looking")
 
+    def head_for(
+        self, pose: np.ndarray, heading: float, obstacles: np.ndarray, t: float, near_lines: np.ndarray | None = None, seen: np.ndarray | None = None
+    ) -> NavCommand:
+        """Drive along the world ``heading`` (in the frame of ``pose``) with no plan and
+        no map: a robot that does not know where it is, in a hall whose walls lie beyond
+        the camera's range, drives to find some (ours). Turn in place to face the
+        heading, then Eq. 3-5 on what the camera, the memory and the near field show,
+        with the points of ``seen`` (robot frame; the relocalization's scan) in the
+        camera's blind spots standing in for the map's walls, which cannot be placed
+        without a pose. Blocked, the robot waits turning towards the heading."""
+        cfg = self.cfg
+        self._seen = np.zeros((0, 2))
+        self._t = float(t)
+        self._progress_t = float(t)
+        obstacles = self.remember(pose, obstacles, t)
+        near = self.near_points(pose, near_lines)
+        if len(near):
+            obstacles = np.vstack([obstacles, near])
+        xy = np.asarray(pose[:2], dtype=np.float64)
+        carrot = xy + cfg.lookahead_m * np.array([math.cos(heading), math.sin(heading)])
+        desired = wrap_angle(heading - float(pose[2]))
+        turn = float(np.clip(cfg.heading_gain * desired, -cfg.max_turn_rate_rad_s, cfg.max_turn_rate_rad_s))
+        if abs(desired) > cfg.turn_in_place_rad:
+            return NavCommand(np.array([0.0, 0.0, turn]), "turning", carrot=carrot, desired_rad=desired)
+        static = np.zeros((0, 2)) if seen is None else np.asarray(seen, dtype=np.float64).reshape(-1, 2)
+        if len(static) and cfg.map_blind_spots_m > 0:
+            static = static[static[:, 0] ** 2 + static[:, 1] ** 2 < cfg.map_blind_spots_m**2]
+            static = static[~in_camera_view(static[:, 0] - self.camera.forward_m, static[:, 1], self.camera)]
+        else:
+            static = np.zeros((0, 2))
+        res = self._keep_side(
+            choose_direction(obstacles, desired, self.avoid, static, self.avoid.robot_radius_m + cfg.map_clearance_m), desired
+        )
+        if res.blocked:
+            return NavCommand(np.array([0.0, 0.0, turn]), "blocked", carrot, desired, res.theta_star, res.open_length_m, (res.angles, res.lengths))
+        return self._drive(obstacles, carrot, desired, min(cfg.cruise_speed_mps, res.safe_speed_mps), res)
+
     def pose_jumped(self, pose: np.ndarray | None = None, t: float | None = None) -> None:
         """The pose estimate jumped (the robot was re-localized elsewhere): forget what
         was placed through the old estimate -- the obstacle memory, the trail, the lane

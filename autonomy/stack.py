@@ -261,6 +261,7 @@ class RobotStack:
         self._explore_T = np.zeros(3)
         self._explore_t0 = 0.0
         self._explored: set[int] = set()
+        self._probe: tuple[np.ndarray, float, float] | None = None
         self._goal: int | None = None
         self._last_depth_key: np.ndarray | None = None
         self._maybe_stale = False
@@ -498,6 +499,7 @@ class RobotStack:
         self._exploring_from = None
         self._explore_t0 = t
         self._explored: set[int] = set()
+        self._probe = None
         self._confirmed = 0
         self._candidate: np.ndarray | None = None
         if self.health is not None:
@@ -513,6 +515,7 @@ class RobotStack:
         self.modes = []
         self._prior = None
         self._exploring_from = None
+        self._probe = None
 
     def _relocalize_step(self, t: float) -> None:
         """While lost: grow the scan; once the robot has looked round, search the map (then
@@ -632,6 +635,10 @@ class RobotStack:
         rec = self.cfg.recovery
         nav = self.navigator
         assert nav is not None
+        if self._probe is not None or (not self.modes and self._swept() and len(self.scan.points) < rec.relocalization.min_scan_points):
+            cmd = self._probe_motion(t, obstacles, near)
+            if cmd is not None:
+                return cmd
         if not self.modes or t - self._reloc_t0 < rec.explore_after_s:
             return nav.look_around(t)
         if self._exploring_from is None:
@@ -667,6 +674,44 @@ class RobotStack:
             self._reloc_t0 = t
             self.scan.turned_rad = 0.0
             return nav.look_around(t)
+        cmd.state = "exploring" if cmd.state in ("driving", "turning") else cmd.state
+        return cmd
+
+    def _swept(self) -> bool:
+        """Whether the robot has looked round since it last set out (``min_sweep_deg``)."""
+        return self.scan.turned_rad >= math.radians(self.cfg.recovery.relocalization.min_sweep_deg)
+
+    def _probe_motion(self, t: float, obstacles: np.ndarray, near: np.ndarray | None) -> NavCommand | None:
+        """Looked round without seeing enough to search the map (``min_scan_points``: in a
+        hall whose walls all lie beyond the camera's 4 m the scan holds a pillar or two),
+        drive to find walls: on dead reckoning alone, towards what the scan holds (the
+        mean of its points' directions; straight on when it holds nothing), avoiding
+        what the camera sees, until the scan can be searched, ``explore_m`` is behind, a
+        search has found modes or ``explore_timeout_s`` has passed; then look round
+        again (None: the caller does). The next probe sets out from where this one
+        ended, towards what the scan holds from there."""
+        rec, rc = self.cfg.recovery, self.cfg.recovery.relocalization
+        nav = self.navigator
+        assert nav is not None
+        if self._probe is None:
+            pts = self.scan.in_robot_frame(self.odom)
+            d = np.hypot(pts[:, 0], pts[:, 1]) if len(pts) else np.zeros(0)
+            keep = d > 1e-6
+            u = (pts[keep] / d[keep, None]).sum(axis=0) if keep.any() else np.zeros(2)
+            rel = math.atan2(float(u[1]), float(u[0])) if math.hypot(float(u[0]), float(u[1])) > 1e-9 else 0.0
+            self._probe = (self.odom.copy(), wrap_angle(float(self.odom[2]) + rel), t)
+            # The memory and trail were placed through the belief before the alarm; this
+            # drive sees the world in the odometry's frame.
+            nav.pose_jumped()
+        start, heading, t0 = self._probe
+        gone = math.hypot(float(self.odom[0] - start[0]), float(self.odom[1] - start[1]))
+        if self.modes or len(self.scan.points) >= rc.min_scan_points or gone >= rec.explore_m or t - t0 > rec.explore_timeout_s:
+            self._probe = None
+            self._reloc_t0 = t
+            self.scan.turned_rad = 0.0
+            nav.pose_jumped()
+            return None
+        cmd = nav.head_for(self.odom, heading, obstacles, t, near, seen=self.scan.in_robot_frame(self.odom))
         cmd.state = "exploring" if cmd.state in ("driving", "turning") else cmd.state
         return cmd
 

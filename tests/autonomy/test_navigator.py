@@ -366,6 +366,31 @@ def test_walls_seen_before_count_with_the_map_in_the_blind_spots() -> None:
     assert len(nav.map_points(np.zeros(3), 1.0)) == 0
 
 
+def test_heads_for_a_direction_without_a_plan_or_the_map() -> None:
+    """head_for: a robot that does not know where it is drives along a heading in its
+    odometry's frame. Facing away, it turns in place; facing it, it drives at cruise
+    speed whatever the map says (the pose is not on the map: a mapped wall beside it
+    is ignored); a wall it sees ahead blocks it; points of its scan beside it, where
+    the camera does not look, steer it off them as the map's walls would."""
+    mapped = np.array([[-2.0, -0.33, 3.0, -0.33]])  # where the camera does not look
+    nav = Navigator(line_graph(), walls=mapped)
+    cmd = nav.head_for(np.zeros(3), math.pi, np.zeros((0, 2)), 0.0)
+    assert cmd.state == "turning" and np.hypot(*cmd.velocity[:2]) == 0.0 and abs(cmd.velocity[2]) > 1.0
+    cmd = nav.head_for(np.zeros(3), 0.0, np.zeros((0, 2)), 0.0)
+    assert cmd.state == "driving" and cmd.theta_star_rad == pytest.approx(0.0)
+    np.testing.assert_allclose(cmd.velocity, [0.75, 0.0, 0.0], atol=1e-9)
+    np.testing.assert_allclose(cmd.carrot, [nav.cfg.lookahead_m, 0.0])
+    wall = np.array([[0.4, y] for y in np.linspace(-3, 3, 121)])
+    blocked = Navigator(line_graph(), NavigatorConfig(memory_s=0.0), walls=mapped)
+    cmd = blocked.head_for(np.zeros(3), 0.0, wall, 0.0)
+    assert cmd.state == "blocked" and np.hypot(*cmd.velocity[:2]) == 0.0
+    beside = np.column_stack([np.linspace(-2.0, 3.0, 201), np.full(201, -0.33)])
+    cmd = Navigator(line_graph()).head_for(np.zeros(3), 0.0, np.zeros((0, 2)), 0.0, seen=beside)
+    assert cmd.state == "driving" and cmd.theta_star_rad > math.radians(5)
+    far = np.column_stack([np.linspace(-2.0, 3.0, 201), np.full(201, -0.45)])
+    assert Navigator(line_graph()).head_for(np.zeros(3), 0.0, np.zeros((0, 2)), 0.0, seen=far).theta_star_rad == pytest.approx(0.0)
+
+
 def test_slows_down_passing_close_to_an_obstacle() -> None:
     """With proximity_speed_mps 0.4, a person 0.55 m to the side, 1 m ahead: outside the
     avoidance corridor (0.4 m), so the robot drives straight on, but within

@@ -531,3 +531,41 @@ def test_prepare_recovery_builds_the_map_search_up_front(building) -> None:
     off = make_stack(building, recovery=replace(stack.cfg.recovery, enabled=False))
     off.prepare_recovery()
     assert off._global is None
+
+
+#: In the atrium's west aisle, 4 m from its west wall: looking round, the camera (4 m
+#: range) sees two pillars' faces, too few points to search the map.
+HALL = np.array([25.3, 15.25, math.pi])
+
+
+@pytest.mark.slow
+def test_an_unknown_start_where_no_wall_is_in_range_drives_to_find_walls(building) -> None:
+    """reset(None) in the atrium, perfect odometry, the camera seeing the map from the
+    true pose (with 3 mm of noise: a view of bare floor repeats exactly as the robot
+    turns, and the stack would drop it as stale). After the sweep the scan is too small
+    to search and no mode exists; the robot drives on dead reckoning towards what it saw
+    until walls come into range, looks round again, and relocalizes within 50 s. A robot
+    that only looked round would turn in place for ever."""
+    stack = make_stack(building, pose=None)
+    rc = stack.cfg.recovery.relocalization
+    noise = np.random.default_rng(5)
+    fps = 10.0
+    truth, inc, states, swept_small = HALL.copy(), None, [], None
+    for k in range(int(50 * fps)):
+        t = k / fps
+        z = render(building[1], truth)
+        stack.perceive(np.where(z > 0, z + noise.normal(0.0, 0.003, z.shape), 0.0).astype(np.float32))
+        stack.localize(inc, t)
+        if not stack.relocalizing:
+            break
+        if swept_small is None and stack.scan.turned_rad >= math.radians(rc.min_sweep_deg):
+            swept_small = (len(stack.scan.points), len(stack.modes))
+        cmd = stack.decide(t)
+        states.append((cmd.state, len(stack.modes)))
+        inc = cmd.velocity / fps
+        truth = compose_pose(truth, inc)
+    assert swept_small is not None and swept_small[0] < rc.min_scan_points and swept_small[1] == 0, swept_small
+    assert ("exploring", 0) in states, "it never drove without a mode"
+    assert not stack.relocalizing, (t, stack.last_search.reason if stack.last_search else None)
+    err = relative_pose(truth, stack.pose)
+    assert math.hypot(err[0], err[1]) < 0.15 and abs(wrap_angle(err[2])) < math.radians(3.0), err

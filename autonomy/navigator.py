@@ -775,7 +775,9 @@ class Navigator:
         self._t = float(t)
         self._progress_t = float(t)
         obstacles = self.remember(pose, obstacles, t)
-        near = self.near_points(pose, near_lines)
+        # Every near-field sight line counts: no map wall can be placed to explain one.
+        lines = np.zeros((0, 4)) if near_lines is None else np.asarray(near_lines, dtype=np.float64).reshape(-1, 4)
+        near = line_points(lines, self.avoid.near_field.point_step_m)
         if len(near):
             obstacles = np.vstack([obstacles, near])
         xy = np.asarray(pose[:2], dtype=np.float64)

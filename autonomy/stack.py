@@ -45,7 +45,7 @@ from autonomy.geometry import (
 from autonomy.health import HealthConfig, HealthMonitor, HealthSample, explain_points
 from autonomy.mount_check import MountCheck, MountCheckConfig
 from autonomy.navigator import NavCommand, Navigator, NavigatorConfig
-from autonomy.nearfield import NearField
+from autonomy.nearfield import NearField, line_points
 from autonomy.observation import ObservationConfig, correspond
 from autonomy.raycast import SceneQuery, VisibilityGridConfig, load_or_build
 from autonomy.relocalization import GlobalLocalizer, Mode, RelocalizationConfig, Scan
@@ -66,6 +66,10 @@ STALE_MOTION_RAD = 1e-3
 #: A mode is only accepted on a search of the whole map: one that passes the decision
 #: when re-scored brings the next whole-map search forward.
 FULL_SEARCH_EVERY = 5
+#: While relocalizing, what the near field shows (something closer than the camera's
+#: minimum range) is kept this long, in the dead-reckoning frame: about one look round,
+#: so a drive that sets out after it knows what stands beside the robot.
+NEAR_KEEP_S = 15.0
 #: An exploring plan may pass this much closer to a scan point than the robot's radius
 #: (the Kinect's noise on walls beside the path).
 EXPLORE_CLEAR_SLACK_M = 0.05
@@ -262,6 +266,7 @@ class RobotStack:
         self._explore_t0 = 0.0
         self._explored: set[int] = set()
         self._probe: tuple[np.ndarray, float, float] | None = None
+        self._near_seen = np.zeros((0, 3))
         self._goal: int | None = None
         self._last_depth_key: np.ndarray | None = None
         self._maybe_stale = False
@@ -500,6 +505,7 @@ class RobotStack:
         self._explore_t0 = t
         self._explored: set[int] = set()
         self._probe = None
+        self._near_seen = np.zeros((0, 3))
         self._confirmed = 0
         self._candidate: np.ndarray | None = None
         if self.health is not None:
@@ -524,6 +530,7 @@ class RobotStack:
         per = self.perception
         if self._fresh and per is not None:
             self.scan.add(self.odom, per.points_2d)
+            self._keep_near(per.near_lines, t)
         looked = self.scan.turned_rad >= math.radians(rc.min_sweep_deg) or self.scan.travelled_m >= rc.min_travel_m
         if not looked or t - self._last_search_t < rc.search_every_s or len(self.scan.points) < rc.min_scan_points:
             return
@@ -579,6 +586,33 @@ class RobotStack:
                 # Re-scoring sees only the modes kept so far; the place the robot is at
                 # may not be among them (a room's corner fits hundreds of places).
                 self._search_whole_map = True
+
+    def _keep_near(self, near_lines: np.ndarray | None, t: float) -> None:
+        """Keep this frame's near-field points (dead-reckoning frame, with their time) for
+        ``NEAR_KEEP_S``. Looking round in place, the robot sees nothing closer than
+        0.8 m; a pillar beside it hides the floor only while the camera faces it, and
+        the drive that sets out afterwards would turn into it."""
+        kept = self._near_seen
+        kept = kept[kept[:, 2] >= t - NEAR_KEEP_S]
+        lines = np.zeros((0, 4)) if near_lines is None else np.asarray(near_lines, dtype=np.float64).reshape(-1, 4)
+        if len(lines):
+            q = line_points(lines, self.cfg.avoidance.near_field.point_step_m)
+            p = self.odom
+            c, s = math.cos(float(p[2])), math.sin(float(p[2]))
+            w = np.column_stack([p[0] + c * q[:, 0] - s * q[:, 1], p[1] + s * q[:, 0] + c * q[:, 1], np.full(len(q), t)])
+            kept = np.vstack([w, kept])  # newest first: np.unique keeps the first of a cell
+            key = np.floor(kept[:, :2] / self.scan.cell_m).astype(np.int64)
+            _, first = np.unique(key[:, 0] * 1_000_003 + key[:, 1], return_index=True)
+            kept = kept[np.sort(first)]
+        self._near_seen = kept
+
+    def _seen_now(self) -> np.ndarray:
+        """What the robot has seen while relocalizing, relative to it now: the scan, and
+        the near field's points of the last ``NEAR_KEEP_S``."""
+        pts = self.scan.in_robot_frame(self.odom)
+        if len(self._near_seen):
+            pts = np.vstack([pts, points_in_frame(self.odom, self._near_seen[:, :2])])
+        return pts
 
     def _accept(self, mode: Mode, t: float, reason: str, n_modes: int) -> None:
         """Restart CGR on the accepted mode; the navigator re-plans to its goal from there."""
@@ -666,7 +700,7 @@ class RobotStack:
         # The scan's walls count with the map's where the camera cannot look: the map is
         # placed through a mode that may be wrong (a door beside the robot that the
         # mode's map has elsewhere).
-        cmd = nav.command(best, obstacles, t, near, seen=self.scan.in_robot_frame(self.odom))
+        cmd = nav.command(best, obstacles, t, near, seen=self._seen_now())
         gone = math.hypot(*(self.odom[:2] - self._exploring_from[:2]))
         if cmd.state == "arrived" or gone >= rec.explore_m or t - self._explore_t0 > rec.explore_timeout_s:
             # Look round again from here (the scan keeps what it saw on the way).
@@ -711,7 +745,7 @@ class RobotStack:
             self.scan.turned_rad = 0.0
             nav.pose_jumped()
             return None
-        cmd = nav.head_for(self.odom, heading, obstacles, t, near, seen=self.scan.in_robot_frame(self.odom))
+        cmd = nav.head_for(self.odom, heading, obstacles, t, near, seen=self._seen_now())
         cmd.state = "exploring" if cmd.state in ("driving", "turning") else cmd.state
         return cmd
 

@@ -59,6 +59,15 @@ def points_in_frame(pose: np.ndarray, xy: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]]))
 
 
+def points_from_frame(pose: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """Points (N, 2) given in the frame of ``pose``, in world coordinates (the inverse of
+    :func:`points_in_frame`)."""
+    p = np.asarray(pose, dtype=np.float64)
+    q = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    c, s = math.cos(p[2]), math.sin(p[2])
+    return np.column_stack([p[0] + c * q[:, 0] - s * q[:, 1], p[1] + s * q[:, 0] + c * q[:, 1]])
+
+
 def polyline_clear(path: np.ndarray, points: np.ndarray, length_m: float, clearance_m: float) -> bool:
     """Whether the first ``length_m`` of the polyline ``path`` (K, 2) passes farther than
     ``clearance_m`` from every one of ``points`` (N, 2)."""

@@ -47,7 +47,7 @@ import numpy as np
 
 from autonomy.errors import require_int, require_non_negative, require_positive
 from autonomy.freespace import FreeSpace
-from autonomy.geometry import points_in_frame, wrap_angle
+from autonomy.geometry import points_from_frame, points_in_frame, wrap_angle
 from autonomy.health import explain_points
 
 
@@ -388,8 +388,7 @@ class Scan:
         q = np.asarray(pts_robot, dtype=np.float64).reshape(-1, 2)
         if not len(q):
             return
-        c, s = math.cos(p[2]), math.sin(p[2])
-        w = np.column_stack([p[0] + c * q[:, 0] - s * q[:, 1], p[1] + s * q[:, 0] + c * q[:, 1]])
+        w = points_from_frame(p, q)
         allp = np.vstack([w, self.points])  # newest first: np.unique keeps the first of a cell
         allo = np.vstack([np.broadcast_to(p[:2], w.shape), self.origins])
         key = np.floor(allp / self.cell_m).astype(np.int64)

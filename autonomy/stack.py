@@ -36,6 +36,7 @@ from autonomy.freespace import FreeSpaceConfig, build_free_space
 from autonomy.fspf import FSPFConfig, FSPFResult, fspf
 from autonomy.geometry import (
     compose_pose,
+    points_from_frame,
     points_in_frame,
     polyline_clear,
     relative_pose,
@@ -596,10 +597,8 @@ class RobotStack:
         kept = kept[kept[:, 2] >= t - NEAR_KEEP_S]
         lines = np.zeros((0, 4)) if near_lines is None else np.asarray(near_lines, dtype=np.float64).reshape(-1, 4)
         if len(lines):
-            q = line_points(lines, self.cfg.avoidance.near_field.point_step_m)
-            p = self.odom
-            c, s = math.cos(float(p[2])), math.sin(float(p[2]))
-            w = np.column_stack([p[0] + c * q[:, 0] - s * q[:, 1], p[1] + s * q[:, 0] + c * q[:, 1], np.full(len(q), t)])
+            w = points_from_frame(self.odom, line_points(lines, self.cfg.avoidance.near_field.point_step_m))
+            w = np.column_stack([w, np.full(len(w), t)])
             kept = np.vstack([w, kept])  # newest first: np.unique keeps the first of a cell
             key = np.floor(kept[:, :2] / self.scan.cell_m).astype(np.int64)
             _, first = np.unique(key[:, 0] * 1_000_003 + key[:, 1], return_index=True)

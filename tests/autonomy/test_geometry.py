@@ -14,6 +14,7 @@ from autonomy.geometry import (
     crosses_any,
     point_segment_distance,
     point_segment_projection,
+    points_from_frame,
     points_in_frame,
     polyline_clear,
     relative_pose,
@@ -81,12 +82,15 @@ def test_crossing_is_proper_and_the_kernel_agrees(seg: tuple[float, ...], want: 
 
 
 @given(st.tuples(*[st.floats(-20, 20)] * 2, st.floats(-4, 4)), st.lists(st.tuples(st.floats(-20, 20), st.floats(-20, 20)), min_size=1, max_size=20))
-def test_points_in_frame_undo_compose_pose(pose, pts) -> None:
+def test_points_in_frame_undo_compose_pose_and_points_from_frame_redo_it(pose, pts) -> None:
     pose, pts = np.array(pose), np.array(pts)
     local = points_in_frame(pose, pts)
     assert local.flags.c_contiguous and local.shape == pts.shape
     back = np.array([compose_pose(pose, np.array([q[0], q[1], 0.0]))[:2] for q in local])
     np.testing.assert_allclose(back, pts, atol=1e-9)
+    np.testing.assert_allclose(points_from_frame(pose, local), pts, atol=1e-9)
+    direct = np.array([compose_pose(pose, np.array([q[0], q[1], 0.0]))[:2] for q in pts])
+    np.testing.assert_allclose(points_from_frame(pose, pts), direct, atol=1e-9)
 
 
 coord = st.floats(-5, 5, allow_nan=False)

@@ -16,7 +16,14 @@ import numpy as np
 import pytest
 
 from autonomy.camera import DepthCamera, pixel_rays
-from autonomy.geometry import compose_pose, points_in_frame, relative_pose, wrap_angle, wrap_angles
+from autonomy.geometry import (
+    compose_pose,
+    points_from_frame,
+    points_in_frame,
+    relative_pose,
+    wrap_angle,
+    wrap_angles,
+)
 from autonomy.raycast import SceneQuery, load_or_build, rays_hit
 from autonomy.stack import LOCALIZATION_GRID, RobotStack, StackConfig
 from sim.simulator.blueprints import ASSETS_DIR, load_blueprint
@@ -609,10 +616,9 @@ def test_what_the_near_field_shows_while_looking_round_keeps_a_drive_off_it(buil
     # Turned in place to face it: the same points relative to the robot facing that way.
     o = stack.odom
     facing = np.array([o[0], o[1], heading])
-    c, sn = math.cos(float(o[2])), math.sin(float(o[2]))
 
     def turned(p: np.ndarray) -> np.ndarray:
-        return points_in_frame(facing, np.column_stack([o[0] + c * p[:, 0] - sn * p[:, 1], o[1] + sn * p[:, 0] + c * p[:, 1]]))
+        return points_in_frame(facing, points_from_frame(o, p))
 
     nav = stack.navigator
     nav.pose_jumped()

@@ -495,10 +495,14 @@ class Navigator:
         cfg = self.cfg
         if cfg.map_blind_spots_m <= 0:
             return np.zeros((0, 2))
-        w = self.map_points(pose, cfg.map_blind_spots_m)
-        if not len(w):
-            return w
-        return w[~in_camera_view(w[:, 0] - self.camera.forward_m, w[:, 1], self.camera)]
+        return self._out_of_view(self.map_points(pose, cfg.map_blind_spots_m))
+
+    def _out_of_view(self, pts: np.ndarray) -> np.ndarray:
+        """The points (robot frame) the camera cannot see now: outside its view cone or
+        closer than its minimum range."""
+        if not len(pts):
+            return pts
+        return pts[~in_camera_view(pts[:, 0] - self.camera.forward_m, pts[:, 1], self.camera)]
 
     def _point_at(self, s: float) -> np.ndarray:
         s = min(max(s, 0.0), float(self._cum[-1]))
@@ -786,12 +790,10 @@ class Navigator:
         turn = float(np.clip(cfg.heading_gain * desired, -cfg.max_turn_rate_rad_s, cfg.max_turn_rate_rad_s))
         if abs(desired) > cfg.turn_in_place_rad:
             return NavCommand(np.array([0.0, 0.0, turn]), "turning", carrot=carrot, desired_rad=desired)
-        static = np.zeros((0, 2)) if seen is None else np.asarray(seen, dtype=np.float64).reshape(-1, 2)
-        if len(static) and cfg.map_blind_spots_m > 0:
-            static = static[static[:, 0] ** 2 + static[:, 1] ** 2 < cfg.map_blind_spots_m**2]
-            static = static[~in_camera_view(static[:, 0] - self.camera.forward_m, static[:, 1], self.camera)]
-        else:
-            static = np.zeros((0, 2))
+        static = np.zeros((0, 2))
+        if seen is not None and cfg.map_blind_spots_m > 0:
+            static = np.asarray(seen, dtype=np.float64).reshape(-1, 2)
+            static = self._out_of_view(static[static[:, 0] ** 2 + static[:, 1] ** 2 < cfg.map_blind_spots_m**2])
         res = self._keep_side(
             choose_direction(obstacles, desired, self.avoid, static, self.avoid.robot_radius_m + cfg.map_clearance_m), desired
         )

@@ -532,7 +532,7 @@ class RobotStack:
         if self._fresh and per is not None:
             self.scan.add(self.odom, per.points_2d)
             self._keep_near(per.near_lines, t)
-        looked = self.scan.turned_rad >= math.radians(rc.min_sweep_deg) or self.scan.travelled_m >= rc.min_travel_m
+        looked = self._swept() or self.scan.travelled_m >= rc.min_travel_m
         if not looked or t - self._last_search_t < rc.search_every_s or len(self.scan.points) < rc.min_scan_points:
             return
         self._last_search_t = t

@@ -57,7 +57,12 @@ _MEMORY_KEEP_MARGIN_M = 0.5
 _TRAIL_STEP_M = 0.05
 """The trail keeps a footprint each time the robot has moved this far (``trail_s``)."""
 _TRAIL_SAMPLE_M = 0.025
-"""A back-off's sweep is checked against the trail at points this far apart."""
+"""A back-off's way back is checked for clearance at points this far apart."""
+_TRAIL_GAP_M = 0.15
+"""Consecutive footprints farther apart than this were not joined by driving (a pose
+correction, a stretch the robot backed along): the way back ends there."""
+_RETRACE_AHEAD_M = 0.1
+"""A back-off heads for the point this far back along the trail."""
 _LOOK_BACK_FACING_RAD = math.radians(10.0)
 """A look back drives once the robot faces the way back this closely."""
 _BLOCKED_POINTS_KEPT = 64
@@ -324,6 +329,8 @@ class Navigator:
         self._trail_t = np.full(cap, -np.inf)
         self._trail_next = 0
         self._trail_last: np.ndarray | None = None
+        self._retracing = False
+        """The last command backed off along the trail (:meth:`retrace`)."""
         self._mem = np.zeros((0, 2))
         self._mem_t = np.zeros(0)
         self._mem_all = np.zeros((0, 2))
@@ -590,26 +597,28 @@ class Navigator:
         return rel[rel[:, 0] * rel[:, 0] + rel[:, 1] * rel[:, 1] < radius_m * radius_m]
 
     def _backoff_velocity(self, pose: np.ndarray, obstacles: np.ndarray) -> np.ndarray:
-        """Recovery motion: back off along the clearest direction behind the robot.
+        """Recovery motion: back off the way the robot came, where nothing is in the way.
 
-        Behind the robot the camera sees nothing, so a direction is taken only where the
-        robot has been (its trail, :meth:`trail_allows`; ``trail_s``) and where the map's
-        walls and the remembered obstacles leave room (someone may have stepped in since):
-        straight back if that holds for ``backoff_check_m``, else the nearest such
-        direction within 75 degrees of it, else no translation (the robot re-plans where
-        it stands). Straight back would run into door frames and walls it cannot see
-        (ours), and off the trail into furniture the camera never saw.
+        Behind the robot the camera sees nothing, so with the trail on (``trail_s``) the
+        robot only retraces its own trail (:meth:`retrace`): the space its body has just
+        swept is the only evidence there is that the way back is free. A straight line
+        near the trail is not enough: a robot that passed a person at a door jamb with
+        millimetres to spare, whom the jamb had hidden from the camera, touches them
+        backing off straight 5 cm beside the way it came. The way back is taken when its
+        first stretch runs within 75 degrees of straight back and the map's walls and the
+        remembered obstacles keep ``backoff_clearance_m`` from it (someone may have
+        stepped in since); else no translation (the robot re-plans where it stands).
+        With the trail off: straight back if that holds for ``backoff_check_m``, else the
+        nearest such direction within 75 degrees of it (the map and memory only).
         """
         cfg = self.cfg
         pts = np.asarray(obstacles, dtype=np.float64).reshape(-1, 2)
         walls = self.map_points(pose, cfg.backoff_check_m + self.avoid.robot_radius_m + 0.2)
         pts = np.vstack([pts, walls, self._mem_all])
         clear = self.avoid.robot_radius_m + cfg.backoff_clearance_m
-        steps = (0, 1, -1, 2, -2, 3, -3, 4, -4, 5, -5)
-        on_trail = self.trail_allows(pose, float(pose[2]) + math.pi + np.radians(15.0) * np.array(steps, dtype=np.float64))
-        for j, k in enumerate(steps):
-            if not on_trail[j]:
-                continue
+        if cfg.trail_s > 0:
+            return self._retrace_velocity(pose, pts, clear)
+        for k in (0, 1, -1, 2, -2, 3, -3, 4, -4, 5, -5):
             phi = math.pi + k * math.radians(15.0)
             u = np.array([math.cos(phi), math.sin(phi)])
             ahead = pts[pts @ u > 0.0] if len(pts) else pts  # what lies the other way never blocks
@@ -619,6 +628,38 @@ class Navigator:
                     continue
             return np.array([cfg.backoff_speed_mps * u[0], cfg.backoff_speed_mps * u[1], 0.0])
         return np.zeros(3)
+
+    def _retrace_velocity(self, pose: np.ndarray, pts: np.ndarray, clear: float) -> np.ndarray:
+        """The back-off along :meth:`retrace` (robot-frame velocity; zero where it may
+        not): towards the point ``_RETRACE_AHEAD_M`` back along the trail, when that runs
+        within 75 degrees of straight back and no point of ``pts`` (robot frame) that the
+        way back brings the robot closer to comes within ``clear`` of it."""
+        cfg = self.cfg
+        way = self.retrace(pose)
+        if len(way) < 2:
+            return np.zeros(3)
+        c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
+        rel = way - way[0]
+        q = np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]])  # robot frame
+        steps = np.hypot(*np.diff(q, axis=0).T)
+        cum = np.concatenate([[0.0], np.cumsum(steps)])
+        if cum[-1] < _TRAIL_STEP_M:
+            return np.zeros(3)
+        target = np.array([np.interp(min(_RETRACE_AHEAD_M, cum[-1]), cum, q[:, i]) for i in range(2)])
+        if abs(wrap_angle(math.atan2(target[1], target[0]) - math.pi)) > math.radians(75.0) + 1e-9:
+            return np.zeros(3)
+        if len(pts):
+            # The way back, every _TRAIL_SAMPLE_M; a point blocks where the robot would
+            # come closer to it than it is now, within the clearance.
+            d = np.linspace(0.0, cum[-1], int(math.ceil(cum[-1] / _TRAIL_SAMPLE_M)) + 1)
+            samples = np.column_stack([np.interp(d, cum, q[:, 0]), np.interp(d, cum, q[:, 1])])
+            gap = np.sqrt(((pts[:, None, :] - samples[None, 1:, :]) ** 2).sum(axis=-1)).min(axis=1)
+            now = np.hypot(pts[:, 0], pts[:, 1])
+            if np.any((gap < clear) & (gap < now)):
+                return np.zeros(3)
+        u = target / max(float(np.hypot(target[0], target[1])), 1e-12)
+        self._retracing = True
+        return np.array([cfg.backoff_speed_mps * u[0], cfg.backoff_speed_mps * u[1], 0.0])
 
     # -- the trail, blocked edges, looking round, pose jumps ----------------------------
     def _record_trail(self, pose: np.ndarray, t: float) -> None:
@@ -645,25 +686,44 @@ class Navigator:
         order = np.arange(self._trail_next - n, self._trail_next) % cap
         return self._trail[order][t - self._trail_t[order] <= self.cfg.trail_s]
 
-    def trail_allows(self, pose: np.ndarray, angles: np.ndarray) -> np.ndarray:
-        """For each world-frame direction in ``angles``: whether a straight move of
-        ``backoff_check_m`` that way from the pose stays on the trail, i.e. every point of
-        it (every ``_TRAIL_SAMPLE_M``) lies within ``trail_tolerance_m`` of a footprint of
-        the trail or of the pose itself (then the robot's disc there lies within that
-        tolerance of the footprint's disc). All True when the trail is off."""
+    def retrace(self, pose: np.ndarray) -> np.ndarray:
+        """The way back along the trail from the pose (world frame, the pose first).
+
+        It starts at the point of the trail nearest the pose (the latest such, on a trail
+        that crosses itself), if that lies within ``trail_tolerance_m``, and runs back
+        through older footprints for ``backoff_check_m`` at most, ending where
+        consecutive footprints lie more than ``_TRAIL_GAP_M`` apart (the robot did not
+        drive between them). Just the pose when the trail is off or not near it."""
         cfg = self.cfg
-        angles = np.asarray(angles, dtype=np.float64).reshape(-1)
-        if cfg.trail_s <= 0:
-            return np.ones(len(angles), dtype=bool)
         xy = np.asarray(pose[:2], dtype=np.float64)
-        tr = self.trail_points()
-        reach = cfg.backoff_check_m + cfg.trail_tolerance_m
-        tr = np.vstack([tr[(tr[:, 0] - xy[0]) ** 2 + (tr[:, 1] - xy[1]) ** 2 <= reach * reach], xy[None, :]])
-        d = np.linspace(0.0, cfg.backoff_check_m, int(math.ceil(cfg.backoff_check_m / _TRAIL_SAMPLE_M)) + 1)
-        u = np.column_stack([np.cos(angles), np.sin(angles)])
-        q = xy + d[None, :, None] * u[:, None, :]  # (directions, samples, 2)
-        gap2 = ((q[:, :, None, :] - tr[None, None, :, :]) ** 2).sum(axis=-1).min(axis=-1)
-        return (gap2 <= cfg.trail_tolerance_m**2).all(axis=1)
+        tr = self.trail_points() if cfg.trail_s > 0 else np.zeros((0, 2))
+        if len(tr) < 2:
+            if len(tr) and float(np.hypot(*(tr[0] - xy))) <= cfg.trail_tolerance_m:
+                return np.vstack([xy, tr[0]])
+            return xy[None, :]
+        a, d = tr[:-1], np.diff(tr, axis=0)
+        dd = (d * d).sum(axis=1)
+        f = np.clip(((xy - a) * d).sum(axis=1) / np.maximum(dd, 1e-12), 0.0, 1.0)
+        proj = a + f[:, None] * d
+        gap = np.hypot(*(proj - xy).T)
+        gap[dd > _TRAIL_GAP_M**2] = np.inf  # not driven between those footprints
+        j = len(gap) - 1 - int(np.argmin(gap[::-1]))  # the nearest, the latest of equals
+        if not gap[j] <= cfg.trail_tolerance_m:
+            return xy[None, :]
+        back = tr[j::-1]
+        cut = np.flatnonzero(np.hypot(*np.diff(back, axis=0).T) > _TRAIL_GAP_M)
+        if len(cut):
+            back = back[: cut[0] + 1]
+        way = np.vstack([xy, proj[j], back])
+        steps = np.hypot(*np.diff(way, axis=0).T)
+        keep = np.concatenate([[True], steps > 1e-9])
+        way, steps = way[keep], steps[steps > 1e-9]
+        cum = np.concatenate([[0.0], np.cumsum(steps)])
+        if cum[-1] <= cfg.backoff_check_m:
+            return way
+        k = int(np.searchsorted(cum, cfg.backoff_check_m))
+        w = (cfg.backoff_check_m - cum[k - 1]) / max(cum[k] - cum[k - 1], 1e-12)
+        return np.vstack([way[:k], way[k - 1] + w * (way[k] - way[k - 1])])
 
     def _plan_direction(self, pose: np.ndarray) -> tuple[np.ndarray, float, float]:
         """The carrot on the plan (no lane shift), its direction in the robot frame and
@@ -813,6 +873,7 @@ class Navigator:
         self._trail_t[:] = -np.inf
         self._trail_next = 0
         self._trail_last = None
+        self._retracing = False
         self._lane = 0.0
         self._side = 0
         self._backoff_until = -1.0
@@ -977,7 +1038,9 @@ class Navigator:
         """
         self._seen = np.zeros((0, 2)) if seen is None else np.asarray(seen, dtype=np.float64).reshape(-1, 2)
         self._t = float(t)
-        self._record_trail(pose, t)
+        if not self._retracing:  # the way back is trail already; the retrace reads it back
+            self._record_trail(pose, t)
+        self._retracing = False
         if self.blocked:
             self._prune_blocked(t)
         obstacles = self.remember(pose, obstacles, t)

@@ -469,6 +469,21 @@ class GlobalLocalizer:
         )
         return out / len(pts)
 
+    def warm(self) -> None:
+        """Run each kernel of :meth:`search` once on one hypothesis and a few points, so
+        that numba loads them (and starts its thread pool, which the search's parallel
+        kernels are the first of a run to use) before the first alarm rather than at it:
+        a long run's memory then steps at its start, not at its first relocalization."""
+        if not len(self.candidates):
+            return
+        pts = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.5]])
+        rot = np.empty((1, 3, 2))  # writeable, as the search's: a read-only array is another signature
+        rot[0] = pts
+        _grid_costs(self.dist, self.origin[0], self.origin[1], self.inv_cell, self.candidates[:1], rot, 1.0, np.empty((1, 1)))
+        pose = np.array([self.candidates[0, 0], self.candidates[0, 1], 0.0])
+        _refine(self.dist, self.origin[0], self.origin[1], self.inv_cell, pose.copy(), pts, 1.0, 0.1, 0.1, 1)
+        self.scan_through_at(pose[None, :], np.zeros((3, 2)), pts)
+
     def _coarse_subsample(self, n: int) -> np.ndarray:
         """Indices of the even subsample of ``n`` scan points the coarse pass scores."""
         return np.linspace(0, n - 1, min(n, self.cfg.coarse_points)).astype(np.int64)

@@ -480,10 +480,11 @@ class RobotStack:
 
     def prepare_recovery(self) -> None:
         """Build the relocalization's map search now (the free-space grid, the coarse
-        hypotheses and the segment index) rather than at the first alarm: a long run's
+        hypotheses and the segment index) and load its kernels
+        (:meth:`GlobalLocalizer.warm`) rather than at the first alarm: a long run's
         memory is then steady from its start, and the first search does not wait for it."""
-        if self.health is not None:
-            self._global_localizer()
+        if self.health is not None and self._global is None:
+            self._global_localizer().warm()
 
     def _global_localizer(self) -> GlobalLocalizer:
         if self._global is None:

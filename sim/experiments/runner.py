@@ -34,6 +34,7 @@ from sim.experiments.blackbox import (
     starts_incident,
 )
 from sim.experiments.columns import Column
+from sim.experiments.memory import release_free_memory, resident_mb
 from sim.experiments.waypoints import Mission, close_leg, leg_timeout, plan_mission
 from sim.scenario import Scenario
 from sim.simulator import blueprints
@@ -57,21 +58,11 @@ PAPER_FIGURES: dict[str, dict[str, float]] = {
     "demo": {"distance_m": 4000.0, "resets": 3, "resets_per_km": 0.75},
 }
 
-#: Resident memory is sampled every this many frames (30 s of simulated time).
+#: Resident memory is sampled, after the free heap is returned to the system, every this
+#: many frames (30 s of simulated time).
 RSS_EVERY = 900
 #: The report's frame times at the start and the end of a run are medians over this many frames.
 ENDS_FRAMES = 2000
-
-
-def resident_mb() -> float:
-    """This process's resident memory in MB (Linux /proc; elsewhere its peak so far)."""
-    try:
-        with open("/proc/self/statm") as f:
-            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 1e6
-    except (OSError, ValueError, IndexError):
-        import resource
-
-        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e3
 
 
 def resources(run: Run) -> dict:
@@ -360,6 +351,9 @@ def tick(run: Run, recorder) -> bool:
     for k in STAGES:
         run.timing[k].append(timings[k])
     if run.frames % RSS_EVERY == 1:
+        # Free heap pages go back to the system first (sim.experiments.memory): a long
+        # run's resident memory is then what it uses, not the heap's high-water mark.
+        release_free_memory()
         run.rss_mb.append((run.frames, resident_mb(), run.distance_m))
     return True
 

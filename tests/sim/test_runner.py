@@ -138,7 +138,8 @@ def test_the_depth_backend_line_names_the_fix_for_the_slow_fallback():
 def test_resources_report_memory_and_frame_time_at_both_ends():
     from types import SimpleNamespace
 
-    from sim.experiments.runner import ENDS_FRAMES, STAGES, resident_mb, resources
+    from sim.experiments.memory import resident_mb
+    from sim.experiments.runner import ENDS_FRAMES, STAGES, resources
 
     n = 2 * ENDS_FRAMES + 500
     timing = {k: [0.001] * n for k in STAGES}

@@ -484,9 +484,10 @@ class RobotStack:
         (:meth:`GlobalLocalizer.warm`) rather than at the first alarm: a long run's
         memory is then steady from its start, and the first search does not wait for it."""
         if self.health is not None and self._global is None:
-            self._global_localizer().warm()
+            self.global_localizer().warm()
 
-    def _global_localizer(self) -> GlobalLocalizer:
+    def global_localizer(self) -> GlobalLocalizer:
+        """The relocalization's map search on this stack's map (built on first use)."""
         if self._global is None:
             r = self.cfg.avoidance.robot_radius_m
             fs = build_free_space(self.vectormap, FreeSpaceConfig(robot_radius_m=r))
@@ -537,7 +538,7 @@ class RobotStack:
         if not looked or t - self._last_search_t < rc.search_every_s or len(self.scan.points) < rc.min_scan_points:
             return
         self._last_search_t = t
-        gl = self._global_localizer()
+        gl = self.global_localizer()
         assert self.scene is not None
         query = self.scene
         pts = self.scan.in_robot_frame(self.odom)

@@ -231,6 +231,29 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 130 if report["interrupted"] else 0
 
 
+def cmd_reloc_sample(args: argparse.Namespace) -> int:
+    import json
+
+    from sim.experiments.reloc_sample import parse_region, sample
+
+    region = parse_region(args.region) if args.region else None
+
+    def show(tr) -> None:
+        x, y, yaw = tr.start
+        done = f"relocalized in {tr.seconds:.1f} s, {tr.error_m:.2f} m / {tr.heading_error_deg:.1f} deg off" if tr.relocalized else f"not found in {tr.seconds:.0f} s ({tr.reason})"
+        print(f"({x:.2f}, {y:.2f}, {math.degrees(yaw):.0f} deg): {done}", flush=True)
+
+    trials = sample(args.map, region, args.n, args.seed, args.seconds, args.noise_m, progress=show)
+    found = [t for t in trials if t.relocalized]
+    times = sorted(t.seconds for t in found)
+    tail = f", median {times[len(times) // 2]:.1f} s, worst {times[-1]:.1f} s" if times else ""
+    print(f"{args.map}: {len(found)} of {len(trials)} unknown starts relocalized within {args.seconds:.0f} s{tail}")
+    if args.out:
+        Path(args.out).write_text(json.dumps([t.__dict__ for t in trials], indent=2) + "\n", encoding="utf-8")
+        print(f"wrote {args.out}")
+    return 0
+
+
 def cmd_sweep(args: argparse.Namespace) -> int:
     from sim.experiments.sweep import SweepError, run_sweep
 
@@ -421,6 +444,18 @@ def build_parser() -> argparse.ArgumentParser:
     _add_snapshot_command(sub)
     _add_run_command(sub)
     _add_sweep_command(sub)
+    c = sub.add_parser(
+        "reloc-sample",
+        help="relocalize from unknown starts at random places of a map, seeing the map alone (docs/recovery.md)",
+    )
+    c.add_argument("--map", default="corridor_loop", help="a shipped map name or a blueprint path (default corridor_loop)")
+    c.add_argument("--region", help="x0,y0,x1,y1: draw the places inside this box (metres; default the whole map)")
+    c.add_argument("--n", type=int, default=8, help="number of places (default 8)")
+    c.add_argument("--seed", type=int, default=0, help="seed of the places, headings and depth noise (default 0)")
+    c.add_argument("--seconds", type=float, default=60.0, help="give up on a place after this long (default 60)")
+    c.add_argument("--noise-m", type=float, default=0.003, help="Gaussian depth noise in metres (default 0.003)")
+    c.add_argument("--out", help="also write the trials as JSON to this file")
+    c.set_defaults(func=cmd_reloc_sample)
     _add_eval_command(sub)
     _add_demos_command(sub)
     _add_train_command(sub)

@@ -15,7 +15,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from autonomy.camera import DepthCamera, pixel_rays
+from autonomy.camera import DepthCamera
 from autonomy.geometry import (
     compose_pose,
     points_from_frame,
@@ -24,9 +24,10 @@ from autonomy.geometry import (
     wrap_angle,
     wrap_angles,
 )
-from autonomy.raycast import SceneQuery, load_or_build, rays_hit
+from autonomy.raycast import SceneQuery, load_or_build
 from autonomy.stack import LOCALIZATION_GRID, RobotStack, StackConfig
 from sim.simulator.blueprints import ASSETS_DIR, load_blueprint
+from sim.simulator.map_depth import MapDepth
 
 CAM = DepthCamera()
 SHAPE = (CAM.intrinsics.height, CAM.intrinsics.width)
@@ -51,29 +52,13 @@ def make_stack(building, pose: np.ndarray | None = START, **cfg) -> RobotStack:
     return stack
 
 
-_RAYS = pixel_rays(CAM.intrinsics).reshape(-1, 3) @ CAM.mount.rotation().T  # robot frame, per unit of depth
-_BEARING = np.arctan2(_RAYS[:, 1], _RAYS[:, 0])  # each pixel's horizontal bearing (robot frame)
-_H_PER_DEPTH = np.hypot(_RAYS[:, 0], _RAYS[:, 1])  # horizontal distance per unit of depth
-with np.errstate(divide="ignore"):
-    _TO_FLOOR = np.where(_RAYS[:, 2] < 0, -CAM.mount.translation()[2] / _RAYS[:, 2], np.inf)
-_TABLE = np.linspace(_BEARING.min(), _BEARING.max(), 8192)  # bearings ray-cast per frame
+_MAP_DEPTH = MapDepth(CAM)
 
 
 def render(scene: SceneQuery, pose: np.ndarray) -> np.ndarray:
-    """Planar depth (float32 m, 0 out of range) of the map's walls (vertical planes) and
-    the floor seen from ``pose``. A pixel's ray meets a wall where its horizontal part
-    does; the horizontal distances are ray-cast once per frame on a fine table of
-    bearings (0.007 degrees apart) and looked up per pixel."""
-    c, s = math.cos(pose[2]), math.sin(pose[2])
-    t = CAM.mount.translation()
-    ox, oy = pose[0] + c * t[0] - s * t[1], pose[1] + s * t[0] + c * t[1]
-    a = _TABLE + pose[2]
-    idx, dist = rays_hit(scene.scene_lines(ox, oy)[0], ox, oy, np.column_stack([np.cos(a), np.sin(a)]))
-    dist = np.where(idx >= 0, dist, np.inf)
-    k = np.rint((_BEARING - _TABLE[0]) / (_TABLE[1] - _TABLE[0])).astype(np.int64)
-    z = np.minimum(dist[k] / _H_PER_DEPTH, _TO_FLOOR)
-    z = np.where((z >= CAM.min_range_m) & (z <= CAM.max_range_m), z, 0.0)
-    return z.reshape(SHAPE).astype(np.float32)
+    """Planar depth of the map's walls and the floor seen from ``pose``
+    (:class:`sim.simulator.map_depth.MapDepth`)."""
+    return _MAP_DEPTH.render(scene, pose)
 
 
 def wall(depth_m: float = 2.0) -> np.ndarray:

@@ -1,0 +1,122 @@
+"""Relocalization from unknown starts on the map alone: how often, and how fast, the
+robot finds itself at random places of a region when the only thing it sees is the map.
+
+Each trial starts the robot stack with an unknown pose (``RobotStack.reset(None)``) at a
+random free place of the region, with a random heading, and closes the loop for up to
+``seconds``: the stack decides (it looks round, drives to find walls, explores on its
+modes), the robot moves exactly as commanded (perfect odometry), and the camera sees the
+map's walls and floor from the true pose (:class:`sim.simulator.map_depth.MapDepth`,
+with ``noise_m`` of Gaussian depth noise: without any, standing still reads as stale
+frames). Nothing the map lacks is in view, so a failure here is the map's own ambiguity
+or its lack of walls in range, not clutter: what the kidnapped scenario measures with
+people and furniture, this separates. ``depthnav reloc-sample`` runs it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from autonomy.errors import InputError
+from autonomy.geometry import compose_pose, relative_pose
+from autonomy.raycast import SceneQuery, load_or_build
+from autonomy.stack import LOCALIZATION_GRID, RobotStack, StackConfig
+from sim.simulator.blueprints import load_blueprint
+from sim.simulator.map_depth import MapDepth
+
+RATE_HZ = 10.0
+"""Frames per second of a trial (the stack's decisions do not need the camera's 30)."""
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One unknown start: where, and how it ended."""
+
+    start: tuple[float, float, float]
+    relocalized: bool
+    seconds: float
+    """Time to the accepted mode (or the trial's length when none was)."""
+    error_m: float
+    """Distance from the accepted mode to the truth (NaN when none was)."""
+    heading_error_deg: float
+    reason: str
+    """The last search's verdict (why it accepted, or why it had not)."""
+
+
+def parse_region(text: str) -> tuple[float, float, float, float]:
+    """``"x0,y0,x1,y1"`` (metres) -> the box, checked."""
+    try:
+        x0, y0, x1, y1 = (float(v) for v in text.split(","))
+    except ValueError:
+        raise InputError(f"--region: expected x0,y0,x1,y1 in metres, got {text!r}") from None
+    if not (x1 > x0 and y1 > y0) or not all(math.isfinite(v) for v in (x0, y0, x1, y1)):
+        raise InputError(f"--region: expected x0 < x1 and y0 < y1, got {text!r}")
+    return x0, y0, x1, y1
+
+
+def start_poses(stack: RobotStack, region: tuple[float, float, float, float] | None, n: int, rng: np.random.Generator) -> np.ndarray:
+    """``n`` poses (n, 3) uniform over the free space the relocalization searches (where
+    the robot fits), inside ``region`` (None: anywhere), with uniform headings."""
+    gl = stack.global_localizer()
+    fs = gl.fs
+    rows, cols = fs.free_cells(stack.cfg.avoidance.robot_radius_m, region=None)
+    xy = fs.centres(rows, cols)
+    if region is not None:
+        x0, y0, x1, y1 = region
+        xy = xy[(xy[:, 0] >= x0) & (xy[:, 0] <= x1) & (xy[:, 1] >= y0) & (xy[:, 1] <= y1)]
+    if not len(xy):
+        raise InputError(f"--region: no free place of the map inside {region}")
+    pick = xy[rng.integers(0, len(xy), size=n)]
+    return np.column_stack([pick, rng.uniform(-math.pi, math.pi, size=n)])
+
+
+def run_trial(stack: RobotStack, scene: SceneQuery, depth: MapDepth, start: np.ndarray, seconds: float, noise_m: float,
+              rng: np.random.Generator) -> Trial:
+    """One unknown start at ``start`` (see the module docstring)."""
+    stack.reset(None)
+    truth, inc, t = np.asarray(start, dtype=np.float64).copy(), None, 0.0
+    while t < seconds:
+        frame = depth.render(scene, truth)
+        if noise_m > 0:
+            frame = np.where(frame > 0, frame + rng.normal(0.0, noise_m, frame.shape), 0.0).astype(np.float32)
+        stack.perceive(frame)
+        stack.localize(inc, t)
+        if not stack.relocalizing:
+            break
+        inc = stack.decide(t).velocity / RATE_HZ
+        truth = compose_pose(truth, inc)
+        t += 1.0 / RATE_HZ
+    found = not stack.relocalizing
+    err = relative_pose(truth, stack.pose) if found else np.full(3, math.nan)
+    last = stack.last_search
+    return Trial(
+        start=(round(float(start[0]), 3), round(float(start[1]), 3), round(float(start[2]), 3)),
+        relocalized=found,
+        seconds=round(t, 2),
+        error_m=round(float(math.hypot(err[0], err[1])), 3),
+        heading_error_deg=round(float(math.degrees(abs(err[2]))), 2),
+        reason="" if last is None else last.reason,
+    )
+
+
+def sample(map_name: str, region: tuple[float, float, float, float] | None, n: int, seed: int, seconds: float = 60.0,
+           noise_m: float = 0.003, progress=None) -> list[Trial]:
+    """``n`` trials at random places of ``region`` on a shipped or given map (stem path)."""
+    if n < 1:
+        raise InputError(f"--n: expected at least 1 trial, got {n}")
+    if not seconds > 0:
+        raise InputError(f"--seconds: expected a positive number, got {seconds}")
+    bp = load_blueprint(map_name)
+    scene = SceneQuery(bp.vectormap, load_or_build(bp.vectormap, None, LOCALIZATION_GRID))
+    stack = RobotStack(bp.vectormap, bp.navgraph, StackConfig(), rng=np.random.default_rng(seed), scene=scene)
+    stack.prepare_recovery()
+    rng = np.random.default_rng(seed)
+    depth = MapDepth(stack.cfg.camera)
+    out = []
+    for start in start_poses(stack, region, n, rng):
+        out.append(run_trial(stack, scene, depth, start, seconds, noise_m, rng))
+        if progress is not None:
+            progress(out[-1])
+    return out

@@ -1,0 +1,56 @@
+"""Relocalization from unknown starts on the map alone (sim/experiments/reloc_sample.py)
+and its command, ``depthnav reloc-sample``."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from autonomy.errors import InputError
+from sim.cli import main
+from sim.experiments.reloc_sample import parse_region, sample
+
+finite = st.floats(min_value=-1e4, max_value=1e4, allow_nan=False)
+
+
+@given(finite, finite, st.floats(min_value=1e-3, max_value=1e3), st.floats(min_value=1e-3, max_value=1e3))
+def test_a_region_reads_back_as_its_box(x0: float, y0: float, w: float, h: float) -> None:
+    box = (x0, y0, x0 + w, y0 + h)
+    if not (box[2] > box[0] and box[3] > box[1]):
+        return  # w or h lost to rounding at this magnitude
+    assert parse_region(",".join(repr(v) for v in box)) == box
+
+
+@pytest.mark.parametrize("text", ["1,2,3", "a,b,c,d", "1,2,1,3", "0,5,1,4", "0,0,inf,1", ""])
+def test_a_bad_region_is_one_line_naming_the_option(text: str) -> None:
+    with pytest.raises(InputError, match="^--region: expected"):
+        parse_region(text)
+
+
+def test_the_command_reports_bad_input_in_one_line(capsys) -> None:
+    assert main(["reloc-sample", "--region", "1,2"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("depthnav: error: --region")
+    assert main(["reloc-sample", "--region", "100,100,101,101", "--n", "1"]) == 2
+    assert "no free place" in capsys.readouterr().err
+    assert main(["reloc-sample", "--n", "0"]) == 2
+    assert "--n: expected at least 1" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_a_corridor_start_by_an_office_door_is_found_where_it_is() -> None:
+    """Two unknown starts in a short stretch of corridor by an office door (its
+    surroundings repeat nowhere else): each is found within 40 s, within 15 cm."""
+    trials = sample("corridor_loop", (37.8, 33.1, 38.8, 33.6), 2, seed=3, seconds=40.0)
+    assert len(trials) == 2
+    for tr in trials:
+        assert 37.8 <= tr.start[0] <= 38.8 and 33.1 <= tr.start[1] <= 33.6 and -math.pi <= tr.start[2] <= math.pi
+        assert tr.relocalized, tr
+        assert tr.seconds < 40.0 and tr.error_m < 0.15 and tr.heading_error_deg < 3.0, tr
+    # Seeded: the same places again.
+    again = sample("corridor_loop", (37.8, 33.1, 38.8, 33.6), 1, seed=3, seconds=0.1)
+    assert np.allclose(again[0].start, trials[0].start) and not again[0].relocalized

@@ -25,6 +25,22 @@ def box_segments(
     return bottom + [(x1, y0, x1, y1), (x1, y1, x0, y1), (x0, y1, x0, y0)]
 
 
+def one_wall_depth(camera, wall_x: float) -> np.ndarray:
+    """Exact planar depth (float32 m, 0 outside the camera's range) of the floor and the
+    plane x = wall_x, seen by ``camera`` (an ``autonomy.camera.DepthCamera``) from the
+    origin facing +x: each pixel's ray through the mount, in closed form."""
+    from autonomy.camera import pixel_rays
+
+    d = pixel_rays(camera.intrinsics).reshape(-1, 3) @ camera.mount.rotation().T  # robot frame, per unit of depth
+    t = camera.mount.translation()
+    with np.errstate(divide="ignore", invalid="ignore"):
+        to_wall = np.where(d[:, 0] > 0, (wall_x - t[0]) / d[:, 0], np.inf)
+        to_floor = np.where(d[:, 2] < 0, -t[2] / d[:, 2], np.inf)
+    z = np.minimum(to_wall, to_floor)
+    z = np.where((z >= camera.min_range_m) & (z <= camera.max_range_m), z, 0.0)
+    return z.reshape(camera.intrinsics.height, camera.intrinsics.width).astype(np.float32)
+
+
 def segments_map(rows) -> VectorMap:
     """A vector map of explicit segment rows."""
     return VectorMap.from_segments(np.array(rows, dtype=np.float64), name="test")

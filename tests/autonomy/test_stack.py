@@ -9,11 +9,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from autonomy.camera import DepthCamera, pixel_rays
+from autonomy.camera import DepthCamera
 from autonomy.errors import InputError
 from autonomy.geometry import compose_pose
 from autonomy.stack import LocalizationConfig, RobotStack, StackConfig
 from autonomy.vectormap import NavEdge, NavGraph, NavNode, VectorMap
+from tests.helpers import one_wall_depth
 
 WALL_X = 2.5
 CAM = DepthCamera()
@@ -21,15 +22,7 @@ CAM = DepthCamera()
 
 def wall_depth(wall_x: float = WALL_X) -> np.ndarray:
     """Planar depth (float32 m, 0 beyond range) of the floor and a wall x = wall_x."""
-    rays = pixel_rays(CAM.intrinsics).reshape(-1, 3)  # optical frame, z = 1
-    d = rays @ CAM.mount.rotation().T  # robot frame, per unit of depth
-    t = CAM.mount.translation()
-    with np.errstate(divide="ignore", invalid="ignore"):
-        to_wall = np.where(d[:, 0] > 0, (wall_x - t[0]) / d[:, 0], np.inf)
-        to_floor = np.where(d[:, 2] < 0, -t[2] / d[:, 2], np.inf)
-    z = np.minimum(to_wall, to_floor)
-    z = np.where((z >= CAM.min_range_m) & (z <= CAM.max_range_m), z, 0.0)
-    return z.reshape(CAM.intrinsics.height, CAM.intrinsics.width).astype(np.float32)
+    return one_wall_depth(CAM, wall_x)
 
 
 def scene() -> tuple[VectorMap, NavGraph]:

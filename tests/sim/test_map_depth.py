@@ -7,30 +7,19 @@ import math
 
 import numpy as np
 
-from autonomy.camera import DepthCamera, pixel_rays
+from autonomy.camera import DepthCamera
 from autonomy.raycast import SceneQuery
 from autonomy.vectormap import VectorMap
 from sim.simulator.map_depth import MapDepth
+from tests.helpers import one_wall_depth
 
 CAM = DepthCamera()
-
-
-def one_wall_depth(wall_x: float) -> np.ndarray:
-    """Exact planar depth of the floor and the plane x = wall_x (robot at the origin)."""
-    d = pixel_rays(CAM.intrinsics).reshape(-1, 3) @ CAM.mount.rotation().T
-    t = CAM.mount.translation()
-    with np.errstate(divide="ignore", invalid="ignore"):
-        to_wall = np.where(d[:, 0] > 0, (wall_x - t[0]) / d[:, 0], np.inf)
-        to_floor = np.where(d[:, 2] < 0, -t[2] / d[:, 2], np.inf)
-    z = np.minimum(to_wall, to_floor)
-    z = np.where((z >= CAM.min_range_m) & (z <= CAM.max_range_m), z, 0.0)
-    return z.reshape(CAM.intrinsics.height, CAM.intrinsics.width)
 
 
 def test_a_wall_across_the_path_matches_the_closed_form() -> None:
     scene = SceneQuery(VectorMap(np.array([[2.5, -20.0, 2.5, 20.0]])))
     got = MapDepth(CAM).render(scene, np.zeros(3))
-    want = one_wall_depth(2.5)
+    want = one_wall_depth(CAM, 2.5)
     assert got.dtype == np.float32 and got.shape == want.shape
     both = (got > 0) & (want > 0)
     assert both.mean() > 0.5 and np.mean((got > 0) != (want > 0)) < 1e-3  # pixels at the range cuts may differ

@@ -648,6 +648,8 @@ class Navigator:
         target = np.array([np.interp(min(_RETRACE_AHEAD_M, cum[-1]), cum, q[:, i]) for i in range(2)])
         if abs(wrap_angle(math.atan2(target[1], target[0]) - math.pi)) > math.radians(75.0) + 1e-9:
             return np.zeros(3)
+        # Only points within the way back's length plus the clearance can block it.
+        pts = pts[pts[:, 0] * pts[:, 0] + pts[:, 1] * pts[:, 1] < (cum[-1] + clear) ** 2] if len(pts) else pts
         if len(pts):
             # The way back, every _TRAIL_SAMPLE_M; a point blocks where the robot would
             # come closer to it than it is now, within the clearance.

@@ -233,6 +233,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def cmd_reloc_sample(args: argparse.Namespace) -> int:
     import json
+    from dataclasses import asdict
 
     from sim.experiments.reloc_sample import parse_region, sample
 
@@ -249,7 +250,7 @@ def cmd_reloc_sample(args: argparse.Namespace) -> int:
     tail = f", median {times[len(times) // 2]:.1f} s, worst {times[-1]:.1f} s" if times else ""
     print(f"{args.map}: {len(found)} of {len(trials)} unknown starts relocalized within {args.seconds:.0f} s{tail}")
     if args.out:
-        Path(args.out).write_text(json.dumps([t.__dict__ for t in trials], indent=2) + "\n", encoding="utf-8")
+        Path(args.out).write_text(json.dumps([asdict(t) for t in trials], indent=2) + "\n", encoding="utf-8")
         print(f"wrote {args.out}")
     return 0
 

@@ -106,8 +106,10 @@ def sample(map_name: str, region: tuple[float, float, float, float] | None, n: i
     """``n`` trials at random places of ``region`` on a shipped or given map (stem path)."""
     if n < 1:
         raise InputError(f"--n: expected at least 1 trial, got {n}")
-    if not seconds > 0:
-        raise InputError(f"--seconds: expected a positive number, got {seconds}")
+    if not (math.isfinite(seconds) and seconds > 0):
+        raise InputError(f"--seconds: expected a finite number above 0, got {seconds}")
+    if not (math.isfinite(noise_m) and noise_m >= 0):
+        raise InputError(f"--noise-m: expected a finite depth noise of 0 m or more, got {noise_m}")
     bp = load_blueprint(map_name)
     scene = SceneQuery(bp.vectormap, load_or_build(bp.vectormap, None, LOCALIZATION_GRID))
     stack = RobotStack(bp.vectormap, bp.navgraph, StackConfig(), rng=np.random.default_rng(seed), scene=scene)

@@ -39,6 +39,10 @@ def test_the_command_reports_bad_input_in_one_line(capsys) -> None:
     assert "no free place" in capsys.readouterr().err
     assert main(["reloc-sample", "--n", "0"]) == 2
     assert "--n: expected at least 1" in capsys.readouterr().err
+    for opt, value in (("--seconds", "inf"), ("--seconds", "-2"), ("--noise-m", "-1"), ("--noise-m", "nan")):
+        assert main(["reloc-sample", "--n", "1", opt, value]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith(f"depthnav: error: {opt}: expected"), err
 
 
 @pytest.mark.slow

@@ -347,9 +347,13 @@ class PeopleController:
         return np.array([*(pos + self._side[i] * right), math.atan2(d[1], d[0])])
 
     def _side_is_clear(self, i: int, pos: np.ndarray, margin_m: float = 0.05) -> bool:
+        return self._wall_distance(pos) > self.people[i].radius_m + margin_m
+
+    def _wall_distance(self, pos: np.ndarray) -> float:
+        """Distance from a body's centre to the nearest wall (inf without walls)."""
         if not len(self.walls):
-            return True
-        return float(point_segment_distance(pos, self.walls).min()) > self.people[i].radius_m + margin_m
+            return math.inf
+        return float(point_segment_distance(pos, self.walls).min())
 
     def _keep_off_walls(self, i: int) -> None:
         """Walking on stepped aside, a person keeps 5 cm off the walls: where the corridor
@@ -417,14 +421,27 @@ class PeopleController:
         much; walking on reconciles the two. Placing the body at the new route position
         instead, a person whose body lags it (walking to the next leg's offset after a
         corner) could take no step at all: every one would be a jump.
+
+        A body already closer than ``squeeze_m`` to a wall (it lagged its route position
+        while the robot held it up, and stands in the end of a door's frame: people are
+        not stopped by walls) can end no step ``squeeze_m`` from it; it takes the first
+        step that goes no deeper into the wall. Else it would stand still there while the
+        robot, which cannot see it beside it, drives out of the door into it.
         """
         _, d = self._route_point(i, self._s[i])
         right = np.array([d[1], -d[0]])
         cands = _retreat_steps(away, d, right, self.retreat_speed_mps * dt)
         here = self._state[i, :2]
-        for margin, (cand_s, cand_side) in [(m, c) for m in (0.05, self.squeeze_m) for c in cands]:
+        inside = self._wall_distance(here)
+        tries = [(m, c) for m in (0.05, self.squeeze_m) for c in cands]
+        if inside <= self.people[i].radius_m + self.squeeze_m:
+            tries += [(None, c) for c in cands]
+        for margin, (cand_s, cand_side) in tries:
             new = here + cand_s * d + cand_side * right
-            if not self._side_is_clear(i, new, margin):
+            if margin is None:
+                if self._wall_distance(new) < inside:
+                    continue
+            elif not self._side_is_clear(i, new, margin):
                 continue
             if float(np.hypot(new[0] - robot_xy[0], new[1] - robot_xy[1])) > dist:
                 self._state[i, :2] = new

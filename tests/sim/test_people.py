@@ -7,6 +7,7 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
+from autonomy.geometry import point_segment_distance
 from sim.simulator.actors import PeopleController, Person
 
 DT = 1.0 / 30.0
@@ -259,6 +260,33 @@ def test_a_person_wedged_at_a_door_frame_squeezes_along_the_wall_out_of_the_robo
         wall.append(float(np.min([np.hypot(pos[0], pos[1] - np.clip(pos[1], a, b)) for a, b in ((-1.0, 0.0), (0.93, 1.8))])))
     assert min(gaps) > 0.0, min(gaps)
     assert min(wall) > person.radius_m + pc.squeeze_m - 1e-9
+
+
+def test_a_person_whose_body_overlaps_a_door_frames_end_steps_out_of_the_robots_way() -> None:
+    """A person who followed the robot to a door, held up there by it, stands with their
+    body 17 cm from the end of the door's frame (inside it: people are not stopped by
+    walls, and a body that lags its route position can end there) when the robot comes
+    back out through the door at 0.38 m/s: they step back, no deeper into the frame, and
+    are never touched. With every step held to the walls' margin none is taken, and they
+    stand while the robot, which cannot see them beside it, drives into them (as at a door
+    on a 4 km run)."""
+    walls = np.array([[-0.938, 0.0, 0.0, 0.0], [0.987, 0.0, 1.87, 0.0]])  # a door from x = 0 to 0.987
+    person = Person(route=((0.494, -0.75), (0.494, 1.075), (2.157, 1.075)), speed_mps=1.38)
+    pc = PeopleController((person,), np.zeros(1, dtype=int), walls)
+    pc._s[0], pc._side[0] = 0.67, -0.22  # white box: their route position in the door ...
+    pc._state[0] = pc._place(0)
+    pc._state[0, :2] = (0.055, 0.162)  # ... their body lagging it, by the frame's end
+    start, heading = np.array([0.445, -0.451]), np.radians(85.0)
+    robot = lambda k: start + 0.38 * k * DT * np.array([np.cos(heading), np.sin(heading)])  # noqa: E731
+    touch = pc.robot_radius_m + person.radius_m
+    pc.advance(0.0, start)
+    gaps, frame = [], []
+    for k in range(1, 150):
+        pos = pc.advance(k * DT, robot(k))[0, :2]
+        gaps.append(float(np.hypot(*(pos - robot(k)))) - touch)
+        frame.append(float(point_segment_distance(pos, walls).min()))
+    assert min(gaps) > 0.0, min(gaps)
+    assert min(frame) >= frame[0] - 1e-9  # never deeper into the frame
 
 
 def _gaps_to_a_robot_driving_at(pc: PeopleController, start_xy: np.ndarray, bearing: float, speed: float, steps: int) -> list[float]:

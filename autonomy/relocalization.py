@@ -78,6 +78,15 @@ class RelocalizationConfig:
     """The scan keeps at most this many points (the newest)."""
     min_scan_points: int = 150
     """No search before the scan has this many points ..."""
+    min_wall_m: float = 1.5
+    """A wall: a straight run of the scan's points at least this long
+    (:mod:`autonomy.straight_runs`); the faces of the atrium's pillars and of the
+    furniture the map lacks are shorter."""
+    min_wall_points: int = 40
+    """Looked round, the robot drives to find walls while fewer of the scan's points than
+    this lie on walls (2 m of wall at 5 cm cells; 0: only while the scan is too small to
+    search). A scan of pillars and furniture fits no place clearly, the true one
+    included, however long the robot looks there."""
     min_sweep_deg: float = 300.0
     """... and the robot has turned this far (or moved ``min_travel_m``) while looking."""
     min_travel_m: float = 2.0
@@ -146,6 +155,8 @@ class RelocalizationConfig:
         require_int(self, "recovery.relocalization.", "confirmations", minimum=1)
         require_int(self, "recovery.relocalization.", "max_scan_points", minimum=100)
         require_int(self, "recovery.relocalization.", "min_scan_points", minimum=10)
+        require_int(self, "recovery.relocalization.", "min_wall_points", minimum=0)
+        require_positive(self, "recovery.relocalization.", "min_wall_m")
 
 
 @dataclass(frozen=True)

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from autonomy.active_localization import ActiveLocalizationConfig, drive_value
-from autonomy.avoidance import AvoidanceConfig, obstacle_points
+from autonomy.avoidance import AvoidanceConfig, obstacle_points, open_path_lengths
 from autonomy.camera import DepthCamera, frame_checks
 from autonomy.cgr import CGRConfig, CGRLocalizer
 from autonomy.errors import InputError, require_non_negative, require_positive
@@ -50,6 +50,7 @@ from autonomy.nearfield import NearField, line_points
 from autonomy.observation import ObservationConfig, correspond
 from autonomy.raycast import SceneQuery, VisibilityGridConfig, load_or_build
 from autonomy.relocalization import GlobalLocalizer, Mode, RelocalizationConfig, Scan
+from autonomy.straight_runs import on_straight_runs
 from autonomy.vectormap import NavGraph, VectorMap
 
 #: The visibility grid the stack localizes with: 0.5 m cells, scene lines to 6 m (the
@@ -74,6 +75,23 @@ NEAR_KEEP_S = 15.0
 #: An exploring plan may pass this much closer to a scan point than the robot's radius
 #: (the Kinect's noise on walls beside the path).
 EXPLORE_CLEAR_SLACK_M = 0.05
+#: While relocalizing, the scan's points on walls are counted again at most this often
+#: (a few milliseconds for thousands of points; the scan grows by a frame at a time).
+WALL_COUNT_EVERY_S = 0.5
+#: A drive to find walls picks among this many ways round the robot ...
+PROBE_BEARINGS = 36
+#: ... one whose open path is within this of the longest.
+PROBE_TIE_M = 0.25
+
+
+def most_open_way(points: np.ndarray, radius_m: float, reach_m: float) -> float:
+    """The bearing (robot frame, rad) of the longest open path (Eq. 3-4) for a robot of
+    ``radius_m`` among ``points`` (n, 2), every ``360 / PROBE_BEARINGS`` degrees up to
+    ``reach_m``; of the ways within ``PROBE_TIE_M`` of the longest, the one nearest ahead."""
+    ang = np.linspace(-math.pi, math.pi, PROBE_BEARINGS, endpoint=False)
+    free = open_path_lengths(np.asarray(points, dtype=np.float64).reshape(-1, 2), ang, radius_m, reach_m)
+    ways = np.flatnonzero(free >= free.max() - PROBE_TIE_M)
+    return float(ang[ways[np.argmin(np.abs(ang[ways]))]])
 
 
 @dataclass(frozen=True)
@@ -267,6 +285,7 @@ class RobotStack:
         self._explore_t0 = 0.0
         self._explored: set[int] = set()
         self._probe: tuple[np.ndarray, float, float] | None = None
+        self._walls: tuple[float, int, int] | None = None
         self._near_seen = np.zeros((0, 3))
         self._goal: int | None = None
         self._last_depth_key: np.ndarray | None = None
@@ -508,6 +527,7 @@ class RobotStack:
         self._explore_t0 = t
         self._explored: set[int] = set()
         self._probe = None
+        self._walls = None
         self._near_seen = np.zeros((0, 3))
         self._confirmed = 0
         self._candidate: np.ndarray | None = None
@@ -665,12 +685,13 @@ class RobotStack:
         return cmd
 
     def _search_motion(self, t: float, obstacles: np.ndarray, near: np.ndarray | None) -> NavCommand:
-        """Turn in place to look; still undecided after ``explore_after_s``, drive
-        ``explore_m`` on the best mode's belief, then look again."""
+        """Turn in place to look; looked round with too little wall in the scan, drive to
+        find walls (:meth:`_probe_motion`); still undecided after ``explore_after_s``,
+        drive ``explore_m`` on the best mode's belief, then look again."""
         rec = self.cfg.recovery
         nav = self.navigator
         assert nav is not None
-        if self._probe is not None or (not self.modes and self._swept() and len(self.scan.points) < rec.relocalization.min_scan_points):
+        if self._probe is not None or (self._swept() and self._lacks_walls(t)):
             cmd = self._probe_motion(t, obstacles, near)
             if cmd is not None:
                 return cmd
@@ -712,35 +733,50 @@ class RobotStack:
         cmd.state = "exploring" if cmd.state in ("driving", "turning") else cmd.state
         return cmd
 
+    def _lacks_walls(self, t: float) -> bool:
+        """Whether the scan is too small to search (``min_scan_points``) or holds too
+        little wall (``min_wall_points`` of its points on straight runs at least
+        ``min_wall_m`` long, :func:`autonomy.straight_runs.on_straight_runs`; counted at
+        most every ``WALL_COUNT_EVERY_S`` while it grows)."""
+        rc = self.cfg.recovery.relocalization
+        n = len(self.scan.points)
+        if n < rc.min_scan_points:
+            return True
+        if rc.min_wall_points == 0:
+            return False
+        if self._walls is None or t - self._walls[0] >= WALL_COUNT_EVERY_S or n < self._walls[1]:
+            self._walls = (t, n, int(on_straight_runs(self.scan.points, rc.min_wall_m).sum()))
+        return self._walls[2] < rc.min_wall_points
+
     def _swept(self) -> bool:
         """Whether the robot has looked round since it last set out (``min_sweep_deg``)."""
         return self.scan.turned_rad >= math.radians(self.cfg.recovery.relocalization.min_sweep_deg)
 
     def _probe_motion(self, t: float, obstacles: np.ndarray, near: np.ndarray | None) -> NavCommand | None:
-        """Looked round without seeing enough to search the map (``min_scan_points``: in a
-        hall whose walls all lie beyond the camera's 4 m the scan holds a pillar or two),
-        drive to find walls: on dead reckoning alone, towards what the scan holds (the
-        mean of its points' directions; straight on when it holds nothing), avoiding
-        what the camera sees, until the scan can be searched, ``explore_m`` is behind, a
-        search has found modes or ``explore_timeout_s`` has passed; then look round
-        again (None: the caller does). The next probe sets out from where this one
-        ended, towards what the scan holds from there."""
-        rec, rc = self.cfg.recovery, self.cfg.recovery.relocalization
+        """Looked round without seeing enough wall to search the map by (:meth:`_lacks_walls`:
+        in a hall whose walls all lie beyond the camera's 4 m the scan holds a pillar or
+        two, or pillars and furniture the map lacks, which fit no place clearly), drive to
+        find walls: on dead reckoning alone, the way the scan shows most open (Eq. 3's
+        open path length on what the robot has seen, :meth:`_seen_now`, every
+        ``360 / PROBE_BEARINGS`` degrees up to ``explore_m``; of the ways as open as the
+        most, the one nearest ahead): the walls lie beyond the camera's range that way,
+        and a way towards what the scan holds can end at a chair. It avoids what the
+        camera sees, until the scan holds enough wall, ``explore_m`` is behind or
+        ``explore_timeout_s`` has passed; then it looks round again (None: the caller
+        does). The searches go on meanwhile, and one that decides ends the drive. The next
+        probe sets out from where this one ended, the way most open from there."""
+        rec = self.cfg.recovery
         nav = self.navigator
         assert nav is not None
         if self._probe is None:
-            pts = self.scan.in_robot_frame(self.odom)
-            d = np.hypot(pts[:, 0], pts[:, 1]) if len(pts) else np.zeros(0)
-            keep = d > 1e-6
-            u = (pts[keep] / d[keep, None]).sum(axis=0) if keep.any() else np.zeros(2)
-            rel = math.atan2(float(u[1]), float(u[0])) if math.hypot(float(u[0]), float(u[1])) > 1e-9 else 0.0
+            rel = most_open_way(self._seen_now(), self.cfg.avoidance.robot_radius_m, rec.explore_m)
             self._probe = (self.odom.copy(), wrap_angle(float(self.odom[2]) + rel), t)
             # The memory and trail were placed through the belief before the alarm; this
             # drive sees the world in the odometry's frame.
             nav.pose_jumped()
         start, heading, t0 = self._probe
         gone = math.hypot(float(self.odom[0] - start[0]), float(self.odom[1] - start[1]))
-        if self.modes or len(self.scan.points) >= rc.min_scan_points or gone >= rec.explore_m or t - t0 > rec.explore_timeout_s:
+        if not self._lacks_walls(t) or gone >= rec.explore_m or t - t0 > rec.explore_timeout_s:
             self._probe = None
             self._reloc_t0 = t
             self.scan.turned_rad = 0.0

@@ -25,7 +25,7 @@ from autonomy.geometry import (
     wrap_angles,
 )
 from autonomy.raycast import SceneQuery, load_or_build
-from autonomy.stack import LOCALIZATION_GRID, RobotStack, StackConfig
+from autonomy.stack import LOCALIZATION_GRID, RobotStack, StackConfig, most_open_way
 from sim.simulator.blueprints import ASSETS_DIR, load_blueprint
 from sim.simulator.map_depth import MapDepth
 
@@ -587,6 +587,23 @@ def test_an_unknown_start_where_no_wall_is_in_range_drives_to_find_walls(buildin
     assert not stack.relocalizing, (t, stack.last_search.reason if stack.last_search else None)
     err = relative_pose(truth, stack.pose)
     assert math.hypot(err[0], err[1]) < 0.15 and abs(wrap_angle(err[2])) < math.radians(3.0), err
+
+
+def test_a_drive_to_find_walls_sets_out_the_way_most_open() -> None:
+    """Seen all round 1.5 m off but for a 1.27 m gap on the left, the way out is through
+    the gap (a way towards what the scan holds can end at a chair); with nothing seen,
+    straight on; open equally to the left and right, the one nearer ahead."""
+    a = np.radians(np.arange(0.0, 360.0, 2.0))
+    ring = 1.5 * np.column_stack([np.cos(a), np.sin(a)])
+    gap = np.abs(wrap_angles(a - math.pi / 2)) < math.radians(25.0)
+    assert abs(most_open_way(ring[~gap], 0.3, 6.0) - math.pi / 2) <= math.radians(10.0)
+    assert most_open_way(np.zeros((0, 2)), 0.3, 6.0) == 0.0
+    # A wall 1 m ahead across the robot's way, and one 2 m behind: left and right tie,
+    # and of those the nearest ahead is taken.
+    ahead = np.column_stack([np.full(41, 1.0), np.linspace(-0.5, 0.5, 41)])
+    behind = np.column_stack([np.full(41, -2.0), np.linspace(-0.5, 0.5, 41)])
+    way = most_open_way(np.vstack([ahead, behind]), 0.3, 6.0)
+    assert math.radians(49.0) <= abs(way) <= math.radians(90.0), math.degrees(way)
 
 
 #: In the atrium, the robot's centre 0.57 m from a pillar's corner (a kidnapped run

@@ -9,7 +9,10 @@ map's walls and floor from the true pose (:class:`sim.simulator.map_depth.MapDep
 with ``noise_m`` of Gaussian depth noise: without any, standing still reads as stale
 frames). Nothing the map lacks is in view, so a failure here is the map's own ambiguity
 or its lack of walls in range, not clutter: what the kidnapped scenario measures with
-people and furniture, this separates. ``depthnav reloc-sample`` runs it.
+people and furniture, this separates. With ``furniture`` pieces, clutter comes back in a
+controlled form: that many random pieces stand in the map's open areas (as the scenarios
+place them, :func:`sim.simulator.building.random_furniture`), seen as the full-height
+faces of their footprints, and no start lies on one. ``depthnav reloc-sample`` runs it.
 """
 
 from __future__ import annotations
@@ -23,11 +26,16 @@ from autonomy.errors import InputError
 from autonomy.geometry import compose_pose, relative_pose
 from autonomy.raycast import SceneQuery, load_or_build
 from autonomy.stack import LOCALIZATION_GRID, RobotStack, StackConfig
+from sim.simulator.actors import Furniture
 from sim.simulator.blueprints import load_blueprint
+from sim.simulator.building import Building, random_furniture
 from sim.simulator.map_depth import MapDepth
 
 RATE_HZ = 10.0
 """Frames per second of a trial (the stack's decisions do not need the camera's 30)."""
+MAX_FURNITURE = 100
+"""Most pieces ``--furniture`` places (each is tried at many random places until it fits,
+so an impossible count would search for minutes before it failed)."""
 
 
 @dataclass(frozen=True)
@@ -56,9 +64,12 @@ def parse_region(text: str) -> tuple[float, float, float, float]:
     return x0, y0, x1, y1
 
 
-def start_poses(stack: RobotStack, region: tuple[float, float, float, float] | None, n: int, rng: np.random.Generator) -> np.ndarray:
+def start_poses(
+    stack: RobotStack, region: tuple[float, float, float, float] | None, n: int, rng: np.random.Generator, pieces: tuple[Furniture, ...] = ()
+) -> np.ndarray:
     """``n`` poses (n, 3) uniform over the free space the relocalization searches (where
-    the robot fits), inside ``region`` (None: anywhere), with uniform headings."""
+    the robot fits), inside ``region`` (None: anywhere), clear of the furniture ``pieces``,
+    with uniform headings."""
     gl = stack.global_localizer()
     fs = gl.fs
     rows, cols = fs.free_cells(stack.cfg.avoidance.robot_radius_m, region=None)
@@ -66,6 +77,9 @@ def start_poses(stack: RobotStack, region: tuple[float, float, float, float] | N
     if region is not None:
         x0, y0, x1, y1 = region
         xy = xy[(xy[:, 0] >= x0) & (xy[:, 0] <= x1) & (xy[:, 1] >= y0) & (xy[:, 1] <= y1)]
+    for f in pieces:
+        length, width, _ = f.dims
+        xy = xy[np.hypot(xy[:, 0] - f.x, xy[:, 1] - f.y) > 0.5 * math.hypot(length, width) + stack.cfg.avoidance.robot_radius_m]
     if not len(xy):
         raise InputError(f"--region: no free place of the map inside {region}")
     pick = xy[rng.integers(0, len(xy), size=n)]
@@ -73,12 +87,13 @@ def start_poses(stack: RobotStack, region: tuple[float, float, float, float] | N
 
 
 def run_trial(stack: RobotStack, scene: SceneQuery, depth: MapDepth, start: np.ndarray, seconds: float, noise_m: float,
-              rng: np.random.Generator) -> Trial:
-    """One unknown start at ``start`` (see the module docstring)."""
+              rng: np.random.Generator, clutter: np.ndarray | None = None) -> Trial:
+    """One unknown start at ``start`` (see the module docstring); ``clutter``: (K, 4)
+    segments the camera sees besides the map."""
     stack.reset(None)
     truth, inc, t = np.asarray(start, dtype=np.float64).copy(), None, 0.0
     while t < seconds:
-        frame = depth.render(scene, truth)
+        frame = depth.render(scene, truth, clutter)
         if noise_m > 0:
             frame = np.where(frame > 0, frame + rng.normal(0.0, noise_m, frame.shape), 0.0).astype(np.float32)
         stack.perceive(frame)
@@ -102,10 +117,13 @@ def run_trial(stack: RobotStack, scene: SceneQuery, depth: MapDepth, start: np.n
 
 
 def sample(map_name: str, region: tuple[float, float, float, float] | None, n: int, seed: int, seconds: float = 60.0,
-           noise_m: float = 0.003, progress=None) -> list[Trial]:
-    """``n`` trials at random places of ``region`` on a shipped or given map (stem path)."""
+           noise_m: float = 0.003, progress=None, furniture: int = 0) -> list[Trial]:
+    """``n`` trials at random places of ``region`` on a shipped or given map (stem path),
+    among ``furniture`` random pieces the map lacks."""
     if n < 1:
         raise InputError(f"--n: expected at least 1 trial, got {n}")
+    if not 0 <= furniture <= MAX_FURNITURE:
+        raise InputError(f"--furniture: expected 0 to {MAX_FURNITURE} pieces, got {furniture}")
     if not (math.isfinite(seconds) and seconds > 0):
         raise InputError(f"--seconds: expected a finite number above 0, got {seconds}")
     if not (math.isfinite(noise_m) and noise_m >= 0):
@@ -114,11 +132,20 @@ def sample(map_name: str, region: tuple[float, float, float, float] | None, n: i
     scene = SceneQuery(bp.vectormap, load_or_build(bp.vectormap, None, LOCALIZATION_GRID))
     stack = RobotStack(bp.vectormap, bp.navgraph, StackConfig(), rng=np.random.default_rng(seed), scene=scene)
     stack.prepare_recovery()
+    pieces: tuple[Furniture, ...] = ()
+    if furniture:
+        # Their own stream: a seed's pieces are the same whatever --n and --region.
+        building = Building(bp.vectormap, bp.navgraph, tuple(bp.open_areas), tuple(bp.rooms))
+        try:
+            pieces = random_furniture(building, furniture, np.random.default_rng([seed, 1]), stack.cfg.avoidance.robot_radius_m)
+        except InputError as e:
+            raise InputError(f"--furniture: {e}") from None
+    clutter = np.vstack([f.outline() for f in pieces]) if pieces else None
     rng = np.random.default_rng(seed)
     depth = MapDepth(stack.cfg.camera)
     out = []
-    for start in start_poses(stack, region, n, rng):
-        out.append(run_trial(stack, scene, depth, start, seconds, noise_m, rng))
+    for start in start_poses(stack, region, n, rng, pieces):
+        out.append(run_trial(stack, scene, depth, start, seconds, noise_m, rng, clutter))
         if progress is not None:
             progress(out[-1])
     return out

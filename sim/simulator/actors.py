@@ -57,6 +57,14 @@ class Furniture:
         s = self.size or _FURNITURE_DEFAULT_SIZE[self.kind]
         return float(s[0]), float(s[1]), float(s[2])
 
+    def outline(self) -> np.ndarray:
+        """(4, 4) segments (x0, y0, x1, y1) round the piece's footprint (length along its yaw)."""
+        length, width, _ = self.dims
+        c, s = math.cos(self.yaw), math.sin(self.yaw)
+        local = np.array([[1, 1], [-1, 1], [-1, -1], [1, -1]]) * (0.5 * length, 0.5 * width)
+        corners = np.column_stack([self.x + c * local[:, 0] - s * local[:, 1], self.y + s * local[:, 0] + c * local[:, 1]])
+        return np.hstack([corners, np.roll(corners, -1, axis=0)])
+
 
 @dataclass(frozen=True)
 class Person:

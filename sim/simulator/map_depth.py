@@ -38,14 +38,19 @@ class MapDepth:
         self._table = np.linspace(self._bearing.min(), self._bearing.max(), TABLE_BEARINGS)
         self._index = np.rint((self._bearing - self._table[0]) / (self._table[1] - self._table[0])).astype(np.int64)
 
-    def render(self, scene: SceneQuery, pose: np.ndarray) -> np.ndarray:
-        """The frame the camera sees from ``pose`` (x, y, yaw) on ``scene``'s map."""
+    def render(self, scene: SceneQuery, pose: np.ndarray, clutter: np.ndarray | None = None) -> np.ndarray:
+        """The frame the camera sees from ``pose`` (x, y, yaw) on ``scene``'s map;
+        ``clutter``: (K, 4) segments the map lacks, seen as walls too (furniture as the
+        full-height faces of its footprint, :meth:`sim.simulator.actors.Furniture.outline`)."""
         cam = self.camera
         c, s = math.cos(pose[2]), math.sin(pose[2])
         t = cam.mount.translation()
         ox, oy = pose[0] + c * t[0] - s * t[1], pose[1] + s * t[0] + c * t[1]
         a = self._table + pose[2]
-        idx, dist = rays_hit(scene.scene_lines(ox, oy)[0], ox, oy, np.column_stack([np.cos(a), np.sin(a)]))
+        lines = scene.scene_lines(ox, oy)[0]
+        if clutter is not None and len(clutter):
+            lines = np.vstack([lines, np.asarray(clutter, dtype=np.float64).reshape(-1, 4)])
+        idx, dist = rays_hit(lines, ox, oy, np.column_stack([np.cos(a), np.sin(a)]))
         dist = np.where(idx >= 0, dist, np.inf)
         z = np.minimum(dist[self._index] / self._h_per_depth, self._to_floor)
         z = np.where((z >= cam.min_range_m) & (z <= cam.max_range_m), z, 0.0)

@@ -39,7 +39,7 @@ def test_the_command_reports_bad_input_in_one_line(capsys) -> None:
     assert "no free place" in capsys.readouterr().err
     assert main(["reloc-sample", "--n", "0"]) == 2
     assert "--n: expected at least 1" in capsys.readouterr().err
-    for opt, value in (("--seconds", "inf"), ("--seconds", "-2"), ("--noise-m", "-1"), ("--noise-m", "nan")):
+    for opt, value in (("--seconds", "inf"), ("--seconds", "-2"), ("--noise-m", "-1"), ("--noise-m", "nan"), ("--furniture", "-1"), ("--furniture", "101")):
         assert main(["reloc-sample", "--n", "1", opt, value]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and err[0].startswith(f"depthnav: error: {opt}: expected"), err
@@ -58,3 +58,22 @@ def test_a_corridor_start_by_an_office_door_is_found_where_it_is() -> None:
     # Seeded: the same places again.
     again = sample("corridor_loop", (37.8, 33.1, 38.8, 33.6), 1, seed=3, seconds=0.1)
     assert np.allclose(again[0].start, trials[0].start) and not again[0].relocalized
+
+
+def test_furniture_stands_in_the_open_areas_and_no_start_lies_on_a_piece() -> None:
+    """``--furniture``: the pieces stand where the scenarios put random furniture (the map's
+    open areas), drawn from their own stream, and every start clears every piece by the
+    robot's radius."""
+    from sim.simulator.blueprints import load_blueprint
+    from sim.simulator.building import Building, random_furniture
+
+    region = (26.0, 9.0, 34.0, 16.0)
+    furnished = sample("corridor_loop", region, 6, seed=4, seconds=0.1, furniture=8)
+    bp = load_blueprint("corridor_loop")
+    pieces = random_furniture(Building(bp.vectormap, bp.navgraph, tuple(bp.open_areas), tuple(bp.rooms)), 8, np.random.default_rng([4, 1]), 0.3)
+    for tr in furnished:
+        for f in pieces:
+            assert math.hypot(tr.start[0] - f.x, tr.start[1] - f.y) > 0.5 * math.hypot(*f.dims[:2]) + 0.3
+    assert all(region[0] <= tr.start[0] <= region[2] and region[1] <= tr.start[1] <= region[3] for tr in furnished)
+    with pytest.raises(InputError, match="^--furniture: "):
+        sample("corridor_loop", region, 1, seed=4, seconds=0.1, furniture=101)

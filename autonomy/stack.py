@@ -500,10 +500,12 @@ class RobotStack:
     def prepare_recovery(self) -> None:
         """Build the relocalization's map search now (the free-space grid, the coarse
         hypotheses and the segment index) and load its kernels
-        (:meth:`GlobalLocalizer.warm`) rather than at the first alarm: a long run's
-        memory is then steady from its start, and the first search does not wait for it."""
+        (:meth:`GlobalLocalizer.warm`, and the count of the scan's wall points) rather
+        than at the first alarm: a long run's memory is then steady from its start, and
+        the first search does not wait for it."""
         if self.health is not None and self._global is None:
             self.global_localizer().warm()
+            on_straight_runs(np.zeros((2, 2)), 1.0)
 
     def global_localizer(self) -> GlobalLocalizer:
         """The relocalization's map search on this stack's map (built on first use)."""

@@ -527,8 +527,8 @@ def test_prepare_recovery_builds_the_map_search_up_front(building) -> None:
 
 
 def test_prepare_recovery_loads_the_kernels_the_search_uses() -> None:
-    """In a fresh process, after prepare_recovery a map search compiles or loads no
-    kernel of its own: each of the search's kernels has the one signature the warm-up
+    """In a fresh process, after prepare_recovery a map search (and the count of the
+    scan's wall points) compiles or loads no kernel of its own: each of the search's kernels has the one signature the warm-up
     gave it (a warm-up with other argument types would leave the search to load its own
     at the first alarm, a step in a long run's memory)."""
     import subprocess
@@ -538,18 +538,21 @@ def test_prepare_recovery_loads_the_kernels_the_search_uses() -> None:
 import numpy as np
 from autonomy.relocalization import _grid_costs, _refine, _through_counts
 from autonomy.stack import RobotStack, StackConfig
+from autonomy.straight_runs import _straight_runs, on_straight_runs
 from sim.simulator.blueprints import load_blueprint
 bp = load_blueprint("corridor_loop")
 stack = RobotStack(bp.vectormap, bp.navgraph, StackConfig(), rng=np.random.default_rng(0))
 stack.prepare_recovery()
-kernels = (_grid_costs, _refine, _through_counts)
+kernels = (_grid_costs, _refine, _through_counts, _straight_runs)
 warm = [len(k.signatures) for k in kernels]
 ring = np.column_stack([3.0 * np.cos(np.linspace(0, 6, 200)), 2.0 * np.sin(np.linspace(0, 6, 200))])
 stack._global.search(ring, origins=np.zeros_like(ring))
+stack.scan.add(stack.odom, ring)
+on_straight_runs(stack.scan.points, 1.5)
 print(warm, [len(k.signatures) for k in kernels])
 """
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600, check=True)
-    assert out.stdout.strip().splitlines()[-1] == "[1, 1, 1] [1, 1, 1]", out.stdout + out.stderr
+    assert out.stdout.strip().splitlines()[-1] == "[1, 1, 1, 1] [1, 1, 1, 1]", out.stdout + out.stderr
 
 
 #: In the atrium's west aisle, 4 m from its west wall: looking round, the camera (4 m

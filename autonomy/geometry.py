@@ -59,6 +59,14 @@ def points_in_frame(pose: np.ndarray, xy: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]]))
 
 
+def rectangle_corners(x: float, y: float, yaw: float, length: float, width: float) -> np.ndarray:
+    """(4, 2) corners, counter-clockwise, of a ``length`` x ``width`` rectangle centred at
+    (x, y) with its length along ``yaw``."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    local = np.array([[1.0, 1.0], [-1.0, 1.0], [-1.0, -1.0], [1.0, -1.0]]) * (0.5 * length, 0.5 * width)
+    return np.column_stack([x + c * local[:, 0] - s * local[:, 1], y + s * local[:, 0] + c * local[:, 1]])
+
+
 def points_from_frame(pose: np.ndarray, xy: np.ndarray) -> np.ndarray:
     """Points (N, 2) given in the frame of ``pose``, in world coordinates (the inverse of
     :func:`points_in_frame`)."""

@@ -23,6 +23,7 @@ import numpy as np
 
 from autonomy.constants import ROBOT_RADIUS_M
 from autonomy.errors import InputError
+from autonomy.geometry import rectangle_corners
 
 __all__ = ["FlightRecorder", "footprints", "render_incidents", "starts_incident", "undrawn_bodies"]
 
@@ -239,9 +240,7 @@ def _draw_furniture(ax, furniture: Sequence) -> None:
     for f in pieces:
         x, y, yaw = f["x"], f["y"], f["yaw"]
         lx, ly = f["size"]
-        c, s = math.cos(yaw), math.sin(yaw)
-        corners = [(x + c * dx - s * dy, y + s * dx + c * dy)
-                   for dx, dy in ((-lx / 2, -ly / 2), (lx / 2, -ly / 2), (lx / 2, ly / 2), (-lx / 2, ly / 2))]
+        corners = rectangle_corners(x, y, yaw, lx, ly)
         ax.add_patch(Polygon(corners, closed=True, fill=True, facecolor=_FURNITURE_COLOR, edgecolor="saddlebrown", lw=1.0, alpha=0.6))
         ax.text(x, y, f["label"], fontsize=6, ha="center", va="center", clip_on=True)
 

@@ -78,8 +78,7 @@ def start_poses(
         x0, y0, x1, y1 = region
         xy = xy[(xy[:, 0] >= x0) & (xy[:, 0] <= x1) & (xy[:, 1] >= y0) & (xy[:, 1] <= y1)]
     for f in pieces:
-        length, width, _ = f.dims
-        xy = xy[np.hypot(xy[:, 0] - f.x, xy[:, 1] - f.y) > 0.5 * math.hypot(length, width) + stack.cfg.avoidance.robot_radius_m]
+        xy = xy[np.hypot(xy[:, 0] - f.x, xy[:, 1] - f.y) > f.half_diagonal + stack.cfg.avoidance.robot_radius_m]
     if not len(xy):
         raise InputError(f"--region: no free place of the map inside {region}")
     pick = xy[rng.integers(0, len(xy), size=n)]
@@ -139,7 +138,8 @@ def sample(map_name: str, region: tuple[float, float, float, float] | None, n: i
         try:
             pieces = random_furniture(building, furniture, np.random.default_rng([seed, 1]), stack.cfg.avoidance.robot_radius_m)
         except InputError as e:
-            raise InputError(f"--furniture: {e}") from None
+            # The scenario key the placement names is not what the user typed.
+            raise InputError(f"--furniture: {str(e).removeprefix('actors.random_furniture: ')}") from None
     clutter = np.vstack([f.outline() for f in pieces]) if pieces else None
     rng = np.random.default_rng(seed)
     depth = MapDepth(stack.cfg.camera)

@@ -14,7 +14,7 @@ import numpy as np
 
 from autonomy.constants import ROBOT_RADIUS_M
 from autonomy.errors import InputError
-from autonomy.geometry import point_segment_distance
+from autonomy.geometry import point_segment_distance, rectangle_corners
 from sim.simulator.robot import COLL_PEOPLE, COLL_ROBOT, COLL_STATIC
 
 FURNITURE_KINDS = ("table", "chair", "box", "cabinet")
@@ -57,12 +57,15 @@ class Furniture:
         s = self.size or _FURNITURE_DEFAULT_SIZE[self.kind]
         return float(s[0]), float(s[1]), float(s[2])
 
+    @property
+    def half_diagonal(self) -> float:
+        """Half the footprint's diagonal: the farthest any of it lies from its centre."""
+        return 0.5 * math.hypot(self.dims[0], self.dims[1])
+
     def outline(self) -> np.ndarray:
         """(4, 4) segments (x0, y0, x1, y1) round the piece's footprint (length along its yaw)."""
         length, width, _ = self.dims
-        c, s = math.cos(self.yaw), math.sin(self.yaw)
-        local = np.array([[1, 1], [-1, 1], [-1, -1], [1, -1]]) * (0.5 * length, 0.5 * width)
-        corners = np.column_stack([self.x + c * local[:, 0] - s * local[:, 1], self.y + s * local[:, 0] + c * local[:, 1]])
+        corners = rectangle_corners(self.x, self.y, self.yaw, length, width)
         return np.hstack([corners, np.roll(corners, -1, axis=0)])
 
 

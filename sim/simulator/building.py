@@ -120,10 +120,6 @@ def navgraph_from_walls(
     return got.graph
 
 
-def _half_diagonal(f: Furniture) -> float:
-    return 0.5 * math.hypot(f.dims[0], f.dims[1])
-
-
 def draw_furniture(
     zones: tuple[tuple[float, float, float, float], ...], rng: np.random.Generator, kind: str | None = None
 ) -> Furniture:
@@ -139,13 +135,13 @@ def furniture_fits(
 ) -> bool:
     """Whether a piece keeps the graph drivable (its half-diagonal plus the robot radius
     plus ``EDGE_CLEARANCE_M`` from every edge), clears the walls and the pieces placed."""
-    half = _half_diagonal(f)
+    half = f.half_diagonal
     p = np.array([f.x, f.y])
     if len(edges) and point_segment_distance(p, edges).min() < half + robot_radius_m + EDGE_CLEARANCE_M:
         return False
     if len(walls) and point_segment_distance(p, walls).min() < half + WALL_CLEARANCE_M:
         return False
-    return not any(math.hypot(o.x - f.x, o.y - f.y) < half + _half_diagonal(o) + PIECE_GAP_M for o in placed)
+    return not any(math.hypot(o.x - f.x, o.y - f.y) < half + o.half_diagonal + PIECE_GAP_M for o in placed)
 
 
 def draw_furniture_in_free_space(
@@ -156,7 +152,7 @@ def draw_furniture_in_free_space(
     drawn if not given); None when no place is that far from the walls."""
     if kind is None:
         kind = str(FURNITURE_KINDS[rng.integers(len(FURNITURE_KINDS))])
-    xy = building.free_spot(rng, _half_diagonal(Furniture(kind=kind)) + WALL_CLEARANCE_M, robot_radius_m)
+    xy = building.free_spot(rng, Furniture(kind=kind).half_diagonal + WALL_CLEARANCE_M, robot_radius_m)
     if xy is None:
         return None
     return Furniture(kind=kind, x=float(xy[0]), y=float(xy[1]), yaw=float(rng.uniform(-math.pi, math.pi)))

@@ -25,6 +25,14 @@ def box_segments(
     return bottom + [(x1, y0, x1, y1), (x1, y1, x0, y1), (x0, y1, x0, y0)]
 
 
+def points_along(a, b, step: float = 0.05) -> np.ndarray:
+    """Points from ``a`` to ``b`` (both ends included), at most ``step`` apart: a face as a
+    scan holds it (one point per 5 cm cell)."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    n = int(np.ceil(np.hypot(*(b - a)) / step)) + 1
+    return a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)
+
+
 def one_wall_depth(camera, wall_x: float) -> np.ndarray:
     """Exact planar depth (float32 m, 0 outside the camera's range) of the floor and the
     plane x = wall_x, seen by ``camera`` (an ``autonomy.camera.DepthCamera``) from the

@@ -29,6 +29,7 @@ from autonomy.raycast import SceneQuery, load_or_build
 from autonomy.stack import LOCALIZATION_GRID, RobotStack, StackConfig, most_open_way
 from sim.simulator.blueprints import ASSETS_DIR, load_blueprint
 from sim.simulator.map_depth import MapDepth
+from tests.helpers import points_along
 
 CAM = DepthCamera()
 SHAPE = (CAM.intrinsics.height, CAM.intrinsics.width)
@@ -600,13 +601,9 @@ def test_a_scan_of_pillars_and_furniture_alone_sends_the_robot_to_find_walls(bui
     scan that only had to hold 150 points counted as enough). Once the scan holds a
     3 m wall, the drive ends; with ``min_wall_points`` = 0, only the size counts."""
 
-    def face(a, b):
-        n = int(math.ceil(math.hypot(b[0] - a[0], b[1] - a[1]) / 0.05)) + 1
-        return np.asarray(a) + np.linspace(0.0, 1.0, n)[:, None] * (np.asarray(b) - np.asarray(a))
-
-    short = [face((x, y - 0.25), (x, y + 0.25)) for x in (1.5, 2.0) for y in np.arange(-3.0, 3.1, 1.0)]
-    short += [face((x - 0.25, y), (x + 0.25, y)) for x in (-2.0, -1.2, -0.4) for y in (1.5, 2.0, -1.5, -2.0)]
-    short += [face((-2.5, -0.45), (-2.5, 0.45))]
+    short = [points_along((x, y - 0.25), (x, y + 0.25)) for x in (1.5, 2.0) for y in np.arange(-3.0, 3.1, 1.0)]
+    short += [points_along((x - 0.25, y), (x + 0.25, y)) for x in (-2.0, -1.2, -0.4) for y in (1.5, 2.0, -1.5, -2.0)]
+    short += [points_along((-2.5, -0.45), (-2.5, 0.45))]
     clutter = np.vstack(short)
     assert len(clutter) >= 150
     for min_wall_points, want in ((40, "exploring"), (0, "looking")):
@@ -623,7 +620,7 @@ def test_a_scan_of_pillars_and_furniture_alone_sends_the_robot_to_find_walls(bui
             assert stack._probe is not None
             way = np.array([0.0, 0.0, 3.0 * math.cos(stack._probe[1]), 3.0 * math.sin(stack._probe[1])])
             assert point_segment_distance(clutter, way[None, :]).min() > stack.cfg.avoidance.robot_radius_m, math.degrees(stack._probe[1])
-            stack.scan.add(stack.odom, face((-1.5, 3.0), (1.5, 3.0)) + (0.0, 0.5))
+            stack.scan.add(stack.odom, points_along((-1.5, 3.0), (1.5, 3.0)) + (0.0, 0.5))
             stack.decide(1.6)
             assert stack._probe is None
 

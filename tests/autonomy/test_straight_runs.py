@@ -12,26 +12,21 @@ from hypothesis import strategies as st
 from autonomy.errors import InputError
 from autonomy.geometry import points_from_frame
 from autonomy.straight_runs import on_straight_runs
-
-
-def _segment(a, b, step: float = 0.05) -> np.ndarray:
-    a, b = np.asarray(a, float), np.asarray(b, float)
-    n = int(math.ceil(np.hypot(*(b - a)) / step)) + 1
-    return a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)
+from tests.helpers import points_along
 
 
 def _square(cx: float, cy: float, side: float = 0.5) -> np.ndarray:
     h = side / 2
     c = [(cx - h, cy - h), (cx + h, cy - h), (cx + h, cy + h), (cx - h, cy + h)]
-    return np.vstack([_segment(c[k], c[(k + 1) % 4])[:-1] for k in range(4)])
+    return np.vstack([points_along(c[k], c[(k + 1) % 4])[:-1] for k in range(4)])
 
 
 def _hall(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """A 3 m wall, pillars 0.5 m square in a row 3.5 m apart (their faces line up), a
     1.2 m cabinet face and scattered points: (points, which lie on the wall)."""
-    wall = _segment((-1.5, 3.0), (1.5, 3.0))
+    wall = points_along((-1.5, 3.0), (1.5, 3.0))
     pillars = np.vstack([_square(x, 0.0) for x in (-3.5, 0.0, 3.5)])
-    cabinet = _segment((-1.0, -2.0), (0.2, -2.0))
+    cabinet = points_along((-1.0, -2.0), (0.2, -2.0))
     clutter = rng.uniform((-4.0, -1.5), (4.0, 2.0), size=(40, 2))
     clutter = clutter[np.abs(clutter[:, 1]) > 0.5]
     pts = np.vstack([wall, pillars, cabinet, clutter])
@@ -45,7 +40,7 @@ def test_only_the_wall_lies_on_a_long_run() -> None:
     got = on_straight_runs(pts, 1.5)
     np.testing.assert_array_equal(got, truth)
     # Shorter runs count when asked for: the cabinet's 1.2 m face.
-    assert on_straight_runs(pts, 1.0).sum() == truth.sum() + len(_segment((-1.0, -2.0), (0.2, -2.0)))
+    assert on_straight_runs(pts, 1.0).sum() == truth.sum() + len(points_along((-1.0, -2.0), (0.2, -2.0)))
 
 
 @settings(max_examples=30, deadline=None)
@@ -60,7 +55,7 @@ def test_a_rigid_motion_keeps_the_wall_and_nothing_else(yaw: float, x: float, y:
 
 
 def test_a_gap_wider_than_a_doorway_cuts_a_run() -> None:
-    left, right = _segment((0.0, 0.0), (1.2, 0.0)), _segment((1.45, 0.0), (2.6, 0.0))
+    left, right = points_along((0.0, 0.0), (1.2, 0.0)), points_along((1.45, 0.0), (2.6, 0.0))
     assert on_straight_runs(np.vstack([left, right]), 1.5).all()  # 0.25 m apart: one 2.6 m run
     right = right + (0.2, 0.0)  # 0.45 m apart: two runs of 1.2 m
     assert not on_straight_runs(np.vstack([left, right]), 1.5).any()

@@ -39,6 +39,9 @@ def test_the_command_reports_bad_input_in_one_line(capsys) -> None:
     assert "no free place" in capsys.readouterr().err
     assert main(["reloc-sample", "--n", "0"]) == 2
     assert "--n: expected at least 1" in capsys.readouterr().err
+    assert main(["reloc-sample", "--map", "small_floor", "--n", "1", "--seconds", "0.1", "--furniture", "100"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [err[0]] and err[0].startswith("depthnav: error: --furniture: only ") and "actors." not in err[0], err
     for opt, value in (("--seconds", "inf"), ("--seconds", "-2"), ("--noise-m", "-1"), ("--noise-m", "nan"), ("--furniture", "-1"), ("--furniture", "101")):
         assert main(["reloc-sample", "--n", "1", opt, value]) == 2
         err = capsys.readouterr().err.strip().splitlines()

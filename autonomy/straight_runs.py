@@ -10,7 +10,8 @@ on straight runs at least ``min_length_m`` long (ours; not from the papers).
 
 Lines are found greedily, as in the sequential Hough transform: every remaining point
 votes for ``n_theta`` line directions and ``band_m`` wide offsets, the bin with most
-votes is a line, its points within ``band_m`` of it are cut into runs wherever two
+votes is a line, refitted to its points by least squares, its points within ``band_m``
+of the fit are cut into runs wherever two
 neighbours along it are more than ``gap_m`` apart (a door, a doorway, two pillars in a
 row), the runs at least ``min_length_m`` long are counted, and all the line's points
 leave the vote. A numba kernel over the flat point array; no per-point Python.
@@ -77,13 +78,42 @@ def _straight_runs(pts, n_theta, band, gap, min_len, max_lines, min_votes, on_ru
                     best, bj, bk = votes[j, k], j, k
         if best < min_votes:
             return
+        # The bin's line is up to a degree and half a bin off the points' own: fit the
+        # line to the bin's points (least squares, the covariance's principal axis), then
+        # take every point within band of the fit, the ends of a long wall included.
         rho = (bk + 0.5) * band - rmax
+        nx, ny, off = cs[bj], sn[bj], rho
+        for _fit in range(2):
+            sx, sy, k = 0.0, 0.0, 0
+            for i in range(n):
+                if left[i] and abs((pts[i, 0] - cx) * nx + (pts[i, 1] - cy) * ny - off) <= band:
+                    sx += pts[i, 0] - cx
+                    sy += pts[i, 1] - cy
+                    k += 1
+            if k < 2:
+                break
+            mx, my = sx / k, sy / k
+            sxx, syy, sxy = 0.0, 0.0, 0.0
+            for i in range(n):
+                if left[i] and abs((pts[i, 0] - cx) * nx + (pts[i, 1] - cy) * ny - off) <= band:
+                    dx, dy = pts[i, 0] - cx - mx, pts[i, 1] - cy - my
+                    sxx += dx * dx
+                    syy += dy * dy
+                    sxy += dx * dy
+            t = 0.5 * math.atan2(2.0 * sxy, sxx - syy)  # direction of the principal axis
+            nx, ny = -math.sin(t), math.cos(t)
+            off = mx * nx + my * ny
         m = 0
-        for i in range(n):
-            if left[i] and abs((pts[i, 0] - cx) * cs[bj] + (pts[i, 1] - cy) * sn[bj] - rho) <= band:
-                idx[m] = i
-                along[m] = -(pts[i, 0] - cx) * sn[bj] + (pts[i, 1] - cy) * cs[bj]
-                m += 1
+        for attempt in range(2):
+            if attempt == 1:
+                if m > 0:
+                    break
+                nx, ny, off = cs[bj], sn[bj], rho  # the fit left every point: the bin's own line
+            for i in range(n):
+                if left[i] and abs((pts[i, 0] - cx) * nx + (pts[i, 1] - cy) * ny - off) <= band:
+                    idx[m] = i
+                    along[m] = -(pts[i, 0] - cx) * ny + (pts[i, 1] - cy) * nx
+                    m += 1
         order = np.argsort(along[:m])
         a = 0
         for b in range(1, m + 1):

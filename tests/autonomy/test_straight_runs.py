@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from autonomy.errors import InputError
@@ -45,13 +45,15 @@ def test_only_the_wall_lies_on_a_long_run() -> None:
 
 @settings(max_examples=30, deadline=None)
 @given(st.floats(-math.pi, math.pi), st.floats(-20.0, 20.0), st.floats(-20.0, 20.0), st.integers(0, 2**31 - 1))
+@example(2.75, 0.0, 0.0, 1139)  # the bin's line 1 degree off: 18 % of the wall left off without the refit
 def test_a_rigid_motion_keeps_the_wall_and_nothing_else(yaw: float, x: float, y: float, seed: int) -> None:
-    """Moved and turned anywhere, the wall's points are found (the 2 degree direction bins
-    may leave an end point or two off the line) and no pillar, cabinet or stray point is."""
+    """Moved and turned anywhere, the wall's points are found (the line refitted to them:
+    a 2 degree direction bin alone can leave a 3 m wall's ends off it) and no pillar,
+    cabinet or stray point is."""
     pts, truth = _hall(np.random.default_rng(seed))
     got = on_straight_runs(points_from_frame(np.array([x, y, yaw]), pts), 1.5)
     assert not got[~truth].any()
-    assert got[truth].mean() >= 0.9
+    assert got[truth].mean() >= 0.95
 
 
 def test_a_gap_wider_than_a_doorway_cuts_a_run() -> None:

@@ -20,7 +20,10 @@ The scan is then matched against the whole map (ours; the papers re-localized by
 2. **Modes.** The best hypotheses are refined coarse to fine on the same field with all
    scan points, and **scored**: the cost plus ``through_weight`` times the fraction of
    the scan's points that the mode sees through the map's walls (each point's ray
-   from where the robot stood when it saw it, marched over the distance transform).
+   from where the robot stood when it saw it, marched over the distance transform; a
+   point counts when it lies more than ``through_m`` behind a wall its ray crosses,
+   measured from the wall's line, so that drift does not count a wall seen at a
+   glancing angle as seen through).
    The likelihood field alone favours places with many walls: a hall's furniture fits
    some office's walls better than the hall's own few. Clutter can only hide walls,
    never show what lies behind them, so sight through walls rules such places out.
@@ -121,7 +124,8 @@ class RelocalizationConfig:
     """The check of the latest frame from a mode: a point within this of the first wall
     on its ray is explained ... (as :class:`autonomy.health.HealthConfig`)"""
     through_m: float = 0.4
-    """... and one this far beyond it is seen through the wall."""
+    """... and one this far beyond it is seen through the wall (the scan's points: this
+    far behind a wall their ray crosses, from the wall's line)."""
     confirmations: int = 2
     """A mode is accepted once it has passed the decision in this many searches in a row
     (within ``mode_separation_m`` and ``mode_separation_deg`` of itself)."""
@@ -257,10 +261,11 @@ def segment_index(seg: np.ndarray, x0: float, y0: float, cell: float, ny: int, n
 
 
 @numba.njit(cache=True, inline="always")
-def _crosses(seg, start, ids, ix0, iy0, inv_icell, iny, inx, ax, ay, ux, uy, hx, hy, end):  # pragma: no cover - numba
-    """Whether the ray from (ax, ay) along unit (ux, uy) meets a segment before ``end``,
-    among the indexed segments around (hx, hy) (the cell of a grid wall hit and its
-    eight neighbours)."""
+def _crosses(seg, start, ids, ix0, iy0, inv_icell, iny, inx, ax, ay, ux, uy, hx, hy, end, qx, qy, margin):  # pragma: no cover - numba
+    """Whether the ray from (ax, ay) along unit (ux, uy) meets a segment before ``end``
+    that the ray's point (qx, qy) lies more than ``margin`` behind (from the segment's
+    line), among the indexed segments around (hx, hy) (the cell of a grid wall hit and
+    its eight neighbours)."""
     cj = int(math.floor((hx - ix0) * inv_icell))
     ck = int(math.floor((hy - iy0) * inv_icell))
     for dk in range(-1, 2):
@@ -280,7 +285,8 @@ def _crosses(seg, start, ids, ix0, iy0, inv_icell, iny, inx, ax, ay, ux, uy, hx,
                 tt = (wx * ey - wy * ex) / den
                 lam = (wx * uy - wy * ux) / den
                 if 0.0 <= tt <= end and -1e-9 <= lam <= 1.0 + 1e-9:
-                    return True
+                    if abs(ex * (qy - py) - ey * (qx - px)) > margin * math.sqrt(ex * ex + ey * ey):
+                        return True
     return False
 
 
@@ -289,13 +295,16 @@ def _through_count(
     dist, ox, oy, inv_cell, x, y, c, s, origins, pts, margin, seg, start, ids, ix0, iy0, inv_icell, iny, inx
 ):  # pragma: no cover - numba
     """How many robot-frame points ``pts``, seen from robot-frame ``origins``, lie more
-    than ``margin`` beyond the first wall on their ray at pose (x, y, theta = atan2(s, c)).
+    than ``margin`` behind a wall their ray crosses at pose (x, y, theta = atan2(s, c)).
+    Behind is measured from the wall's line, not along the ray: the scan's points are
+    placed through dead reckoning, and a degree of drift puts a point on a wall seen at
+    a glancing angle 10 degrees off it half a metre along its ray behind the wall.
     The ray is marched over the distance transform (sphere tracing: each step is the
     free distance around the sample less a cell, so no wall cell is stepped over); a
     wall cell has distance 0. A grid wall is a cell thick, so a ray through a door
     beside its jamb can clip one: each hit is confirmed on the map's segments around
-    it (``segment_index``; none given, ``start`` empty: the grid decides). Rays leaving
-    the grid meet no wall."""
+    it (``segment_index``; none given, ``start`` empty: the grid decides, along the
+    ray). Rays leaving the grid meet no wall."""
     ny, nx = dist.shape
     cell = 1.0 / inv_cell
     exact = start.shape[0] > 1
@@ -319,7 +328,10 @@ def _through_count(
                 break
             d = dist[k, j]
             if d < 0.5 * cell:
-                if not exact or _crosses(seg, start, ids, ix0, iy0, inv_icell, iny, inx, ax, ay, ux, uy, ax + t * ux, ay + t * uy, end):
+                if not exact or _crosses(
+                    seg, start, ids, ix0, iy0, inv_icell, iny, inx, ax, ay, ux, uy, ax + t * ux, ay + t * uy, end,
+                    ax + r * ux, ay + r * uy, margin,
+                ):
                     n += 1
                     break
             t += max(d - cell, 0.5 * cell)

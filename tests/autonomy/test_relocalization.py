@@ -15,6 +15,7 @@ from autonomy.freespace import FreeSpaceConfig, build_free_space
 from autonomy.geometry import compose_pose, wrap_angle
 from autonomy.raycast import SceneQuery, rays_hit
 from autonomy.relocalization import GlobalLocalizer, Mode, RelocalizationConfig, Scan
+from autonomy.vectormap import VectorMap
 from sim.simulator.blueprints import load_blueprint
 
 CELL = 0.05
@@ -256,16 +257,35 @@ def test_a_mode_whose_latest_frame_sees_through_walls_is_not_accepted(building) 
     assert bad.accepted is None and "sees through walls" in bad.reason and bad.modes[0].through > 0.9
 
 
-def test_scan_through_agrees_with_rays_cast_on_the_map_segments(building) -> None:
-    """The grid march with its hits confirmed on the segments, against an exact ray
-    cast on every wall segment, for rays from scattered viewpoints at random poses. The
-    grid alone (no segments) counts some rays through doors beside their jambs as seen
-    through the wall, never fewer."""
+def _behind_crossed_walls(seg: np.ndarray, origin: np.ndarray, point: np.ndarray) -> float:
+    """Brute force: how far ``point`` lies behind the walls its ray from ``origin``
+    crosses (the largest distance from a crossed segment's line; -inf: none crossed)."""
+    d = point - origin
+    e = seg[:, 2:] - seg[:, :2]
+    w = seg[:, :2] - origin
+    den = d[0] * e[:, 1] - d[1] * e[:, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (w[:, 0] * e[:, 1] - w[:, 1] * e[:, 0]) / den
+        lam = (w[:, 0] * d[1] - w[:, 1] * d[0]) / den
+    crossed = (den != 0) & (t >= 0) & (t <= 1) & (lam >= 0) & (lam <= 1)
+    if not crossed.any():
+        return -math.inf
+    q = point - seg[crossed, :2]
+    ec = e[crossed]
+    return float(np.max(np.abs(ec[:, 0] * q[:, 1] - ec[:, 1] * q[:, 0]) / np.linalg.norm(ec, axis=1)))
+
+
+def test_scan_through_agrees_with_a_brute_force_cast_on_the_map_segments(building) -> None:
+    """The grid march with its hits confirmed on the segments, against every wall
+    segment crossed by each ray from scattered viewpoints at random poses: a point is
+    seen through a wall when it lies more than ``through_m`` behind one its ray crosses,
+    measured from the wall's line. The grid alone (no segments) measures along the ray
+    and counts some rays through doors beside their jambs too: never fewer."""
     gl, scene = building
     grid_only = GlobalLocalizer(gl.fs, AvoidanceConfig().robot_radius_m)
     rng = np.random.default_rng(70)
     seg = np.ascontiguousarray(scene.vm.segments, dtype=np.float64)
-    margin, checked, grid_extra = gl.cfg.through_m, 0, 0
+    margin, checked, grid_extra, glancing = gl.cfg.through_m, 0, 0, 0
     for _ in range(30):
         pose = np.array([*gl.candidates[rng.integers(len(gl.candidates))], rng.uniform(-math.pi, math.pi)])
         origins = rng.uniform(-0.1, 0.1, (200, 2))
@@ -273,25 +293,51 @@ def test_scan_through_agrees_with_rays_cast_on_the_map_segments(building) -> Non
         r = rng.uniform(0.1, 7.0, 200)
         pts = origins + np.column_stack([r * np.cos(a), r * np.sin(a)])
         c, s = math.cos(pose[2]), math.sin(pose[2])
-        ow = pose[:2] + origins @ np.array([[c, s], [-s, c]])
-        d = np.column_stack([np.cos(a + pose[2]), np.sin(a + pose[2])])
-        hits = [rays_hit(seg, float(o[0]), float(o[1]), dd[None, :]) for o, dd in zip(ow, d, strict=True)]
-        j = np.array([h[0][0] for h in hits])
-        t = np.array([h[1][0] if h[0][0] >= 0 else np.inf for h in hits])
-        # Left out: points within two grid walls' thickness of the margin (a cell-thick
-        # wall met at a glancing angle is 1 / sin(angle) cells thick along the ray).
-        u = seg[np.maximum(j, 0), 2:] - seg[np.maximum(j, 0), :2]
-        sin = np.abs(d[:, 0] * u[:, 1] - d[:, 1] * u[:, 0]) / np.linalg.norm(u, axis=1)
-        clear = np.abs(r - (t + margin)) > 2 * CELL / np.maximum(sin, 0.1)
-        want = (r > t + margin)[clear]
+        rot = np.array([[c, s], [-s, c]])
+        ow, pw = pose[:2] + origins @ rot, pose[:2] + pts @ rot
+        behind = np.array([_behind_crossed_walls(seg, o, p) for o, p in zip(ow, pw, strict=True)])
+        # Left out: points within a grid cell of the margin.
+        clear = np.abs(behind - margin) > CELL
+        want = (behind > margin)[clear]
         got = np.array([gl.scan_through(pose, origins[i : i + 1], pts[i : i + 1]) for i in np.flatnonzero(clear)])
         np.testing.assert_array_equal(got == 1.0, want)
         assert gl.scan_through(pose, origins[clear], pts[clear]) == pytest.approx(want.mean())
         grid = np.array([grid_only.scan_through(pose, origins[i : i + 1], pts[i : i + 1]) for i in np.flatnonzero(clear)])
         assert np.all(grid >= got)
         grid_extra += int(np.sum(grid > got))
+        # Behind a crossed wall, but by less than the margin from its line: counted
+        # along the ray (the grid alone) when the ray meets the wall at a glancing angle.
+        glancing += int(np.sum((grid > got) & (behind[clear] > 0)))
         checked += int(clear.sum())
-    assert checked > 5000 and grid_extra > 0
+    assert checked > 5000 and grid_extra > 0 and glancing > 0
+
+
+def test_a_point_on_a_wall_seen_at_a_glancing_angle_is_not_seen_through_it() -> None:
+    """A long room, 12 x 4 m; the robot 1 m from its south wall looks 10 degrees off it.
+    A point on its ray 0.15 m behind the wall (what a degree of dead-reckoning drift
+    does at 4 m) is 0.86 m along the ray behind it, but within ``through_m`` of its
+    line: not seen through it. Points 0.6 m behind the wall, and one seen head-on
+    through it, are."""
+    vm = VectorMap.from_segments([[0, 0, 12, 0], [12, 0, 12, 4], [12, 4, 0, 4], [0, 4, 0, 0]])
+    r = AvoidanceConfig().robot_radius_m
+    gl = GlobalLocalizer(build_free_space(vm, FreeSpaceConfig(robot_radius_m=r)), r, segments=vm.segments)
+    margin = gl.cfg.through_m
+    pose = np.array([2.0, 1.0, 0.0])
+    glance = math.radians(-10.0)
+    u = np.array([math.cos(glance), math.sin(glance)])
+    down = np.array([0.0, -1.0])
+
+    def behind(depth: float, ray: np.ndarray) -> np.ndarray:
+        """The point on ``ray`` from the robot ``depth`` behind the south wall's line."""
+        return ray[None, :] * (1.0 + depth) / -ray[1]
+
+    here = np.zeros((1, 2))
+    shallow = behind(0.15, u)
+    assert np.hypot(*shallow[0]) - 1.0 / -u[1] > 2 * margin  # along the ray, well behind
+    assert gl.scan_through(pose, here, shallow) == 0.0
+    assert gl.scan_through(pose, here, behind(0.6, u)) == 1.0
+    assert gl.scan_through(pose, here, behind(0.15, down)) == 0.0
+    assert gl.scan_through(pose, here, behind(0.6, down)) == 1.0
 
 
 def test_a_cluttered_hall_keeps_its_place_against_offices_elsewhere(building) -> None:

@@ -21,9 +21,9 @@ The scan is then matched against the whole map (ours; the papers re-localized by
    scan points, and **scored**: the cost plus ``through_weight`` times the fraction of
    the scan's points that the mode sees through the map's walls (each point's ray
    from where the robot stood when it saw it, marched over the distance transform; a
-   point counts when it lies more than ``through_m`` behind a wall its ray crosses,
-   measured from the wall's line, so that drift does not count a wall seen at a
-   glancing angle as seen through).
+   point counts when it lies behind a wall its ray crosses by more than ``through_m``
+   along the ray and ``through_depth_m`` from the wall's line, so that drift does not
+   count a wall seen at a glancing angle as seen through).
    The likelihood field alone favours places with many walls: a hall's furniture fits
    some office's walls better than the hall's own few. Clutter can only hide walls,
    never show what lies behind them, so sight through walls rules such places out.
@@ -125,7 +125,11 @@ class RelocalizationConfig:
     on its ray is explained ... (as :class:`autonomy.health.HealthConfig`)"""
     through_m: float = 0.4
     """... and one this far beyond it is seen through the wall (the scan's points: this
-    far behind a wall their ray crosses, from the wall's line)."""
+    far along their ray behind a wall it crosses, and ``through_depth_m`` ...)"""
+    through_depth_m: float = 0.2
+    """... from the wall's line. The scan is placed by dead reckoning: a degree of drift
+    moves a point 4 m away 7 cm off its wall, 0.4 m along its ray when the wall is seen
+    10 degrees off it. 0 counts along the ray alone."""
     confirmations: int = 2
     """A mode is accepted once it has passed the decision in this many searches in a row
     (within ``mode_separation_m`` and ``mode_separation_deg`` of itself)."""
@@ -152,7 +156,7 @@ class RelocalizationConfig:
         )
         require_non_negative(
             self, "recovery.relocalization.", "min_sweep_deg", "max_through", "prior_cost", "prior_lead_cost", "explain_m", "through_m",
-            "through_weight",
+            "through_depth_m", "through_weight",
         )
         require_int(self, "recovery.relocalization.", "coarse_points", minimum=10)
         require_int(self, "recovery.relocalization.", "modes", minimum=1)
@@ -261,9 +265,9 @@ def segment_index(seg: np.ndarray, x0: float, y0: float, cell: float, ny: int, n
 
 
 @numba.njit(cache=True, inline="always")
-def _crosses(seg, start, ids, ix0, iy0, inv_icell, iny, inx, ax, ay, ux, uy, hx, hy, end, qx, qy, margin):  # pragma: no cover - numba
+def _crosses(seg, start, ids, ix0, iy0, inv_icell, iny, inx, ax, ay, ux, uy, hx, hy, end, qx, qy, depth):  # pragma: no cover - numba
     """Whether the ray from (ax, ay) along unit (ux, uy) meets a segment before ``end``
-    that the ray's point (qx, qy) lies more than ``margin`` behind (from the segment's
+    that the ray's point (qx, qy) lies more than ``depth`` behind (from the segment's
     line), among the indexed segments around (hx, hy) (the cell of a grid wall hit and
     its eight neighbours)."""
     cj = int(math.floor((hx - ix0) * inv_icell))
@@ -285,20 +289,20 @@ def _crosses(seg, start, ids, ix0, iy0, inv_icell, iny, inx, ax, ay, ux, uy, hx,
                 tt = (wx * ey - wy * ex) / den
                 lam = (wx * uy - wy * ux) / den
                 if 0.0 <= tt <= end and -1e-9 <= lam <= 1.0 + 1e-9:
-                    if abs(ex * (qy - py) - ey * (qx - px)) > margin * math.sqrt(ex * ex + ey * ey):
+                    if abs(ex * (qy - py) - ey * (qx - px)) > depth * math.sqrt(ex * ex + ey * ey):
                         return True
     return False
 
 
 @numba.njit(cache=True)
 def _through_count(
-    dist, ox, oy, inv_cell, x, y, c, s, origins, pts, margin, seg, start, ids, ix0, iy0, inv_icell, iny, inx
+    dist, ox, oy, inv_cell, x, y, c, s, origins, pts, margin, depth, seg, start, ids, ix0, iy0, inv_icell, iny, inx
 ):  # pragma: no cover - numba
-    """How many robot-frame points ``pts``, seen from robot-frame ``origins``, lie more
-    than ``margin`` behind a wall their ray crosses at pose (x, y, theta = atan2(s, c)).
-    Behind is measured from the wall's line, not along the ray: the scan's points are
-    placed through dead reckoning, and a degree of drift puts a point on a wall seen at
-    a glancing angle 10 degrees off it half a metre along its ray behind the wall.
+    """How many robot-frame points ``pts``, seen from robot-frame ``origins``, lie behind
+    a wall their ray crosses at pose (x, y, theta = atan2(s, c)): more than ``margin``
+    along the ray and more than ``depth`` from the wall's line. The scan's points are
+    placed through dead reckoning: a degree of drift moves a point 4 m away 7 cm off
+    its wall, which is 0.4 m along its ray when the wall is seen 10 degrees off it.
     The ray is marched over the distance transform (sphere tracing: each step is the
     free distance around the sample less a cell, so no wall cell is stepped over); a
     wall cell has distance 0. A grid wall is a cell thick, so a ray through a door
@@ -330,7 +334,7 @@ def _through_count(
             if d < 0.5 * cell:
                 if not exact or _crosses(
                     seg, start, ids, ix0, iy0, inv_icell, iny, inx, ax, ay, ux, uy, ax + t * ux, ay + t * uy, end,
-                    ax + r * ux, ay + r * uy, margin,
+                    ax + r * ux, ay + r * uy, depth,
                 ):
                     n += 1
                     break
@@ -340,13 +344,13 @@ def _through_count(
 
 @numba.njit(cache=True, parallel=True)
 def _through_counts(
-    dist, ox, oy, inv_cell, poses, origins, pts, margin, seg, start, ids, ix0, iy0, inv_icell, iny, inx, out
+    dist, ox, oy, inv_cell, poses, origins, pts, margin, depth, seg, start, ids, ix0, iy0, inv_icell, iny, inx, out
 ):  # pragma: no cover - numba
     """:func:`_through_count` at each of ``poses`` (shared out over the cores)."""
     for i in numba.prange(poses.shape[0]):
         out[i] = _through_count(
             dist, ox, oy, inv_cell, poses[i, 0], poses[i, 1], math.cos(poses[i, 2]), math.sin(poses[i, 2]), origins, pts,
-            margin, seg, start, ids, ix0, iy0, inv_icell, iny, inx,
+            margin, depth, seg, start, ids, ix0, iy0, inv_icell, iny, inx,
         )
 
 
@@ -473,12 +477,17 @@ class GlobalLocalizer:
 
     def scan_through(self, pose: np.ndarray, origins: np.ndarray, pts: np.ndarray) -> float:
         """Fraction of robot-frame points ``pts``, seen from robot-frame ``origins``, that
-        lie more than ``through_m`` beyond the first wall on their ray at ``pose``."""
+        lie behind a wall their ray crosses at ``pose``: more than ``through_m`` along
+        the ray and ``through_depth_m`` from the wall's line."""
         return float(self.scan_through_at(np.asarray(pose, dtype=np.float64)[None, :], origins, pts)[0])
 
-    def scan_through_at(self, poses: np.ndarray, origins: np.ndarray, pts: np.ndarray, margin_m: float | None = None) -> np.ndarray:
-        """:meth:`scan_through` at each of ``poses`` (N, 3), the points more than
-        ``margin_m`` (default ``through_m``) beyond the wall."""
+    def scan_through_at(
+        self, poses: np.ndarray, origins: np.ndarray, pts: np.ndarray, margin_m: float | None = None,
+        depth_m: float | None = None,
+    ) -> np.ndarray:
+        """:meth:`scan_through` at each of ``poses`` (N, 3), with the margins ``margin_m``
+        along the ray (default ``through_m``) and ``depth_m`` from the wall's line
+        (default ``through_depth_m``)."""
         poses = np.ascontiguousarray(poses, dtype=np.float64).reshape(-1, 3)
         pts = np.ascontiguousarray(pts, dtype=np.float64).reshape(-1, 2)
         out = np.zeros(len(poses), dtype=np.int64)
@@ -488,6 +497,7 @@ class GlobalLocalizer:
             self.dist, self.origin[0], self.origin[1], self.inv_cell, poses,
             np.ascontiguousarray(origins, dtype=np.float64).reshape(-1, 2), pts,
             self.cfg.through_m if margin_m is None else float(margin_m),
+            self.cfg.through_depth_m if depth_m is None else float(depth_m),
             self._seg, self._start, self._ids, self.origin[0], self.origin[1], 1.0 / SEGMENT_INDEX_CELL_M, *self._ishape, out,
         )
         return out / len(pts)

@@ -311,21 +311,32 @@ class FreeSpace:
         i, j = self.cell_of(xy)
         return self.region[i, j]
 
-    def free_cells(self, min_clearance_m: float, region: int | None = 0) -> tuple[np.ndarray, np.ndarray]:
-        """(rows, cols) of cells at least ``min_clearance_m`` from every wall, in ``region``
-        (``None``: any region)."""
+    def free_cells(self, min_clearance_m: float, region: int | None = 0, cache: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """(rows, cols) (int32) of cells at least ``min_clearance_m`` from every wall, in
+        ``region`` (``None``: any region). Kept for the next call unless ``cache`` is
+        false: placement draws many points at a few clearances, whereas a caller that
+        asks once would hold a building's million cells for nothing."""
         key = (float(min_clearance_m), region)
-        if key not in self._cells:  # placement draws many points at a few clearances
-            ok = self.clearance() >= min_clearance_m
-            ok &= (self.region >= 0) if region is None else (self.region == region)
-            self._cells[key] = np.nonzero(ok)
-        return self._cells[key]
+        if key in self._cells:
+            return self._cells[key]
+        ok = self.clearance() >= min_clearance_m
+        ok &= (self.region >= 0) if region is None else (self.region == region)
+        rows, cols = np.nonzero(ok)
+        cells = (rows.astype(np.int32), cols.astype(np.int32))
+        if cache:
+            self._cells[key] = cells
+        return cells
+
+    def sample_cells(self, min_clearance_m: float, region: int | None = 0) -> tuple[np.ndarray, np.ndarray]:
+        """The cells :meth:`sample` draws from (kept): those whose whole area lies at
+        least ``min_clearance_m`` from every wall. A long run that will draw places later
+        calls this at its start, so that its memory does not step at the first draw."""
+        return self.free_cells(min_clearance_m + math.sqrt(0.5) * self.cell_m, region)
 
     def sample(self, rng: np.random.Generator, n: int, min_clearance_m: float, region: int | None = 0) -> np.ndarray:
         """``n`` points (n, 2) uniform over the free space at least ``min_clearance_m`` from
         every wall (exactly: the jitter inside a cell is covered by the threshold)."""
-        half_diag = math.sqrt(0.5) * self.cell_m
-        rows, cols = self.free_cells(min_clearance_m + half_diag, region)
+        rows, cols = self.sample_cells(min_clearance_m, region)
         if rows.size == 0:
             where = "in any region" if region is None else f"in region {region}"
             raise InputError(f"free space: no place {where} at least {min_clearance_m:.2f} m from every wall")

@@ -459,7 +459,7 @@ class GlobalLocalizer:
         else:
             self._seg = np.ascontiguousarray(segments, dtype=np.float64).reshape(-1, 4)
             self._start, self._ids = segment_index(self._seg, self.origin[0], self.origin[1], ic, *self._ishape)
-        rows, cols = free_space.free_cells(robot_radius_m, region=None)
+        rows, cols = free_space.free_cells(robot_radius_m, region=None, cache=False)
         step = max(1, int(round(cfg.grid_step_m / free_space.cell_m)))
         keep = (rows % step == step // 2) & (cols % step == step // 2)
         self.candidates = np.ascontiguousarray(free_space.centres(rows[keep], cols[keep]))

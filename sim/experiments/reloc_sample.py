@@ -72,7 +72,7 @@ def start_poses(
     with uniform headings."""
     gl = stack.global_localizer()
     fs = gl.fs
-    rows, cols = fs.free_cells(stack.cfg.avoidance.robot_radius_m, region=None)
+    rows, cols = fs.free_cells(stack.cfg.avoidance.robot_radius_m, region=None, cache=False)
     xy = fs.centres(rows, cols)
     if region is not None:
         x0, y0, x1, y1 = region

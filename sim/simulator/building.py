@@ -88,6 +88,12 @@ class Building:
         except InputError:
             return None
 
+    def prepare_free_spots(self, clearance_m: float, robot_radius_m: float) -> None:
+        """Build now what :meth:`free_spot` draws from (the free space and its cells, about
+        20 MB for the corridor-loop building), so that a run that will draw places later
+        has its memory steady from its start."""
+        self.free_space(robot_radius_m).sample_cells(clearance_m)
+
     @property
     def main_node_ids(self) -> np.ndarray:
         """Node ids (in node order) of the graph's largest connected component."""

@@ -445,6 +445,13 @@ class FaultInjector:
         self._adj = None
         self._waiting: tuple[FaultParams, str, float, float] | None = None
         self._next_try = -math.inf
+        # The places a kidnap lands on and a bump's fit are read from the building's free
+        # space: built now, not at the first such fault, so that a long run's memory is
+        # steady from its start.
+        if cfg.uses("kidnap"):
+            building.prepare_free_spots(self.robot_radius_m + KIDNAP_CLEARANCE_M, self.robot_radius_m)
+        elif cfg.uses("slip"):
+            building.free_space(self.robot_radius_m)
 
     # ------------------------------------------------------------------ the loop
 

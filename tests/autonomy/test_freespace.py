@@ -92,6 +92,26 @@ def test_samples_keep_the_clearance_exactly():
         fs.sample(np.random.default_rng(2), 1, 50.0)
 
 
+def test_free_cells_are_the_cells_with_the_clearance_kept_only_when_asked():
+    """The cells against the grid's own mask, as int32 (half the memory of a building's
+    million cells); a one-off query (cache=False) leaves nothing behind, and the cells
+    sample() draws from are kept for the next draw."""
+    bp = blueprints.load_blueprint(blueprints.ASSETS_DIR / "small_floor")
+    fs = build_free_space(bp.vectormap)
+    rows, cols = fs.free_cells(0.5, region=None, cache=False)
+    want = np.nonzero((fs.clearance() >= 0.5) & (fs.region >= 0))
+    assert rows.dtype == cols.dtype == np.int32
+    np.testing.assert_array_equal(rows, want[0])
+    np.testing.assert_array_equal(cols, want[1])
+    again = fs.free_cells(0.5, region=None, cache=False)
+    assert again[0] is not rows  # computed afresh: nothing was kept
+    kept = fs.sample_cells(0.6)
+    assert fs.sample_cells(0.6)[0] is kept[0]
+    got = fs.sample(np.random.default_rng(3), 200, 0.6)
+    i, j = fs.cell_of(got)
+    assert set(zip(i.tolist(), j.tolist(), strict=True)) <= set(zip(kept[0].tolist(), kept[1].tolist(), strict=True))
+
+
 def test_config_errors_name_the_key():
     with pytest.raises(InputError, match="free_space.cell_m"):
         FreeSpaceConfig(cell_m=0.0)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import tomllib
+import tracemalloc
 
 import numpy as np
 import pytest
@@ -229,6 +230,33 @@ def test_kidnap_carries_the_robot_to_a_free_place_unseen_by_the_odometry() -> No
     # Anywhere in the building: the landing places spread over it, at random headings.
     assert np.ptp(spots[:, 0]) > 30.0 and np.ptp(spots[:, 1]) > 15.0
     assert np.ptp([p[2] for p in poses]) > 3.0
+    rig.close()
+
+
+def test_the_places_a_kidnap_lands_on_are_built_before_the_first_kidnap() -> None:
+    """A run with kidnappings builds the building's free space and its landing cells
+    when its injector is made: the first kidnap allocates no grid (a long run's memory
+    stepped by about 20 MB at it)."""
+    b = corridor_loop()
+    cfg = FaultsConfig(events=(FaultEvent(kind="kidnap", at_s=0.0),))
+    rig = Rig(cfg, b, np.array([12.0, 6.3, 0.0]), seed=4)
+    tracemalloc.start()
+    try:
+        rig.faults.before_step(0.0, 0.0, None)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert rig.faults.events[-1]["kind"] == "kidnap" and "skipped" not in rig.faults.events[-1]
+    assert peak < 1_000_000
+    # Without the injector, the same first kidnap builds the grid (the check can fail).
+    fresh = corridor_loop()
+    tracemalloc.start()
+    try:
+        fresh.free_spot(np.random.default_rng(0), RADIUS + KIDNAP_CLEARANCE_M, RADIUS)
+        _, peak_cold = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak_cold > 10_000_000
     rig.close()
 
 

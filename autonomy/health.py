@@ -21,7 +21,16 @@ either
 1. the short-term contradiction fraction is above ``lost_through``, or
 2. the short-term explained fraction is below ``lost_ratio`` times the long-term one
    (with enough frames behind the long-term average), or
-3. the particle spread is above ``lost_spread_m``.
+3. the particle spread is above ``lost_spread_m``,
+
+or at once when
+
+4. the localizer moved the belief more than ``jump_m`` beyond what the odometry says
+   within ``jump_s`` while the short-term explained fraction was below ``jump_ratio``
+   times the long-term one: the belief had stopped explaining the view and then jumped
+   to fit it. CGR's corrections on a tracked belief stay far smaller, so the belief
+   before the jump was wrong, and a belief that wrong may have settled on the wrong one
+   of two places the map repeats (a robot carried along a corridor);
 
 and **blind** when no usable frame has arrived for ``blind_s`` (a
 camera blackout, dropped or corrupted frames: the estimate is dead reckoning then).
@@ -32,6 +41,7 @@ docs/results.md its false alarms and misses against the truth on other seeds.
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
 
 import numba
@@ -70,12 +80,19 @@ class HealthConfig:
     ratio_hold_s: float = 4.0
     min_history_s: float = 5.0
     """The ratio test needs this much observed time behind the long-term average."""
+    jump_m: float = 0.5
+    """Lost at once when the localizer moves the belief this far beyond the odometry ..."""
+    jump_s: float = 1.0
+    """... within this long (net, so frame-to-frame jitter cancels) ..."""
+    jump_ratio: float = 0.5
+    """... while the short-term explained fraction was below this fraction of the
+    long-term one (with ``min_history_s`` behind it) in that time."""
     blind_s: float = 0.5
     """Blind when no usable frame has arrived for this long."""
 
     def __post_init__(self) -> None:
-        require_positive(self, "recovery.health.", "explain_m", "through_m", "fast_s", "slow_s", "lost_spread_m", "blind_s")
-        require_non_negative(self, "recovery.health.", "lost_through", "lost_ratio", "hold_s", "ratio_hold_s", "min_history_s")
+        require_positive(self, "recovery.health.", "explain_m", "through_m", "fast_s", "slow_s", "lost_spread_m", "blind_s", "jump_m", "jump_s")
+        require_non_negative(self, "recovery.health.", "lost_through", "lost_ratio", "hold_s", "ratio_hold_s", "min_history_s", "jump_ratio")
         require_int(self, "recovery.health.", "min_points", minimum=1)
 
 
@@ -130,6 +147,8 @@ class HealthSample:
     spread_m: float
     reason: str
     """Which test said lost or blind ('' when ok)."""
+    jump_m: float = 0.0
+    """How far the localizer moved the belief beyond the odometry within ``jump_s`` (net)."""
 
 
 class HealthMonitor:
@@ -149,15 +168,23 @@ class HealthMonitor:
             self.e_slow = math.nan
             self.history_s = 0.0
         self.last_t = math.nan
+        self._moves: deque[tuple[float, float, float, float]] = deque()
+        self._move_x = self._move_y = 0.0
+        self.jump_m = 0.0
         self.last_evidence_t = t
         self.bad_since = math.nan
         self.state = "ok"
         self.reason = ""
         self.last = HealthSample(t, "ok", math.nan, math.nan, math.nan, math.nan, math.nan, 0.0, "")
 
-    def update(self, t: float, verdicts: np.ndarray | None, spread_m: float) -> HealthSample:
+    def update(
+        self, t: float, verdicts: np.ndarray | None, spread_m: float, correction: tuple[float, float] | None = None
+    ) -> HealthSample:
         """Fold in one frame's per-point verdicts (:func:`explain_points`; None: no usable
-        frame; fewer than ``min_points``: a frame, but no evidence) and the belief's spread; returns the frame's :class:`HealthSample`."""
+        frame; fewer than ``min_points``: a frame, but no evidence), the belief's spread and
+        the localizer's ``correction`` this frame (world x, y: the belief after the update
+        minus the odometry's prediction of it; None: none); returns the frame's
+        :class:`HealthSample`."""
         cfg = self.cfg
         dt = 0.0 if math.isnan(self.last_t) else max(0.0, t - self.last_t)
         self.last_t = t
@@ -174,19 +201,47 @@ class HealthMonitor:
             self.th_fast = th if math.isnan(self.th_fast) else self.th_fast + a_fast * (th - self.th_fast)
             self.e_slow = e if math.isnan(self.e_slow) else self.e_slow + a_slow * (e - self.e_slow)
             self.history_s += dt
+        self._track_moves(t, correction)
         reason = self._lost_reason(spread_m)
         if reason:
             if math.isnan(self.bad_since):
                 self.bad_since = t
-            hold = cfg.ratio_hold_s if reason == "explains little" else cfg.hold_s
+            hold = {"explains little": cfg.ratio_hold_s, "belief jumped": 0.0}.get(reason, cfg.hold_s)
             state = "lost" if t - self.bad_since >= hold else ("blind" if t - self.last_evidence_t > cfg.blind_s else "ok")
         else:
             self.bad_since = math.nan
             state = "blind" if t - self.last_evidence_t > cfg.blind_s else "ok"
             reason = "no frames" if state == "blind" else ""
         self.state, self.reason = state, reason if state != "ok" else ""
-        self.last = HealthSample(t, state, e, th, self.e_fast, self.e_slow, self.th_fast, float(spread_m), self.reason)
+        self.last = HealthSample(t, state, e, th, self.e_fast, self.e_slow, self.th_fast, float(spread_m), self.reason, self.jump_m)
         return self.last
+
+    def _ratio(self) -> float:
+        """Short- over long-term explained fraction (NaN without enough history)."""
+        if math.isnan(self.e_fast) or self.history_s < self.cfg.min_history_s or not self.e_slow > 0.0:
+            return math.nan
+        return self.e_fast / self.e_slow
+
+    def _track_moves(self, t: float, correction: tuple[float, float] | None) -> None:
+        """The net correction over the last ``jump_s`` (running sums over a window)."""
+        if correction is not None and math.isfinite(correction[0]) and math.isfinite(correction[1]):
+            cx, cy = float(correction[0]), float(correction[1])
+            self._moves.append((t, cx, cy, self._ratio()))
+            self._move_x += cx
+            self._move_y += cy
+        while self._moves and self._moves[0][0] <= t - self.cfg.jump_s:
+            _, cx, cy, _ = self._moves.popleft()
+            self._move_x -= cx
+            self._move_y -= cy
+        if not self._moves:
+            self._move_x = self._move_y = 0.0
+        self.jump_m = math.hypot(self._move_x, self._move_y)
+
+    def _jumped(self) -> bool:
+        cfg = self.cfg
+        if self.jump_m <= cfg.jump_m:
+            return False
+        return any(r < cfg.jump_ratio for _, _, _, r in self._moves)
 
     def _lost_reason(self, spread_m: float) -> str:
         cfg = self.cfg
@@ -194,6 +249,8 @@ class HealthMonitor:
             return "spread"
         if not math.isnan(self.th_fast) and self.th_fast > cfg.lost_through:
             return "sees through walls"
+        if self._jumped():
+            return "belief jumped"
         if (
             not math.isnan(self.e_fast)
             and self.history_s >= cfg.min_history_s

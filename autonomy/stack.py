@@ -273,6 +273,7 @@ class RobotStack:
         (no valid pixel; used), corrupt (NaN or infinite pixels; used without them)."""
         self.frames_rejected = {"dropped": 0, "stale": 0, "invalid": 0, "corrupt": 0}
         self._prior: np.ndarray | None = None
+        self._prior_trusted = True
         self._reloc_t0 = 0.0
         self._settle_until = -math.inf
         self._last_search_t = -math.inf
@@ -294,6 +295,7 @@ class RobotStack:
         self._t = 0.0
         self._cgr_lines: np.ndarray | None = None
         self.last_search = None
+        self._correction: tuple[float, float] | None = None
 
     # -- belief ------------------------------------------------------------------------
     def reset(self, pose: np.ndarray | None) -> None:
@@ -427,6 +429,7 @@ class RobotStack:
             self._t = float(t)
         moved = False
         self._cgr_lines = None
+        self._correction = None
         if increment is not None:
             inc = np.asarray(increment, dtype=np.float64)
             if inc.shape != (3,):
@@ -451,11 +454,14 @@ class RobotStack:
                 elif self.modes:
                     self.pose = compose_pose(self.modes[0][0], self.odom)
             else:
+                predicted = compose_pose(self.pose, inc)
                 self.localizer.predict(inc)
                 if self.perception is not None and self._fresh:
                     self.localizer.update(self.perception.points_2d, self.perception.normals_2d)
                     self._cgr_lines = self.localizer.last_lines
                 self._read_estimate()
+                # How far the update moved the belief beyond the odometry (the jump test).
+                self._correction = (float(self.pose[0] - predicted[0]), float(self.pose[1] - predicted[1]))
         if t is not None and self.health is not None:
             if self.relocalizing:
                 self._relocalize_step(float(t))
@@ -490,12 +496,15 @@ class RobotStack:
                 lines = np.ascontiguousarray(self.scene.scene_lines(float(self.pose[0]), float(self.pose[1]))[0])
             verdicts = explain_points(lines, self.pose, np.ascontiguousarray(per.points_2d, dtype=np.float64), hc.explain_m, hc.through_m)
         was = self.health.state
-        sample = self.health.update(t, verdicts, self.spread[0])
+        sample = self.health.update(t, verdicts, self.spread[0], self._correction)
         if sample.state != was and "blind" in (sample.state, was) and sample.state != "lost":
             self.events.append({"t": round(t, 3), "event": sample.state if sample.state == "blind" else "seeing"})
         if sample.state == "lost":
             prior = compose_pose(self.pose, relative_pose(self.odom, np.zeros(3)))
             self._start_relocalizing(t, prior, sample.reason)
+            # A belief that just jumped is the suspect: it competes with the other places
+            # but wins only by the usual margins (a corridor the map repeats fits both).
+            self._prior_trusted = sample.reason != "belief jumped"
 
     def prepare_recovery(self) -> None:
         """Build the relocalization's map search now (the free-space grid, the coarse
@@ -521,6 +530,7 @@ class RobotStack:
         self.scan.clear()
         self.modes = []
         self._prior = prior
+        self._prior_trusted = True
         self._reloc_t0 = t
         self._last_search_t = -math.inf
         self._searches = 0
@@ -583,7 +593,7 @@ class RobotStack:
             self.pose = compose_pose(self.modes[0][0], self.odom)
         self.last_search = res
         prior_mode = None
-        if prior is not None and res.modes:
+        if prior is not None and res.modes and self._prior_trusted:
             # A false alarm ends where it began: the belief before the alarm, if it still
             # explains the scan about as well as the best mode.
             kept = gl.rescore(prior[None, :], pts, origins=origins).modes

@@ -541,6 +541,7 @@ def health_scalars(stack: RobotStack) -> dict[str, float]:
         "health/explained_fast": h.explained_fast,
         "health/explained_slow": h.explained_slow,
         "health/through_fast": h.through_fast,
+        "health/jump_m": h.jump_m,
     }
 
 

@@ -344,3 +344,92 @@ def test_a_second_frame_at_the_same_time_moves_no_average() -> None:
 def test_bad_config_is_a_one_line_error_naming_the_field(field, value) -> None:
     with pytest.raises(InputError, match=rf"health\.{field}: expected"):
         HealthConfig(**{field: value})
+
+
+# --------------------------------------------------------------------------- the jump test
+
+
+def feed(mon: HealthMonitor, t0: float, seconds: float, explained, correction):
+    """Feed frames at 30 Hz with ``explained(t)`` verdicts and ``correction(t)`` (world
+    x, y of the localizer's correction); returns (times, corrections, samples)."""
+    rng = np.random.default_rng(11)
+    ts = t0 + np.arange(1, int(round(seconds * FPS)) + 1) / FPS
+    cs, samples = [], []
+    for t in ts:
+        c = correction(float(t))
+        cs.append(c)
+        samples.append(mon.update(float(t), frame(rng, explained(float(t))), 0.05, c))
+    return ts, cs, samples
+
+
+def reference_jump(ts, cs, k: int, window_s: float) -> float:
+    """Brute force: the norm of the sum of the corrections within ``window_s`` up to frame k."""
+    sx = sy = 0.0
+    for t, c in zip(ts[: k + 1], cs[: k + 1], strict=True):
+        if t > ts[k] - window_s:
+            sx, sy = sx + c[0], sy + c[1]
+    return math.hypot(sx, sy)
+
+
+def test_the_net_correction_matches_a_brute_force_window_sum() -> None:
+    rng = np.random.default_rng(12)
+    mon = HealthMonitor()
+    steps = rng.normal(0.0, 0.03, (int(20 * FPS), 2)) + np.array([0.004, -0.002])
+    ts, cs, samples = feed(mon, 0.0, 20.0, lambda t: 0.8, lambda t: tuple(steps[int(round(t * FPS)) - 1]))
+    for k in range(0, len(ts), 7):
+        assert samples[k].jump_m == pytest.approx(reference_jump(ts, cs, k, CFG.jump_s), abs=1e-9)
+
+
+def test_a_jump_after_the_view_stopped_fitting_is_lost_at_once() -> None:
+    """A robot carried along a corridor: the explained fraction falls to a third of its
+    level (above the ratio test's), then the localizer pulls the belief 0.7 m in 0.3 s."""
+    mon = HealthMonitor()
+    jitter = np.random.default_rng(13)
+    feed(mon, 0.0, 20.0, lambda t: 0.9, lambda t: tuple(jitter.normal(0.0, 0.02, 2)))
+    ts, cs, samples = feed(mon, 20.0, 2.0, lambda t: 0.3, lambda t: tuple(jitter.normal(0.0, 0.02, 2)))
+    assert {s.state for s in samples} == {"ok"}
+    assert samples[-1].explained_fast < CFG.jump_ratio * samples[-1].explained_slow
+    per_frame = 0.7 / (0.3 * FPS)
+    ts2, cs2, samples2 = feed(mon, 22.0, 1.0, lambda t: 0.6, lambda t: (per_frame, 0.0) if t <= 22.3 + 1e-9 else (0.0, 0.0))
+    lost = [k for k, s in enumerate(samples2) if s.state == "lost"]
+    assert lost and samples2[lost[0]].reason == "belief jumped"
+    ts_all, cs_all = list(ts) + list(ts2), cs + cs2
+    first_over = next(k for k in range(len(ts2)) if reference_jump(ts_all, cs_all, len(ts) + k, CFG.jump_s) > CFG.jump_m)
+    assert lost[0] == first_over
+
+
+def test_the_same_jump_while_the_view_still_fits_is_no_alarm() -> None:
+    """Wheels slipping under a tracked belief: the localizer corrects the odometry
+    quickly but the map keeps explaining what the camera sees."""
+    mon = HealthMonitor()
+    feed(mon, 0.0, 20.0, lambda t: 0.9, lambda t: (0.0, 0.0))
+    per_frame = 0.7 / (0.3 * FPS)
+    _, _, samples = feed(mon, 20.0, 3.0, lambda t: 0.8, lambda t: (per_frame, 0.0) if t <= 20.3 else (0.0, 0.0))
+    assert {s.state for s in samples} == {"ok"}
+    assert max(s.jump_m for s in samples) > CFG.jump_m
+
+
+@settings(max_examples=30, deadline=None)
+@given(rate=st.floats(0.0, 0.95), sigma=st.floats(0.0, 0.05), angle=st.floats(0.0, 2 * math.pi))
+def test_jitter_and_slow_corrections_never_jump(rate, sigma, angle) -> None:
+    """Corrections below ``jump_m`` per ``jump_s`` (net), with zero-mean jitter on top that
+    cancels over the window, raise no jump alarm even when the view fits poorly."""
+    mon = HealthMonitor()
+    rng = np.random.default_rng(14)
+    per_frame = rate * CFG.jump_m / CFG.jump_s / FPS
+    drift = (per_frame * math.cos(angle), per_frame * math.sin(angle))
+    # Antithetic jitter (each draw followed by its negative): the window's net jitter is
+    # at most one draw, so the test is exact.
+    draws: list[np.ndarray] = []
+
+    def correction(t: float) -> tuple[float, float]:
+        if draws:
+            d = -draws.pop()
+        else:
+            d = np.clip(rng.normal(0.0, sigma, 2), -0.05, 0.05)
+            draws.append(d)
+        return (drift[0] + d[0] * (1.0 - rate), drift[1] + d[1] * (1.0 - rate))
+
+    feed(mon, 0.0, 10.0, lambda t: 0.9, correction)
+    _, _, samples = feed(mon, 10.0, 3.0, lambda t: 0.3, correction)
+    assert all(s.reason != "belief jumped" for s in samples)

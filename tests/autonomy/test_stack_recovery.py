@@ -287,6 +287,31 @@ def test_a_false_alarm_in_a_repeated_office_ends_where_it_began(building) -> Non
     assert math.hypot(err[0], err[1]) < 0.15 and abs(wrap_angle(err[2])) < math.radians(3.0), err
 
 
+def test_after_the_belief_jumped_the_belief_is_not_kept_for_explaining_the_scan(building, monkeypatch) -> None:
+    """The same office, but the alarm says the belief jumped: that belief is the suspect
+    (a corridor the map repeats fits it as well as the place the robot is at), so it is
+    not taken back for explaining the scan; only a mode leading by the margins is."""
+    scene = building[1]
+    office = np.array([1.16, 33.7, -3.04])
+    stack = make_stack(building, pose=office)
+    t = settle(stack, scene, 2.0)
+    monkeypatch.setattr(stack.health, "_lost_reason", lambda spread_m: "belief jumped")
+    t += 0.1
+    stack.perceive(render(scene, office))
+    stack.localize(np.zeros(3), t)
+    assert stack.relocalizing and stack.events[-1]["why"] == "belief jumped"
+    monkeypatch.undo()
+    truth, t, _ = follow(stack, scene, office, t, until_s=t + 20.0)
+    assert stack.last_search is not None  # it searched
+    done = [e for e in stack.events if e["event"] == "relocalized"]
+    assert all("before the alarm" not in e["reason"] for e in done), stack.events
+    if done:
+        err = relative_pose(truth, stack.pose)
+        assert math.hypot(err[0], err[1]) < 0.15 and abs(wrap_angle(err[2])) < math.radians(3.0), err
+    else:
+        assert stack.relocalizing
+
+
 # --------------------------------------------------------------------------- unknown start
 
 

@@ -86,7 +86,7 @@ class HealthConfig:
     """... within this long (net, so frame-to-frame jitter cancels) ..."""
     jump_ratio: float = 0.5
     """... while the short-term explained fraction was below this fraction of the
-    long-term one (with ``min_history_s`` behind it) in that time."""
+    long-term one (with ``min_history_s`` behind it) in that time (0 turns the test off)."""
     blind_s: float = 0.5
     """Blind when no usable frame has arrived for this long."""
 

@@ -339,7 +339,8 @@ def test_a_second_frame_at_the_same_time_moves_no_average() -> None:
 
 
 @pytest.mark.parametrize(
-    ("field", "value"), [("explain_m", 0.0), ("through_m", -1.0), ("blind_s", math.nan), ("hold_s", -0.1), ("lost_ratio", "0.3")]
+    ("field", "value"), [("explain_m", 0.0), ("through_m", -1.0), ("blind_s", math.nan), ("hold_s", -0.1), ("lost_ratio", "0.3"),
+     ("jump_m", 0.0), ("jump_s", -1.0), ("jump_ratio", -0.1)]
 )
 def test_bad_config_is_a_one_line_error_naming_the_field(field, value) -> None:
     with pytest.raises(InputError, match=rf"health\.{field}: expected"):

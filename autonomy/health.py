@@ -30,7 +30,11 @@ or at once when
    times the long-term one: the belief had stopped explaining the view and then jumped
    to fit it. CGR's corrections on a tracked belief stay far smaller, so the belief
    before the jump was wrong, and a belief that wrong may have settled on the wrong one
-   of two places the map repeats (a robot carried along a corridor);
+   of two places the map repeats (a robot carried along a corridor), or
+5. the camera's view disagreed with the odometry's prediction of it from the last
+   frame (:mod:`autonomy.view_check`: agreement below ``view_agree``) on
+   ``view_frames`` frames in a row: the robot was carried or pushed, and its belief
+   went nowhere;
 
 and **blind** when no usable frame has arrived for ``blind_s`` (a
 camera blackout, dropped or corrupted frames: the estimate is dead reckoning then).
@@ -87,13 +91,20 @@ class HealthConfig:
     jump_ratio: float = 0.5
     """... while the short-term explained fraction was below this fraction of the
     long-term one (with ``min_history_s`` behind it) in that time (0 turns the test off)."""
+    view_agree: float = 0.3
+    """Lost at once when the view agreed with the odometry's prediction of it
+    (:mod:`autonomy.view_check`) less than this ... (0 turns the test off)"""
+    view_frames: int = 1
+    """... on this many frames with evidence in a row (a robot put down elsewhere gives
+    one such frame when the view check compares consecutive frames, ``lag_s`` 0)."""
     blind_s: float = 0.5
     """Blind when no usable frame has arrived for this long."""
 
     def __post_init__(self) -> None:
         require_positive(self, "recovery.health.", "explain_m", "through_m", "fast_s", "slow_s", "lost_spread_m", "blind_s", "jump_m", "jump_s")
-        require_non_negative(self, "recovery.health.", "lost_through", "lost_ratio", "hold_s", "ratio_hold_s", "min_history_s", "jump_ratio")
+        require_non_negative(self, "recovery.health.", "lost_through", "lost_ratio", "hold_s", "ratio_hold_s", "min_history_s", "jump_ratio", "view_agree")
         require_int(self, "recovery.health.", "min_points", minimum=1)
+        require_int(self, "recovery.health.", "view_frames", minimum=1)
 
 
 @numba.njit(cache=True)
@@ -149,6 +160,8 @@ class HealthSample:
     """Which test said lost or blind ('' when ok)."""
     jump_m: float = 0.0
     """How far the localizer moved the belief beyond the odometry within ``jump_s`` (net)."""
+    view_agree: float = math.nan
+    """This frame's agreement of the view with the odometry (NaN: no evidence)."""
 
 
 class HealthMonitor:
@@ -171,6 +184,8 @@ class HealthMonitor:
         self._moves: deque[tuple[float, float, float, float]] = deque()
         self._move_x = self._move_y = 0.0
         self.jump_m = 0.0
+        self.view_low = 0
+        """Frames with evidence in a row whose view disagreed with the odometry."""
         self.last_evidence_t = t
         self.bad_since = math.nan
         self.state = "ok"
@@ -178,13 +193,19 @@ class HealthMonitor:
         self.last = HealthSample(t, "ok", math.nan, math.nan, math.nan, math.nan, math.nan, 0.0, "")
 
     def update(
-        self, t: float, verdicts: np.ndarray | None, spread_m: float, correction: tuple[float, float] | None = None
+        self,
+        t: float,
+        verdicts: np.ndarray | None,
+        spread_m: float,
+        correction: tuple[float, float] | None = None,
+        view_agree: float = math.nan,
     ) -> HealthSample:
         """Fold in one frame's per-point verdicts (:func:`explain_points`; None: no usable
-        frame; fewer than ``min_points``: a frame, but no evidence), the belief's spread and
+        frame; fewer than ``min_points``: a frame, but no evidence), the belief's spread,
         the localizer's ``correction`` this frame (world x, y: the belief after the update
-        minus the odometry's prediction of it; None: none); returns the frame's
-        :class:`HealthSample`."""
+        minus the odometry's prediction of it; None: none) and the view's agreement with
+        the odometry (:class:`autonomy.view_check.ViewCheck`; NaN: no evidence); returns
+        the frame's :class:`HealthSample`."""
         cfg = self.cfg
         dt = 0.0 if math.isnan(self.last_t) else max(0.0, t - self.last_t)
         self.last_t = t
@@ -195,6 +216,9 @@ class HealthMonitor:
             n = len(verdicts)
             e = float(np.count_nonzero(verdicts > 0)) / n
             th = float(np.count_nonzero(verdicts < 0)) / n
+        if math.isfinite(view_agree):
+            self.view_low = self.view_low + 1 if view_agree < cfg.view_agree else 0
+        if not math.isnan(e):
             a_fast = 1.0 - math.exp(-dt / cfg.fast_s)
             a_slow = 1.0 - math.exp(-dt / cfg.slow_s)
             self.e_fast = e if math.isnan(self.e_fast) else self.e_fast + a_fast * (e - self.e_fast)
@@ -206,14 +230,14 @@ class HealthMonitor:
         if reason:
             if math.isnan(self.bad_since):
                 self.bad_since = t
-            hold = {"explains little": cfg.ratio_hold_s, "belief jumped": 0.0}.get(reason, cfg.hold_s)
+            hold = {"explains little": cfg.ratio_hold_s, "belief jumped": 0.0, "view jumped": 0.0}.get(reason, cfg.hold_s)
             state = "lost" if t - self.bad_since >= hold else ("blind" if t - self.last_evidence_t > cfg.blind_s else "ok")
         else:
             self.bad_since = math.nan
             state = "blind" if t - self.last_evidence_t > cfg.blind_s else "ok"
             reason = "no frames" if state == "blind" else ""
         self.state, self.reason = state, reason if state != "ok" else ""
-        self.last = HealthSample(t, state, e, th, self.e_fast, self.e_slow, self.th_fast, float(spread_m), self.reason, self.jump_m)
+        self.last = HealthSample(t, state, e, th, self.e_fast, self.e_slow, self.th_fast, float(spread_m), self.reason, self.jump_m, float(view_agree))
         return self.last
 
     def _ratio(self) -> float:
@@ -251,6 +275,8 @@ class HealthMonitor:
             return "sees through walls"
         if self._jumped():
             return "belief jumped"
+        if self.view_low >= cfg.view_frames:
+            return "view jumped"
         if (
             not math.isnan(self.e_fast)
             and self.history_s >= cfg.min_history_s

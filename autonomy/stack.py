@@ -52,6 +52,7 @@ from autonomy.raycast import SceneQuery, VisibilityGridConfig, load_or_build
 from autonomy.relocalization import GlobalLocalizer, Mode, RelocalizationConfig, Scan
 from autonomy.straight_runs import on_straight_runs
 from autonomy.vectormap import NavGraph, VectorMap
+from autonomy.view_check import ViewCheck, ViewCheckConfig
 
 #: The visibility grid the stack localizes with: 0.5 m cells, scene lines to 6 m (the
 #: Kinect sees 4 m; the margin keeps lines a refined particle may reach).
@@ -124,6 +125,9 @@ class RecoveryConfig:
     (:mod:`autonomy.mount_check`)."""
     mount_check: MountCheckConfig = field(default_factory=MountCheckConfig)
     """The mount self-check's parameters."""
+    view: ViewCheckConfig = field(default_factory=ViewCheckConfig)
+    """The check of each view against the odometry (:mod:`autonomy.view_check`), which
+    tells the health monitor that the robot was carried."""
     restart_std_xy_m: float = 0.15
     """CGR restarts around an accepted mode with this position spread ..."""
     restart_std_theta_rad: float = math.radians(4.0)
@@ -258,6 +262,11 @@ class RobotStack:
         # Recovery: health, dead reckoning, the relocalization's scan and modes.
         rec = cfg.recovery
         self.health: HealthMonitor | None = HealthMonitor(rec.health) if (rec.enabled and self.localizer is not None) else None
+        self.view_check: ViewCheck | None = None
+        if self.health is not None and rec.view.enabled:
+            self.view_check = ViewCheck(rec.view, cam.intrinsics, cam.mount.robot_from_camera(), cam.min_range_m, cam.max_range_m)
+        self._depth: np.ndarray | None = None
+        self._view_agree = math.nan
         self._global: GlobalLocalizer | None = None
         self.odom = np.zeros(3)
         """Dead reckoning from the odometry alone (the relocalization's scan frame)."""
@@ -392,6 +401,7 @@ class RobotStack:
         self.timings_s = {"fspf": t1 - t0, "obstacles": t2 - t1}
         self.perception = Perception(planes, p2d, n2d, obstacles, near)
         self._fresh = True
+        self._depth = depth
         return self.perception
 
     def _correct_mount(self, mount) -> None:
@@ -403,6 +413,8 @@ class RobotStack:
              "roll_deg": round(math.degrees(float(getattr(mount, "roll_rad", 0.0))), 2)}
         )
         self.mount = mount
+        if self.view_check is not None:
+            self.view_check.set_mount(mount.robot_from_camera())
         if self.near_field is not None:
             cam = self.cfg.camera
             self.near_field = NearField(cam.intrinsics, mount, cam.min_range_m, self.cfg.avoidance.robot_radius_m, self.cfg.avoidance.near_field)
@@ -430,6 +442,7 @@ class RobotStack:
         moved = False
         self._cgr_lines = None
         self._correction = None
+        self._view_agree = math.nan
         if increment is not None:
             inc = np.asarray(increment, dtype=np.float64)
             if inc.shape != (3,):
@@ -462,6 +475,8 @@ class RobotStack:
                 self._read_estimate()
                 # How far the update moved the belief beyond the odometry (the jump test).
                 self._correction = (float(self.pose[0] - predicted[0]), float(self.pose[1] - predicted[1]))
+        if t is not None and self.view_check is not None and self._fresh and self._depth is not None:
+            self._view_agree = self.view_check.update(float(t), self.odom, self._depth)
         if t is not None and self.health is not None:
             if self.relocalizing:
                 self._relocalize_step(float(t))
@@ -496,7 +511,7 @@ class RobotStack:
                 lines = np.ascontiguousarray(self.scene.scene_lines(float(self.pose[0]), float(self.pose[1]))[0])
             verdicts = explain_points(lines, self.pose, np.ascontiguousarray(per.points_2d, dtype=np.float64), hc.explain_m, hc.through_m)
         was = self.health.state
-        sample = self.health.update(t, verdicts, self.spread[0], self._correction)
+        sample = self.health.update(t, verdicts, self.spread[0], self._correction, self._view_agree)
         if sample.state != was and "blind" in (sample.state, was) and sample.state != "lost":
             self.events.append({"t": round(t, 3), "event": sample.state if sample.state == "blind" else "seeing"})
         if sample.state == "lost":

@@ -542,6 +542,7 @@ def health_scalars(stack: RobotStack) -> dict[str, float]:
         "health/explained_slow": h.explained_slow,
         "health/through_fast": h.through_fast,
         "health/jump_m": h.jump_m,
+        "health/view_agree": h.view_agree,
     }
 
 

@@ -340,7 +340,7 @@ def test_a_second_frame_at_the_same_time_moves_no_average() -> None:
 
 @pytest.mark.parametrize(
     ("field", "value"), [("explain_m", 0.0), ("through_m", -1.0), ("blind_s", math.nan), ("hold_s", -0.1), ("lost_ratio", "0.3"),
-     ("jump_m", 0.0), ("jump_s", -1.0), ("jump_ratio", -0.1)]
+     ("jump_m", 0.0), ("jump_s", -1.0), ("jump_ratio", -0.1), ("view_agree", -0.5), ("view_frames", 0), ("view_frames", 1.5)]
 )
 def test_bad_config_is_a_one_line_error_naming_the_field(field, value) -> None:
     with pytest.raises(InputError, match=rf"health\.{field}: expected"):
@@ -434,3 +434,44 @@ def test_jitter_and_slow_corrections_never_jump(rate, sigma, angle) -> None:
     feed(mon, 0.0, 10.0, lambda t: 0.9, correction)
     _, _, samples = feed(mon, 10.0, 3.0, lambda t: 0.3, correction)
     assert all(s.reason != "belief jumped" for s in samples)
+
+
+# --------------------------------------------------------------------------- the view test
+
+
+def feed_views(mon: HealthMonitor, t0: float, agree: list[float], rng: np.random.Generator):
+    """Frames the map explains at 0.8 with the view agreements ``agree`` at 30 Hz;
+    returns the samples."""
+    ts = t0 + np.arange(1, len(agree) + 1) / FPS
+    return [mon.update(float(t), frame(rng, 0.8), 0.1, None, a) for t, a in zip(ts, agree, strict=True)]
+
+
+def settled(seed: int, cfg: HealthConfig = CFG) -> tuple[HealthMonitor, np.random.Generator]:
+    """A monitor after 10 s of frames the map explains at 0.8."""
+    rng = np.random.default_rng(seed)
+    mon = HealthMonitor(cfg)
+    run(mon, 0.0, 10.0, lambda t: frame(rng, 0.8))
+    return mon, rng
+
+
+@pytest.mark.parametrize("frames", [CFG.view_frames, 3])
+def test_a_view_disagreeing_with_the_odometry_on_view_frames_frames_is_lost_at_once(frames: int) -> None:
+    """Even while the map still explains the view (a kidnapping to a place the belief's
+    map fits as well)."""
+    mon, rng = settled(12, HealthConfig(view_frames=frames))
+    low, high = CFG.view_agree / 2, min(1.0, CFG.view_agree * 3)
+    # Frames without evidence (NaN) neither count nor break the run; one agreeing frame does.
+    pattern = [high, math.nan] + ([low] * (frames - 1) + [high] if frames > 1 else []) + [low] * (frames - 1) + [math.nan, low]
+    samples = feed_views(mon, 10.0, pattern, rng)
+    states = [s.state for s in samples]
+    assert states[:-1] == ["ok"] * (len(pattern) - 1), states
+    assert samples[-1].state == "lost" and samples[-1].reason == "view jumped"
+    assert samples[-1].view_agree == low and math.isnan(samples[-2].view_agree)
+    assert samples[-1].explained_fast > 0.7
+
+
+def test_the_view_test_off_or_agreeing_views_never_say_lost() -> None:
+    mon, rng = settled(13, HealthConfig(view_agree=0.0))
+    assert all(s.state == "ok" for s in feed_views(mon, 10.0, [0.0] * 30, rng))
+    mon, rng = settled(15)
+    assert all(s.state == "ok" for s in feed_views(mon, 10.0, [CFG.view_agree] * 30 + [math.nan] * 5, rng))

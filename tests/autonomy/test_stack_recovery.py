@@ -26,7 +26,8 @@ from autonomy.geometry import (
     wrap_angles,
 )
 from autonomy.raycast import SceneQuery, load_or_build
-from autonomy.stack import LOCALIZATION_GRID, RobotStack, StackConfig, most_open_way
+from autonomy.stack import LOCALIZATION_GRID, RecoveryConfig, RobotStack, StackConfig, most_open_way
+from autonomy.view_check import ViewCheckConfig
 from sim.simulator.blueprints import ASSETS_DIR, load_blueprint
 from sim.simulator.map_depth import MapDepth
 from tests.helpers import points_along
@@ -239,9 +240,12 @@ def settle(stack: RobotStack, scene: SceneQuery, seconds: float, fps: float = 10
     return seconds
 
 
-def test_a_kidnap_is_noticed_and_the_robot_relocalizes_where_it_is(building) -> None:
+@pytest.mark.parametrize("view_check", [True, False])
+def test_a_kidnap_is_noticed_and_the_robot_relocalizes_where_it_is(building, view_check: bool) -> None:
+    """With the view check the kidnapping is noticed on the first frame after it (the
+    view moved while the wheels stood still); without it, seconds later by the map tests."""
     scene = building[1]
-    stack = make_stack(building)
+    stack = make_stack(building, recovery=RecoveryConfig(view=ViewCheckConfig(enabled=view_check)))
     hc = stack.cfg.recovery.health
     t = settle(stack, scene, hc.min_history_s + 1.0)
     assert stack.health_state == "ok" and stack.events == []
@@ -249,8 +253,13 @@ def test_a_kidnap_is_noticed_and_the_robot_relocalizes_where_it_is(building) -> 
     truth, t, commands = follow(stack, scene, np.array([22.91, 30.84, -2.2]), t, until_s=40.0)
     kidnap = hc.min_history_s + 1.0
     lost = [e for e in stack.events if e["event"] == "lost"]
-    assert len(lost) == 1 and lost[0]["why"] in ("sees through walls", "explains little", "spread"), lost
-    assert hc.hold_s <= lost[0]["t"] - kidnap <= hc.ratio_hold_s + 4.0
+    if view_check:
+        assert len(lost) == 1 and lost[0]["why"] == "view jumped", lost
+        # The first frame after the landing disagrees with the last one before it.
+        assert lost[0]["t"] - kidnap <= hc.view_frames / 10.0 + 1e-6
+    else:
+        assert len(lost) == 1 and lost[0]["why"] in ("sees through walls", "explains little", "spread"), lost
+        assert hc.hold_s <= lost[0]["t"] - kidnap <= hc.ratio_hold_s + 4.0
     # The estimate at the alarm was still START's (the belief it began with) ...
     assert math.hypot(lost[0]["estimate"][0] - START[0], lost[0]["estimate"][1] - START[1]) < 1.0
     # ... then the robot turned in place to look ...

@@ -85,6 +85,9 @@ def test_kidnap_is_noticed_and_relocalized_without_truth(tmp_path):
     rep = run(tmp_path, KIDNAP, 30.0, KIDNAP_SEED)
     f, m = the_fault(rep, "kidnap"), rep["metrics"]
     assert f["noticed_t"] is not None and f["noticed_t"] >= f["t_start"]
+    # The view jumped while the wheels stood still: noticed on the next frame.
+    lost = [e for e in rep["recovery"]["events"] if e["event"] == "lost"]
+    assert lost and lost[0]["why"] == "view jumped" and f["noticed_t"] - f["t_start"] < 0.1, (lost, f)
     assert f["ended_by"] == "robot" and f["recovered_t"] is not None
     assert m["truth_resets_needed"] == 0 and m["relocalizations"] >= 1
     assert f["error_after_m"] is not None and f["error_after_m"] < OK_M

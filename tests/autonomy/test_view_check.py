@@ -1,0 +1,205 @@
+"""The view check: back-projection and agreement against brute-force references, and its
+verdict on closed-form renders of the shipped building (a view moved as the odometry
+says agrees; a robot carried elsewhere, or pushed unseen, does not)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from autonomy.camera import CameraIntrinsics, DepthCamera, pixel_rays, transform_points
+from autonomy.errors import InputError
+from autonomy.geometry import compose_pose, relative_pose
+from autonomy.health import HealthConfig
+from autonomy.raycast import SceneQuery, load_or_build
+from autonomy.stack import LOCALIZATION_GRID
+from autonomy.view_check import (
+    ViewCheck,
+    ViewCheckConfig,
+    move_points,
+    sample_points,
+    view_agreement,
+)
+from sim.simulator.blueprints import ASSETS_DIR, load_blueprint
+from sim.simulator.map_depth import MapDepth
+
+CAM = DepthCamera()
+CFG = ViewCheckConfig()
+VIEW_AGREE = HealthConfig().view_agree
+"""Below this agreement the health monitor counts a frame as disagreeing."""
+RC = CAM.mount.robot_from_camera()
+SHAPE = (CAM.intrinsics.height, CAM.intrinsics.width)
+#: A corridor spot by an office door (the recovery tests' start), facing along the corridor.
+START = np.array([38.31, 33.34, -2.56])
+
+
+@pytest.fixture(scope="module")
+def scene() -> SceneQuery:
+    bp = load_blueprint("corridor_loop")
+    return SceneQuery(bp.vectormap, load_or_build(bp.vectormap, ASSETS_DIR / "corridor_loop.vectormap.txt", LOCALIZATION_GRID))
+
+
+_RENDER = MapDepth(CAM)
+
+
+def agreement(scene: SceneQuery, then: np.ndarray, now: np.ndarray, odom_inc: np.ndarray) -> float:
+    """The check's agreement when the camera saw the map from ``then`` and now from
+    ``now``, while the odometry says the robot moved by ``odom_inc``."""
+    check = ViewCheck(CFG, CAM.intrinsics, RC, CAM.min_range_m, CAM.max_range_m)
+    assert math.isnan(check.update(0.0, np.zeros(3), _RENDER.render(scene, then)))
+    return check.update(1.0 / 30.0, odom_inc, _RENDER.render(scene, now))
+
+
+# --------------------------------------------------------------------------- kernels
+
+
+def test_sample_points_back_project_the_grid_and_drop_the_floor() -> None:
+    rng = np.random.default_rng(1)
+    depth = rng.uniform(0.5, 5.0, (CAM.intrinsics.height, CAM.intrinsics.width)).astype(np.float32)
+    depth[rng.random(depth.shape) < 0.2] = 0.0
+    depth[5, 8] = np.nan
+    pts = sample_points(depth, CAM.intrinsics, RC, CFG.stride_px, CFG.floor_m)
+    # Reference: every pixel's ray scaled by its depth, through the mount, then the grid.
+    rays = pixel_rays(CAM.intrinsics)
+    with np.errstate(invalid="ignore"):
+        full = transform_points(RC, rays * depth[..., None].astype(np.float64))
+    grid = full[:: CFG.stride_px, :: CFG.stride_px].reshape(-1, 3)
+    d = depth[:: CFG.stride_px, :: CFG.stride_px].ravel()
+    ok = np.isfinite(d) & (d > 0)
+    ref = grid[ok]
+    ref = ref[ref[:, 2] > CFG.floor_m]
+    assert len(pts) == len(ref) > 100
+    np.testing.assert_allclose(pts, ref, atol=1e-9)
+
+
+def reference_agreement(pts, depth, intr, rc, zmin, zmax, tol_m, tol_q, win):
+    """Pure-python view_agreement."""
+    inv = np.linalg.inv(rc)
+    n_cmp = n_ok = 0
+    h, w = depth.shape
+    for p in pts:
+        x, y, z = inv[:3, :3] @ p + inv[:3, 3]
+        if z < zmin or z > zmax:
+            continue
+        u, v = int(math.floor(intr.fx * x / z + intr.cx + 0.5)), int(math.floor(intr.fy * y / z + intr.cy + 0.5))
+        if not (0 <= u < w and 0 <= v < h):
+            continue
+        near = [float(depth[vv, uu]) for vv in range(v - win, v + win + 1) for uu in range(u - win, u + win + 1)
+                if 0 <= vv < h and 0 <= uu < w and depth[vv, uu] > 0 and math.isfinite(depth[vv, uu])]
+        if not near:
+            continue
+        n_cmp += 1
+        n_ok += min(abs(d - z) for d in near) <= tol_m + tol_q * z * z
+    return n_cmp, n_ok
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 10_000), win=st.integers(0, 3))
+def test_agreement_matches_a_brute_force_reference(seed: int, win: int) -> None:
+    rng = np.random.default_rng(seed)
+    intr = CameraIntrinsics().scaled(64, 48)
+    depth = rng.uniform(0.3, 5.0, (48, 64)).astype(np.float32)
+    depth[rng.random(depth.shape) < 0.3] = 0.0
+    # Points in front of the camera (some outside its view or range), robot frame.
+    pts = np.column_stack([rng.uniform(-1.0, 6.0, 300), rng.uniform(-3.0, 3.0, 300), rng.uniform(-0.5, 2.0, 300)])
+    got = view_agreement(pts, depth, intr, RC, 0.8, 4.0, 0.05, 0.01, win)
+    ref = reference_agreement(pts, depth.astype(np.float64), intr, RC, 0.8, 4.0, 0.05, 0.01, win)
+    assert got == ref
+
+
+@settings(max_examples=50, deadline=None)
+@given(
+    inc=st.tuples(st.floats(-1, 1), st.floats(-1, 1), st.floats(-math.pi, math.pi)),
+    p=st.tuples(st.floats(-5, 5), st.floats(-5, 5), st.floats(0, 2)),
+)
+def test_move_points_agrees_with_composing_poses(inc, p) -> None:
+    """A point seen at odometry pose ``then`` is where the world point lies in ``now``'s frame."""
+    then = np.array([1.0, -2.0, 0.3])
+    now = compose_pose(then, np.array(inc))
+    moved = move_points(np.array([p]), then, now)[0]
+    world = compose_pose(then, np.array([p[0], p[1], 0.0]))
+    expect = relative_pose(now, world)
+    np.testing.assert_allclose(moved[:2], expect[:2], atol=1e-9)
+    assert moved[2] == p[2]
+
+
+# --------------------------------------------------------------------------- verdicts
+
+
+def test_a_view_moved_as_the_odometry_says_agrees(scene) -> None:
+    for inc in (np.zeros(3), np.array([0.15, 0.0, 0.0]), np.array([0.1, 0.02, 0.3]), np.array([0.0, 0.0, -0.45])):
+        a = agreement(scene, START, compose_pose(START, inc), inc)
+        assert a > 0.95, (inc, a)
+
+
+def test_a_robot_carried_elsewhere_disagrees(scene) -> None:
+    # Carried to another corridor, and into an office, while the wheels stood still.
+    for there in (np.array([22.91, 30.84, -2.2]), np.array([40.27, 29.91, 1.83]), np.array([25.0, 12.2, 1.57])):
+        a = agreement(scene, START, there, np.zeros(3))
+        assert a < VIEW_AGREE, (there, a)
+
+
+def test_a_push_the_odometry_missed_disagrees(scene) -> None:
+    """The slip fault's bump: pushed 0.3 m and turned 15 degrees, unseen by the wheels."""
+    a = agreement(scene, START, compose_pose(START, np.array([0.3, 0.0, math.radians(15.0)])), np.zeros(3))
+    assert a < VIEW_AGREE, a
+
+
+def test_frames_younger_than_lag_or_older_than_max_lag_are_not_compared(scene) -> None:
+    cfg = ViewCheckConfig(lag_s=0.2, max_lag_s=1.0)
+    check = ViewCheck(cfg, CAM.intrinsics, RC, CAM.min_range_m, CAM.max_range_m)
+    depth = _RENDER.render(scene, START)
+    assert math.isnan(check.update(0.0, np.zeros(3), depth))
+    assert math.isnan(check.update(0.1, np.zeros(3), depth))  # too young
+    assert check.update(0.2, np.zeros(3), depth) > 0.99
+    # After a gap longer than max_lag_s (a blackout) nothing is old enough to compare with.
+    assert math.isnan(check.update(1.3, np.zeros(3), depth))
+    # By default each frame is compared with the last one.
+    check = ViewCheck(CFG, CAM.intrinsics, RC, CAM.min_range_m, CAM.max_range_m)
+    check.update(0.0, np.zeros(3), depth)
+    assert check.update(1.0 / 30.0, np.zeros(3), depth) > 0.99
+    assert math.isnan(check.update(1.0 / 30.0 + CFG.max_lag_s + 0.01, np.zeros(3), depth))
+
+
+def test_a_frame_without_evidence_does_not_become_the_reference(scene) -> None:
+    """A landing whose first frame shares too few points with the last one (here a frame
+    without a valid pixel: a wall closer than the minimum range) is still caught on the
+    next frame."""
+    check = ViewCheck(CFG, CAM.intrinsics, RC, CAM.min_range_m, CAM.max_range_m)
+    check.update(0.0, np.zeros(3), _RENDER.render(scene, START))
+    assert math.isnan(check.update(1 / 30, np.zeros(3), np.zeros(SHAPE, np.float32)))
+    assert check.update(2 / 30, np.zeros(3), _RENDER.render(scene, np.array([22.91, 30.84, -2.2]))) < VIEW_AGREE
+
+
+def floor_only() -> np.ndarray:
+    """The floor alone in view (no wall within the camera's range)."""
+    rays = pixel_rays(CAM.intrinsics) @ CAM.mount.rotation().T
+    with np.errstate(divide="ignore"):
+        floor = np.where(rays[..., 2] < 0, -CAM.mount.height_m / rays[..., 2], 0.0)
+    return np.where((floor > CAM.min_range_m) & (floor < CAM.max_range_m), floor, 0.0).astype(np.float32)
+
+
+def test_a_view_of_the_floor_alone_carries_no_evidence() -> None:
+    """Only the floor in view: it looks alike everywhere, so it is no evidence."""
+    check = ViewCheck(CFG, CAM.intrinsics, RC, CAM.min_range_m, CAM.max_range_m)
+    floor = floor_only()
+    check.update(0.0, np.zeros(3), floor)
+    assert math.isnan(check.update(1.0 / 30.0, np.array([0.5, 0.0, 0.0]), floor))
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [("stride_px", 0), ("window_px", -1), ("min_points", 0), ("max_lag_s", 0.0), ("tol_m", -0.1), ("lag_s", -1.0), ("floor_m", math.nan)],
+)
+def test_bad_config_is_a_one_line_error_naming_the_field(field, value) -> None:
+    with pytest.raises(InputError, match=rf"view\.{field}: expected"):
+        ViewCheckConfig(**{field: value})
+
+
+def test_lag_beyond_max_lag_is_an_error() -> None:
+    with pytest.raises(InputError, match=r"view\.lag_s: expected at most"):
+        ViewCheckConfig(lag_s=2.0, max_lag_s=1.0)

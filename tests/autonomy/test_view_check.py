@@ -175,6 +175,16 @@ def test_a_frame_without_evidence_does_not_become_the_reference(scene) -> None:
     assert check.update(2 / 30, np.zeros(3), _RENDER.render(scene, np.array([22.91, 30.84, -2.2]))) < VIEW_AGREE
 
 
+def test_a_robot_carried_from_an_open_hall_to_walls_disagrees(scene) -> None:
+    """The last view held nothing but floor (no points of its own to compare): this
+    frame's points, seen in the last image, land on that floor."""
+    check = ViewCheck(CFG, CAM.intrinsics, RC, CAM.min_range_m, CAM.max_range_m)
+    check.update(0.0, np.zeros(3), floor_only())
+    assert check.update(1 / 30, np.zeros(3), _RENDER.render(scene, START)) < VIEW_AGREE
+    # One way only (the last frame's points in this image) there is no evidence.
+    assert len(sample_points(floor_only(), CAM.intrinsics, RC, CFG.stride_px, CFG.floor_m)) == 0
+
+
 def floor_only() -> np.ndarray:
     """The floor alone in view (no wall within the camera's range)."""
     rays = pixel_rays(CAM.intrinsics) @ CAM.mount.rotation().T

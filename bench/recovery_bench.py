@@ -1,5 +1,6 @@
-"""Recovery benchmarks: the health check of one frame, and one global relocalization
-search (autonomy.health, autonomy.relocalization)."""
+"""Recovery benchmarks: the health check of one frame, the view check of one frame, and
+one global relocalization search (autonomy.health, autonomy.view_check,
+autonomy.relocalization)."""
 
 from __future__ import annotations
 
@@ -9,13 +10,17 @@ import sys
 import numpy as np
 from common import Result, entry, timeit
 
+from autonomy.camera import DepthCamera
 from autonomy.freespace import FreeSpaceConfig, build_free_space
+from autonomy.geometry import compose_pose
 from autonomy.health import HealthConfig, explain_points
 from autonomy.raycast import SceneQuery, VisibilityGrid, rays_hit
 from autonomy.relocalization import GlobalLocalizer, Scan
 from autonomy.stack import LOCALIZATION_GRID
+from autonomy.view_check import ViewCheck, ViewCheckConfig
 from sim.simulator import blueprints
 from sim.simulator.blueprints import ASSETS_DIR
+from sim.simulator.map_depth import MapDepth
 
 
 def _panorama(query: SceneQuery, pose: np.ndarray, rng: np.random.Generator) -> np.ndarray:
@@ -48,6 +53,22 @@ def bench_recovery(results: dict[str, Result], quick: bool) -> None:
     results["health_frame"] = entry(
         timeit(lambda: explain_points(lines, pose, frame, hc.explain_m, hc.through_m), 200 if quick else 2000, warmup=3), target=0.2
     )
+    # The view check of one frame against the last (both ways), the robot driving 2.5 cm
+    # and turning 1 degree between two closed-form renders of the map.
+    cam = DepthCamera()
+    step = np.array([0.025, 0.0, math.radians(1.0)])
+    render = MapDepth(cam)
+    depths = [render.render(query, pose), render.render(query, compose_pose(pose, step))]
+    check = ViewCheck(ViewCheckConfig(), cam.intrinsics, cam.mount.robot_from_camera(), cam.min_range_m, cam.max_range_m)
+    clock = [0.0, np.zeros(3)]
+
+    def view_frame() -> None:
+        clock[0] += 1.0 / 30.0
+        k = int(round(clock[0] * 30.0)) % 2
+        clock[1] = compose_pose(clock[1], step if k else -step)
+        check.update(clock[0], clock[1], depths[k])
+
+    results["view_check_frame"] = entry(timeit(view_frame, 200 if quick else 2000, warmup=3), target=0.5)
     # As the stack searches: each point's viewpoint (the robot turned in place) for the
     # sight-through-walls score.
     seen_from = np.zeros_like(scan)

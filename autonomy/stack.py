@@ -476,7 +476,10 @@ class RobotStack:
                 # How far the update moved the belief beyond the odometry (the jump test).
                 self._correction = (float(self.pose[0] - predicted[0]), float(self.pose[1] - predicted[1]))
         if t is not None and self.view_check is not None and self._fresh and self._depth is not None:
-            self._view_agree = self.view_check.update(float(t), self.odom, self._depth)
+            if self.relocalizing:  # the health monitor does not listen while relocalizing
+                self.view_check.store(float(t), self.odom, self._depth)
+            else:
+                self._view_agree = self.view_check.update(float(t), self.odom, self._depth)
         if t is not None and self.health is not None:
             if self.relocalizing:
                 self._relocalize_step(float(t))

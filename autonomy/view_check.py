@@ -41,7 +41,7 @@ import numpy as np
 
 from autonomy.camera import CameraIntrinsics
 from autonomy.errors import InputError, require_int, require_non_negative, require_positive
-from autonomy.geometry import relative_pose
+from autonomy.geometry import points_from_frame, relative_pose
 
 __all__ = ["ViewCheckConfig", "ViewCheck", "sample_points", "view_agreement", "move_points"]
 
@@ -185,12 +185,10 @@ def view_agreement(
 
 
 def move_points(pts: np.ndarray, then: np.ndarray, now: np.ndarray) -> np.ndarray:
-    """Robot-frame points (n, 3) seen at odometry pose ``then``, in the robot frame at ``now``."""
-    dx, dy, dth = relative_pose(now, then)
-    c, s = math.cos(dth), math.sin(dth)
+    """Robot-frame points (n, 3) seen at odometry pose ``then``, in the robot frame at
+    ``now`` (heights unchanged)."""
     out = np.empty_like(pts)
-    out[:, 0] = c * pts[:, 0] - s * pts[:, 1] + dx
-    out[:, 1] = s * pts[:, 0] + c * pts[:, 1] + dy
+    out[:, :2] = points_from_frame(relative_pose(now, then), pts[:, :2])
     out[:, 2] = pts[:, 2]
     return out
 
@@ -227,6 +225,13 @@ class ViewCheck:
             move_points(pts, then, now), depth, self.intr, self.robot_from_camera, self.min_range_m, self.max_range_m,
             cfg.tol_m, cfg.tol_per_m2, cfg.window_px,
         )
+
+    def store(self, t: float, odom: np.ndarray, depth: np.ndarray) -> None:
+        """Keep this frame as the next one's reference without comparing it (nobody is
+        listening: the stack is relocalizing)."""
+        pts = sample_points(depth, self.intr, self.robot_from_camera, self.cfg.stride_px, self.cfg.floor_m)
+        self._frames = deque([(float(t), np.asarray(odom, dtype=np.float64).copy(), pts, np.array(depth, dtype=np.float32))])
+        self.last = math.nan
 
     def update(self, t: float, odom: np.ndarray, depth: np.ndarray) -> float:
         """The agreement fraction of this frame (time ``t``, odometry pose ``odom``) with

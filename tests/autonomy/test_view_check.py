@@ -193,6 +193,16 @@ def floor_only() -> np.ndarray:
     return np.where((floor > CAM.min_range_m) & (floor < CAM.max_range_m), floor, 0.0).astype(np.float32)
 
 
+def test_a_stored_frame_is_the_next_ones_reference(scene) -> None:
+    """While relocalizing the stack only stores frames: the first compared frame after it
+    is checked against the last stored one, not an older one."""
+    check = ViewCheck(CFG, CAM.intrinsics, RC, CAM.min_range_m, CAM.max_range_m)
+    check.update(0.0, np.zeros(3), _RENDER.render(scene, np.array([22.91, 30.84, -2.2])))
+    check.store(1 / 30, np.zeros(3), _RENDER.render(scene, START))
+    assert math.isnan(check.last)
+    assert check.update(2 / 30, np.zeros(3), _RENDER.render(scene, START)) > 0.99
+
+
 def test_a_view_of_the_floor_alone_carries_no_evidence() -> None:
     """Only the floor in view: it looks alike everywhere, so it is no evidence."""
     check = ViewCheck(CFG, CAM.intrinsics, RC, CAM.min_range_m, CAM.max_range_m)

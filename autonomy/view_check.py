@@ -140,21 +140,29 @@ def _agreement_kernel(pts, rot, trans, depth, fx, fy, cx, cy, zmin, zmax, tol_m,
         if u < 0 or u >= w or v < 0 or v >= h:
             continue
         tol = tol_m + tol_q * z * z
-        best = math.inf
+        # The predicted pixel first: on a view that agrees it settles almost every point.
+        d = depth[v, u]
+        if d > 0.0 and math.isfinite(d) and abs(d - z) <= tol:
+            n_cmp += 1
+            n_ok += 1
+            continue
         seen = False
+        ok = False
         for vv in range(max(0, v - win), min(h, v + win + 1)):
             for uu in range(max(0, u - win), min(w, u + win + 1)):
                 d = depth[vv, uu]
                 if not (d > 0.0) or not math.isfinite(d):
                     continue
                 seen = True
-                e = abs(d - z)
-                if e < best:
-                    best = e
+                if abs(d - z) <= tol:
+                    ok = True
+                    break
+            if ok:
+                break
         if not seen:
             continue
         n_cmp += 1
-        if best <= tol:
+        if ok:
             n_ok += 1
     return n_cmp, n_ok
 

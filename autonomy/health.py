@@ -15,8 +15,8 @@ augmented MCL does with the observation likelihood (Thrun, Burgard and Fox,
 "Probabilistic Robotics", Table 8.3: ``w_fast`` and ``w_slow``): a drop of the short-term
 explained fraction far below the long-term one means the world stopped matching the
 belief, while a low long-term level (an atrium with few walls in view) is normal there
-and raises no alarm. The monitor says **lost** when, for ``hold_s`` (``ratio_hold_s`` for the second test),
-either
+and raises no alarm. The monitor says **lost** when, for ``hold_s`` (``ratio_hold_s`` for the second test;
+for the first two, counting only the frames with evidence), either
 
 1. the short-term contradiction fraction is above ``lost_through``, or
 2. the short-term explained fraction is below ``lost_ratio`` times the long-term one
@@ -57,6 +57,10 @@ from autonomy.raycast import _ray_hit_kernel
 #: Health states, in the order of severity.
 STATES = ("ok", "blind", "lost")
 
+#: The lost tests on the short-term averages of the map's verdicts: their hold counts
+#: only the time of frames with evidence.
+MAP_TESTS = ("sees through walls", "explains little")
+
 
 @dataclass(frozen=True)
 class HealthConfig:
@@ -80,7 +84,10 @@ class HealthConfig:
     """... or the particles' position spread is above this ..."""
     hold_s: float = 1.5
     """... for this long (the ratio test for ``ratio_hold_s``: a robot turning from a
-    corridor to face an open hall's furniture sees little of the map for a few seconds)."""
+    corridor to face an open hall's furniture sees little of the map for a few seconds).
+    The two tests on the map's verdicts count only the time of frames with evidence
+    (``min_points``): in an open hall a few frames of furniture and then seconds of
+    nothing in range held the short-term average low, and said lost on those frames."""
     ratio_hold_s: float = 4.0
     min_history_s: float = 5.0
     """The ratio test needs this much observed time behind the long-term average."""
@@ -188,6 +195,8 @@ class HealthMonitor:
         """Frames with evidence in a row whose view disagreed with the odometry."""
         self.last_evidence_t = t
         self.bad_since = math.nan
+        self.bad_evidence_s = 0.0
+        """Time on frames with evidence since a map test began to hold."""
         self.state = "ok"
         self.reason = ""
         self.last = HealthSample(t, "ok", math.nan, math.nan, math.nan, math.nan, math.nan, 0.0, "")
@@ -230,10 +239,18 @@ class HealthMonitor:
         if reason:
             if math.isnan(self.bad_since):
                 self.bad_since = t
+                self.bad_evidence_s = 0.0
+            elif not math.isnan(e):
+                self.bad_evidence_s += dt
             hold = {"explains little": cfg.ratio_hold_s, "belief jumped": 0.0, "view jumped": 0.0}.get(reason, cfg.hold_s)
-            state = "lost" if t - self.bad_since >= hold else ("blind" if t - self.last_evidence_t > cfg.blind_s else "ok")
+            # The map tests' short-term averages move only on frames with evidence; held
+            # on without any (the camera facing open space past its range, or blocked),
+            # they would say lost on a few frames seen seconds ago.
+            held = self.bad_evidence_s if reason in MAP_TESTS else t - self.bad_since
+            state = "lost" if held >= hold else ("blind" if t - self.last_evidence_t > cfg.blind_s else "ok")
         else:
             self.bad_since = math.nan
+            self.bad_evidence_s = 0.0
             state = "blind" if t - self.last_evidence_t > cfg.blind_s else "ok"
             reason = "no frames" if state == "blind" else ""
         self.state, self.reason = state, reason if state != "ok" else ""

@@ -244,6 +244,43 @@ def test_a_sudden_drop_of_the_explained_fraction_is_lost_after_the_closed_form_d
     assert all(x.state == "ok" for t, x in zip(ts, samples, strict=True) if t - 20.0 < want - 1e-9)
 
 
+def test_the_map_tests_hold_only_on_frames_with_evidence() -> None:
+    """Two seconds of frames that explain nothing after a well explained corridor, then
+    frames too thin to be evidence (open space past the camera's range): the short-term
+    average stays low but nothing new is seen, so no alarm however long that lasts. Bad
+    frames again: lost once the frames with evidence add up to ``ratio_hold_s``."""
+    rng = np.random.default_rng(8)
+    mon = HealthMonitor()
+    run(mon, 0.0, 20.0, lambda t: frame(rng, 0.8))
+    ts, samples = run(mon, 20.0, 2.0, lambda t: frame(rng, 0.0))
+    assert {s.state for s in samples} == {"ok"}
+    held = ts[-1] - ts[next(i for i, s in enumerate(samples) if s.explained_fast < CFG.lost_ratio * s.explained_slow)]
+    assert 0.0 < held < CFG.ratio_hold_s
+    _, thin = run(mon, 22.0, 30.0, lambda t: frame(rng, 0.0, 0.0, CFG.min_points - 1))
+    assert {s.state for s in thin} == {"ok"} and thin[-1].explained_fast < CFG.lost_ratio * thin[-1].explained_slow
+    ts, samples = run(mon, 52.0, 8.0, lambda t: frame(rng, 0.0))
+    lost = first_state(ts, samples, "lost") - 52.0
+    assert samples[int(round(lost * FPS)) - 1].reason == "explains little"
+    # The first bad frame after the gap counts the time since the last frame, 1 / FPS.
+    assert abs(lost - (CFG.ratio_hold_s - held)) < 1.5 / FPS, (lost, held)
+
+
+def test_frames_with_evidence_every_other_frame_take_twice_as_long_to_say_lost() -> None:
+    rng = np.random.default_rng(9)
+    every, alternate = HealthMonitor(), HealthMonitor()
+    run(every, 0.0, 20.0, lambda t: frame(rng, 0.8))
+    run(alternate, 0.0, 20.0, lambda t: frame(rng, 0.8))
+    ts, a = run(every, 20.0, 12.0, lambda t: frame(rng, 0.0))
+    _, b = run(alternate, 20.0, 12.0, lambda t: frame(rng, 0.0, 0.0, 200 if round(t * FPS) % 2 == 0 else CFG.min_points - 1))
+    bad_a = first_state(ts, a, "lost") - 20.0
+    bad_b = first_state(ts, b, "lost") - 20.0
+    # Both averages fall by the same law on the frames with evidence; the hold then
+    # needs twice the frames.
+    assert bad_a < bad_b < math.inf
+    assert b[int(round(bad_b * FPS)) - 1].reason == "explains little"
+    assert bad_b - bad_a > 0.8 * CFG.ratio_hold_s
+
+
 def test_the_ratio_test_waits_for_history() -> None:
     """Right after a reset the long-term level is not known yet: a drop then is no alarm."""
     rng = np.random.default_rng(4)

@@ -175,6 +175,37 @@ def test_a_frame_without_evidence_does_not_become_the_reference(scene) -> None:
     assert check.update(2 / 30, np.zeros(3), _RENDER.render(scene, np.array([22.91, 30.84, -2.2]))) < VIEW_AGREE
 
 
+def person(depth: np.ndarray, u0: int, width: int = 200, z: float = 1.0) -> np.ndarray:
+    """``depth`` with a flat person ``z`` metres in front filling columns u0 .. u0 + width."""
+    out = depth.copy()
+    out[:, u0 : u0 + width] = z
+    return out
+
+
+def test_people_who_walked_on_while_the_view_was_blocked_are_not_compared(scene) -> None:
+    """A person a metre in front walks across at 1.4 m/s; others close in front block the
+    view (no valid pixel) for 0.3 s, in which the first moved 0.42 m (220 pixels). Against
+    the frame before the blockage the view disagrees though the robot stood still: nine
+    frames were not stored since that one, and nothing is compared. Between two frames
+    the person moves 4.7 cm (25 pixels) and the view agrees."""
+    corridor = _RENDER.render(scene, START)
+    blocked = np.zeros(SHAPE, np.float32)
+
+    def verdicts(cfg: ViewCheckConfig) -> list[float]:
+        check = ViewCheck(cfg, CAM.intrinsics, RC, CAM.min_range_m, CAM.max_range_m)
+        out = [check.update(0.0, np.zeros(3), person(corridor, 120))]
+        out += [check.update(k / 30, np.zeros(3), blocked) for k in range(1, 10)]
+        out.append(check.update(10 / 30, np.zeros(3), person(corridor, 340)))
+        out.append(check.update(11 / 30, np.zeros(3), person(corridor, 365)))
+        return out
+
+    got = verdicts(CFG)
+    assert all(math.isnan(a) for a in got[:11]), got
+    assert got[11] > 0.8
+    # Compared across the blockage, the same frames disagree.
+    assert verdicts(ViewCheckConfig(max_gap_frames=9))[10] < VIEW_AGREE
+
+
 def test_a_robot_carried_from_an_open_hall_to_walls_disagrees(scene) -> None:
     """The last view held nothing but floor (no points of its own to compare): this
     frame's points, seen in the last image, land on that floor."""
@@ -213,7 +244,7 @@ def test_a_view_of_the_floor_alone_carries_no_evidence() -> None:
 
 @pytest.mark.parametrize(
     ("field", "value"),
-    [("stride_px", 0), ("window_px", -1), ("min_points", 0), ("max_lag_s", 0.0), ("tol_m", -0.1), ("lag_s", -1.0), ("floor_m", math.nan)],
+    [("stride_px", 0), ("window_px", -1), ("min_points", 0), ("max_gap_frames", -1), ("max_lag_s", 0.0), ("tol_m", -0.1), ("lag_s", -1.0), ("floor_m", math.nan)],
 )
 def test_bad_config_is_a_one_line_error_naming_the_field(field, value) -> None:
     with pytest.raises(InputError, match=rf"view\.{field}: expected"):

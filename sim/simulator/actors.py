@@ -294,8 +294,12 @@ class PeopleController:
         self._side[i] = self._waited[i] = self._blocked[i] = 0.0
         self._state[i] = self._place(i)
 
-    def reset(self) -> None:
-        """People back at their start offsets."""
+    def reset(self, robot_xy: np.ndarray | None = None) -> None:
+        """People back at their start offsets. With the robot's position, a person whose
+        start would overlap the robot (or stand within ``clear_of_robot_m`` of it) starts
+        further along their route: MuJoCo resolves a body placed inside the robot by
+        shoving the robot away at metres per second (a run began with the robot thrown
+        4 m into a wall)."""
         self._s = np.array([p.start_offset_m for p in self.people], dtype=np.float64)
         self._side = np.zeros(len(self.people))
         self._waited = np.zeros(len(self.people))
@@ -304,6 +308,24 @@ class PeopleController:
         self._robot_prev: np.ndarray | None = None
         self._state = np.zeros((len(self.people), 3))
         for i in range(len(self.people)):
+            self._state[i] = self._place(i)
+            if robot_xy is not None:
+                self._start_clear_of(i, np.asarray(robot_xy, dtype=np.float64)[:2])
+
+    def _start_clear_of(self, i: int, robot_xy: np.ndarray, step_m: float = 0.25) -> None:
+        """Person ``i`` moved on along their route until clear of the robot at ``robot_xy``
+        (left where they were when no point of the route is)."""
+        gap = self.robot_radius_m + self.people[i].radius_m + self.clear_of_robot_m
+        s0 = self._s[i]
+        span = self._cum[i][-1] * (1.0 if self.people[i].loop else 2.0)
+        k = 0
+        while float(np.hypot(*(self._state[i][:2] - robot_xy))) < gap:
+            k += 1
+            if k * step_m > span:
+                self._s[i] = s0
+                self._state[i] = self._place(i)
+                return
+            self._s[i] = s0 + k * step_m
             self._state[i] = self._place(i)
 
     @classmethod

@@ -212,7 +212,7 @@ class World:
         mujoco.mj_resetData(self.model, self.data)
         self.data.time = t
         self.robot.set_pose(self.data, pose)
-        self.people.reset()
+        self.people.reset(np.asarray(pose[:2], dtype=np.float64))
         self.people.update(self.data, t)
         mujoco.mj_forward(self.model, self.data)
         self._robot_in_contact = False

@@ -390,3 +390,44 @@ def test_a_person_walking_on_stepped_aside_keeps_off_the_walls_where_the_corrido
         if pos[0] > 3.5:
             assert abs(pos[1]) <= 1.0 - person.radius_m - 0.05 + 1e-9, pos
     assert pos[0] > 8.0  # and walked on
+
+
+def test_a_person_who_would_start_on_the_robot_starts_further_along_their_route() -> None:
+    """Start offsets are drawn without knowing where the robot starts. A person placed on
+    the robot moves on along the route until clear of it; others keep their start, and a
+    route that never leaves the robot's surroundings keeps its offset."""
+    on = Person(route=((0.0, 0.0), (8.0, 0.0)), start_offset_m=3.0)
+    far = Person(route=((0.0, 5.0), (8.0, 5.0)), start_offset_m=3.0)
+    short = Person(route=((2.9, 0.1), (3.1, 0.1)), start_offset_m=0.1)
+    robot = np.array([3.0, 0.1])
+    pc = PeopleController((on, far, short), np.zeros(3, dtype=int))
+    pc.reset(robot)
+    pos = pc.positions()[:, :2]
+    gap = pc.robot_radius_m + on.radius_m + pc.clear_of_robot_m
+    assert gap <= np.hypot(*(pos[0] - robot)) < gap + 0.25 + 1e-9 and pos[0, 0] > robot[0]
+    np.testing.assert_allclose(pos[1], [3.0, 5.0])
+    np.testing.assert_allclose(pos[2], [3.0, 0.1])
+    # Without the robot's position the offsets are the people's own.
+    pc.reset()
+    np.testing.assert_allclose(pc.positions()[0, :2], [3.0, 0.0])
+
+
+def test_a_world_with_a_person_drawn_on_the_robots_start_does_not_shove_the_robot() -> None:
+    """The world puts people clear of the robot's start pose: standing still for a
+    second, the robot neither moves nor touches anyone."""
+    import mujoco
+
+    from sim.simulator.blueprints import load_blueprint
+    from sim.simulator.world import build_world
+
+    start = (12.0, 6.3, 0.0)
+    person = Person(route=((8.0, 6.3), (16.0, 6.3)), start_offset_m=4.0, speed_mps=0.0)
+    world = build_world(load_blueprint("corridor_loop").vectormap, people=(person,), start_pose=start)
+    for k in range(30):
+        world.robot.command(world.data, np.zeros(3), DT)
+        world.people.update(world.data, (k + 1) * DT, np.array(start[:2]))
+        for _ in range(round(DT / world.model.opt.timestep)):
+            mujoco.mj_step(world.model, world.data)
+    pose = world.robot.pose(world.data)
+    assert np.hypot(pose[0] - start[0], pose[1] - start[1]) < 0.01, pose
+    assert not world.robot_contacts()

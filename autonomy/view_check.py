@@ -246,12 +246,22 @@ class ViewCheck:
             cfg.tol_m, cfg.tol_per_m2, cfg.window_px,
         )
 
+    def _keep(self, t: float, odom: np.ndarray, pts: np.ndarray, depth: np.ndarray) -> bool:
+        """Store this frame as a reference, unless the camera saw nothing on the grid
+        (blocked): such a frame is no reference at all. Whether it was stored."""
+        if not len(pts) and not bool(np.any(depth[:: self.cfg.stride_px, :: self.cfg.stride_px] > 0.0)):
+            self._gap += 1
+            return False
+        self._frames.append((float(t), np.asarray(odom, dtype=np.float64).copy(), pts, np.array(depth, dtype=np.float32)))
+        self._gap = 0
+        return True
+
     def store(self, t: float, odom: np.ndarray, depth: np.ndarray) -> None:
         """Keep this frame as the next one's reference without comparing it (nobody is
         listening: the stack is relocalizing)."""
         pts = sample_points(depth, self.intr, self.robot_from_camera, self.cfg.stride_px, self.cfg.floor_m)
-        self._frames = deque([(float(t), np.asarray(odom, dtype=np.float64).copy(), pts, np.array(depth, dtype=np.float32))])
-        self._gap = 0
+        self._frames.clear()
+        self._keep(t, odom, pts, depth)
         self.last = math.nan
 
     def update(self, t: float, odom: np.ndarray, depth: np.ndarray) -> float:
@@ -260,7 +270,9 @@ class ViewCheck:
         this image and this frame's points in that image (a robot carried from an open
         hall, where the last view held nothing but floor, into a room is caught the
         second way). NaN: no stored frame, or fewer than ``min_points`` compared. The
-        frame is stored unless it was compared without evidence."""
+        frame is stored unless it was compared without evidence or has no valid depth on
+        the grid; after more than ``max_gap_frames`` frames not stored, the stored ones
+        are forgotten."""
         cfg = self.cfg
         frames = self._frames
         if self._gap > cfg.max_gap_frames:
@@ -284,12 +296,9 @@ class ViewCheck:
                 frac = (ok1 + ok2) / (n1 + n2)
         # A frame that could not be checked against a stored one does not become the next
         # one's reference while that one lasts: a landing whose first view shares too few
-        # points with the last one would otherwise pass on the next frame. A frame with no
-        # valid depth on the grid (the camera blocked) is no reference at all.
-        grid = depth[:: cfg.stride_px, :: cfg.stride_px]
-        if (ref is None or not math.isnan(frac)) and (len(pts) or bool(np.any(grid > 0.0))):
-            frames.append((float(t), np.asarray(odom, dtype=np.float64).copy(), pts, np.array(depth, dtype=np.float32)))
-            self._gap = 0
+        # points with the last one would otherwise pass on the next frame.
+        if ref is None or not math.isnan(frac):
+            self._keep(t, odom, pts, depth)
         else:
             self._gap += 1
         self.last = frac

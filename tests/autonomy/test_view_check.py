@@ -254,3 +254,14 @@ def test_bad_config_is_a_one_line_error_naming_the_field(field, value) -> None:
 def test_lag_beyond_max_lag_is_an_error() -> None:
     with pytest.raises(InputError, match=r"view\.lag_s: expected at most"):
         ViewCheckConfig(lag_s=2.0, max_lag_s=1.0)
+
+
+def test_a_blocked_frame_stored_while_relocalizing_is_no_reference(scene) -> None:
+    """A frame with no valid depth stored while the stack relocalizes leaves nothing to
+    compare with: the next frame starts afresh instead of comparing with a blank image."""
+    check = ViewCheck(CFG, CAM.intrinsics, RC, CAM.min_range_m, CAM.max_range_m)
+    corridor = _RENDER.render(scene, START)
+    check.update(0.0, np.zeros(3), corridor)
+    check.store(1 / 30, np.zeros(3), np.zeros(SHAPE, np.float32))
+    assert math.isnan(check.update(2 / 30, np.zeros(3), corridor))
+    assert check.update(3 / 30, np.zeros(3), corridor) > 0.99

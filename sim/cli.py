@@ -244,7 +244,9 @@ def cmd_reloc_sample(args: argparse.Namespace) -> int:
         done = f"relocalized in {tr.seconds:.1f} s, {tr.error_m:.2f} m / {tr.heading_error_deg:.1f} deg off" if tr.relocalized else f"not found in {tr.seconds:.0f} s ({tr.reason})"
         print(f"({x:.2f}, {y:.2f}, {math.degrees(yaw):.0f} deg): {done}", flush=True)
 
-    trials = sample(args.map, region, args.n, args.seed, args.seconds, args.noise_m, progress=show, furniture=args.furniture)
+    trials = sample(
+        args.map, region, args.n, args.seed, args.seconds, args.noise_m, progress=show, furniture=args.furniture, odometry_noise=args.odometry_noise
+    )
     found = [t for t in trials if t.relocalized]
     times = sorted(t.seconds for t in found)
     tail = f", median {times[len(times) // 2]:.1f} s, worst {times[-1]:.1f} s" if times else ""
@@ -456,6 +458,10 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--seconds", type=float, default=60.0, help="give up on a place after this long (default 60)")
     c.add_argument("--noise-m", type=float, default=0.003, help="Gaussian depth noise in metres (default 0.003)")
     c.add_argument("--furniture", type=int, default=0, help="random furniture pieces the map lacks in its open areas (default 0)")
+    c.add_argument(
+        "--odometry-noise", type=float, default=0.0,
+        help="relative error on each frame's odometry increments, the scenarios' odometry noise (default 0: exact)",
+    )
     c.add_argument("--out", help="also write the trials as JSON to this file")
     c.set_defaults(func=cmd_reloc_sample)
     _add_eval_command(sub)

@@ -12,7 +12,11 @@ or its lack of walls in range, not clutter: what the kidnapped scenario measures
 people and furniture, this separates. With ``furniture`` pieces, clutter comes back in a
 controlled form: that many random pieces stand in the map's open areas (as the scenarios
 place them, :func:`sim.simulator.building.random_furniture`), seen as the full-height
-faces of their footprints, and no start lies on one. ``depthnav reloc-sample`` runs it.
+faces of their footprints, and no start lies on one. With ``odometry_noise``, the stack
+dead-reckons on the simulator's odometry model instead (:class:`sim.simulator.robot.Odometry`:
+that relative error on each frame's increments, at the trial's 10 frames per second):
+its scan is then placed by drifting dead reckoning, as on a real robot.
+``depthnav reloc-sample`` runs it.
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ from sim.simulator.actors import Furniture
 from sim.simulator.blueprints import load_blueprint
 from sim.simulator.building import Building, random_furniture
 from sim.simulator.map_depth import MapDepth
+from sim.simulator.robot import Odometry, OdometryConfig
 
 RATE_HZ = 10.0
 """Frames per second of a trial (the stack's decisions do not need the camera's 30)."""
@@ -86,11 +91,14 @@ def start_poses(
 
 
 def run_trial(stack: RobotStack, scene: SceneQuery, depth: MapDepth, start: np.ndarray, seconds: float, noise_m: float,
-              rng: np.random.Generator, clutter: np.ndarray | None = None) -> Trial:
+              rng: np.random.Generator, clutter: np.ndarray | None = None, odometry: Odometry | None = None) -> Trial:
     """One unknown start at ``start`` (see the module docstring); ``clutter``: (K, 4)
-    segments the camera sees besides the map."""
+    segments the camera sees besides the map; ``odometry``: the noisy odometry the stack
+    dead-reckons on (None: the commanded motion, exactly)."""
     stack.reset(None)
     truth, inc, t = np.asarray(start, dtype=np.float64).copy(), None, 0.0
+    if odometry is not None:
+        odometry.reset(truth)
     while t < seconds:
         frame = depth.render(scene, truth, clutter)
         if noise_m > 0:
@@ -99,8 +107,9 @@ def run_trial(stack: RobotStack, scene: SceneQuery, depth: MapDepth, start: np.n
         stack.localize(inc, t)
         if not stack.relocalizing:
             break
-        inc = stack.decide(t).velocity / RATE_HZ
-        truth = compose_pose(truth, inc)
+        move = stack.decide(t).velocity / RATE_HZ
+        truth = compose_pose(truth, move)
+        inc = move if odometry is None else odometry.update(truth)
         t += 1.0 / RATE_HZ
     found = not stack.relocalizing
     err = relative_pose(truth, stack.pose) if found else np.full(3, math.nan)
@@ -116,9 +125,10 @@ def run_trial(stack: RobotStack, scene: SceneQuery, depth: MapDepth, start: np.n
 
 
 def sample(map_name: str, region: tuple[float, float, float, float] | None, n: int, seed: int, seconds: float = 60.0,
-           noise_m: float = 0.003, progress=None, furniture: int = 0) -> list[Trial]:
+           noise_m: float = 0.003, progress=None, furniture: int = 0, odometry_noise: float = 0.0) -> list[Trial]:
     """``n`` trials at random places of ``region`` on a shipped or given map (stem path),
-    among ``furniture`` random pieces the map lacks."""
+    among ``furniture`` random pieces the map lacks, dead-reckoning with ``odometry_noise``
+    relative error on each frame's increments (0: exactly)."""
     if n < 1:
         raise InputError(f"--n: expected at least 1 trial, got {n}")
     if not 0 <= furniture <= MAX_FURNITURE:
@@ -127,6 +137,8 @@ def sample(map_name: str, region: tuple[float, float, float, float] | None, n: i
         raise InputError(f"--seconds: expected a finite number above 0, got {seconds}")
     if not (math.isfinite(noise_m) and noise_m >= 0):
         raise InputError(f"--noise-m: expected a finite depth noise of 0 m or more, got {noise_m}")
+    if not (math.isfinite(odometry_noise) and 0 <= odometry_noise < 1):
+        raise InputError(f"--odometry-noise: expected a relative error from 0 to below 1, got {odometry_noise}")
     bp = load_blueprint(map_name)
     scene = SceneQuery(bp.vectormap, load_or_build(bp.vectormap, None, LOCALIZATION_GRID))
     stack = RobotStack(bp.vectormap, bp.navgraph, StackConfig(), rng=np.random.default_rng(seed), scene=scene)
@@ -143,9 +155,13 @@ def sample(map_name: str, region: tuple[float, float, float, float] | None, n: i
     clutter = np.vstack([f.outline() for f in pieces]) if pieces else None
     rng = np.random.default_rng(seed)
     depth = MapDepth(stack.cfg.camera)
+    # Its own stream too: the places and headings are the same with and without it.
+    odometry = None
+    if odometry_noise > 0:
+        odometry = Odometry(OdometryConfig(odometry_noise, odometry_noise), np.random.default_rng([seed, 2]), np.zeros(3))
     out = []
     for start in start_poses(stack, region, n, rng, pieces):
-        out.append(run_trial(stack, scene, depth, start, seconds, noise_m, rng, clutter))
+        out.append(run_trial(stack, scene, depth, start, seconds, noise_m, rng, clutter, odometry))
         if progress is not None:
             progress(out[-1])
     return out

@@ -42,7 +42,8 @@ def test_the_command_reports_bad_input_in_one_line(capsys) -> None:
     assert main(["reloc-sample", "--map", "small_floor", "--n", "1", "--seconds", "0.1", "--furniture", "100"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [err[0]] and err[0].startswith("depthnav: error: --furniture: only ") and "actors." not in err[0], err
-    for opt, value in (("--seconds", "inf"), ("--seconds", "-2"), ("--noise-m", "-1"), ("--noise-m", "nan"), ("--furniture", "-1"), ("--furniture", "101")):
+    for opt, value in (("--seconds", "inf"), ("--seconds", "-2"), ("--noise-m", "-1"), ("--noise-m", "nan"), ("--furniture", "-1"), ("--furniture", "101"),
+                       ("--odometry-noise", "-0.1"), ("--odometry-noise", "1"), ("--odometry-noise", "nan")):
         assert main(["reloc-sample", "--n", "1", opt, value]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and err[0].startswith(f"depthnav: error: {opt}: expected"), err

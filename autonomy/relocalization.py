@@ -147,6 +147,17 @@ class RelocalizationConfig:
     saw it). Clutter can only hide walls, so one point seen through a wall speaks
     against a mode more than an unexplained one: scans in open halls full of furniture
     otherwise fit the many walls of offices elsewhere better than the hall itself."""
+    piece_s: float = 10.0
+    """A mode is scored on the scan in pieces: the points last seen within each span of
+    this many seconds, each piece refined on its own from the mode's pose (0: the scan
+    as one piece). The scan is placed by dead reckoning, and after a minute of turning
+    and driving its older walls lie a degree or two off the newer ones: a room's true
+    place then fits no better than the same room turned round."""
+    piece_shift_m: float = 0.3
+    """A piece's own refinement is kept only within this of the mode's position ..."""
+    piece_turn_deg: float = 3.0
+    """... and this of its heading (else the piece is scored at the mode's pose):
+    what a minute of dead reckoning drifts, not a different place."""
 
     def __post_init__(self) -> None:
         require_positive(
@@ -156,7 +167,7 @@ class RelocalizationConfig:
         )
         require_non_negative(
             self, "recovery.relocalization.", "min_sweep_deg", "max_through", "prior_cost", "prior_lead_cost", "explain_m", "through_m",
-            "through_depth_m", "through_weight",
+            "through_depth_m", "through_weight", "piece_s", "piece_shift_m", "piece_turn_deg",
         )
         require_int(self, "recovery.relocalization.", "coarse_points", minimum=10)
         require_int(self, "recovery.relocalization.", "modes", minimum=1)
@@ -174,7 +185,8 @@ class Mode:
     pose: np.ndarray
     """(x, y, theta) in the map."""
     cost: float
-    """Mean robust cost of the scan there (0 = every point on a wall, 1 = none near one)."""
+    """Mean robust cost of the scan there (0 = every point on a wall, 1 = none near one;
+    each of the scan's pieces at its own refinement, :meth:`GlobalLocalizer.piece_scores`)."""
     through: float = math.nan
     """Fraction of the latest frame's points seen through a mapped wall from there."""
     scan_through: float = math.nan
@@ -388,7 +400,8 @@ def _refine(dist, ox, oy, inv_cell, pose, pts, robust2, step_m, step_rad, levels
 
 class Scan:
     """Observation points gathered while looking, in the dead-reckoning frame, one per
-    ``cell_m`` cell (the newest), at most ``max_points``."""
+    ``cell_m`` cell (the newest), at most ``max_points``, each with where the robot stood
+    and when it saw it."""
 
     def __init__(self, cell_m: float, max_points: int) -> None:
         self.cell_m = cell_m
@@ -399,13 +412,16 @@ class Scan:
         self.points = np.zeros((0, 2))
         self.origins = np.zeros((0, 2))
         """Where the robot stood (dead reckoning) when it saw each point."""
+        self.times = np.zeros(0)
+        """When it saw each point (s)."""
         self.turned_rad = 0.0
         self.travelled_m = 0.0
         self._last: np.ndarray | None = None
         self.frames = 0
 
-    def add(self, odom_pose: np.ndarray, pts_robot: np.ndarray) -> None:
-        """Add one frame's points (robot frame) seen at ``odom_pose`` (dead reckoning)."""
+    def add(self, odom_pose: np.ndarray, pts_robot: np.ndarray, t: float) -> None:
+        """Add one frame's points (robot frame) seen at ``odom_pose`` (dead reckoning) at
+        time ``t``."""
         p = np.asarray(odom_pose, dtype=np.float64)
         if self._last is not None:
             self.turned_rad += abs(wrap_angle(float(p[2] - self._last[2])))
@@ -418,15 +434,20 @@ class Scan:
         w = points_from_frame(p, q)
         allp = np.vstack([w, self.points])  # newest first: np.unique keeps the first of a cell
         allo = np.vstack([np.broadcast_to(p[:2], w.shape), self.origins])
+        allt = np.concatenate([np.full(len(w), float(t)), self.times])
         key = np.floor(allp / self.cell_m).astype(np.int64)
         _, first = np.unique(key[:, 0] * 1_000_003 + key[:, 1], return_index=True)
         first.sort()
         keep = first[: self.max_points]
-        self.points, self.origins = allp[keep], allo[keep]
+        self.points, self.origins, self.times = allp[keep], allo[keep], allt[keep]
 
     def in_robot_frame(self, odom_pose: np.ndarray) -> np.ndarray:
         """The scan relative to the robot now (at ``odom_pose``)."""
         return points_in_frame(odom_pose, self.points)
+
+    def recent_in_robot_frame(self, odom_pose: np.ndarray, since_t: float) -> np.ndarray:
+        """The points seen at ``since_t`` or later, relative to the robot now."""
+        return points_in_frame(odom_pose, self.points[self.times >= since_t])
 
     def origins_in_robot_frame(self, odom_pose: np.ndarray) -> np.ndarray:
         """Where each point was seen from, relative to the robot now."""
@@ -515,6 +536,7 @@ class GlobalLocalizer:
         _grid_costs(self.dist, self.origin[0], self.origin[1], self.inv_cell, self.candidates[:1], rot, 1.0, np.empty((1, 1)))
         pose = np.array([self.candidates[0, 0], self.candidates[0, 1], 0.0])
         _refine(self.dist, self.origin[0], self.origin[1], self.inv_cell, pose.copy(), pts, 1.0, 0.1, 0.1, 1)
+        self.cost(pose, pts)
         self.scan_through_at(pose[None, :], np.zeros((3, 2)), pts)
 
     def _coarse_subsample(self, n: int) -> np.ndarray:
@@ -552,11 +574,11 @@ class GlobalLocalizer:
 
     def search(
         self, pts: np.ndarray, frame_pts: np.ndarray | None = None, scene_lines=None, prior: np.ndarray | None = None,
-        origins: np.ndarray | None = None,
+        origins: np.ndarray | None = None, times: np.ndarray | None = None,
     ) -> SearchResult:
-        """Match robot-frame scan points ``pts`` (seen from ``origins``) against the whole
-        map: coarse search, then :meth:`rescore` of the best distinct hypotheses
-        (``prior``, the belief before the robot was lost, competes with them)."""
+        """Match robot-frame scan points ``pts`` (seen from ``origins`` at ``times``)
+        against the whole map: coarse search, then :meth:`rescore` of the best distinct
+        hypotheses (``prior``, the belief before the robot was lost, competes with them)."""
         cfg = self.cfg
         pts = np.ascontiguousarray(pts, dtype=np.float64).reshape(-1, 2)
         if len(pts) < cfg.min_scan_points:
@@ -578,15 +600,56 @@ class GlobalLocalizer:
             seeds = np.vstack([np.asarray(prior, dtype=np.float64)[None, :], seeds])
             order = np.concatenate([[0], order + 1])
         picked = self._distinct(seeds, order, 2 * cfg.modes)
-        res = self.rescore(seeds[picked], pts, frame_pts, scene_lines, origins)
+        res = self.rescore(seeds[picked], pts, frame_pts, scene_lines, origins, times)
         return SearchResult(res.modes, res.accepted, res.reason, int(costs.size))
+
+    def pieces(self, times: np.ndarray | None, n: int) -> list[np.ndarray]:
+        """Indices of the scan's points in each piece (``piece_s`` of when they were last
+        seen), newest first; one piece without ``times`` or with ``piece_s`` 0."""
+        span = self.cfg.piece_s
+        if times is None or span <= 0 or n == 0:
+            return [np.arange(n)]
+        tt = np.asarray(times, dtype=np.float64)
+        k = np.floor((float(tt.max()) - tt) / span).astype(np.int64)
+        order = np.argsort(k, kind="stable")
+        cuts = np.flatnonzero(np.diff(k[order])) + 1
+        return np.split(order, cuts)
+
+    def piece_scores(
+        self, poses: np.ndarray, pts: np.ndarray, origins: np.ndarray | None, pieces: list[np.ndarray]
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Each pose's mean cost and fraction of points seen through walls (NaN without
+        ``origins``) over the scan's ``pieces``, each piece refined on its own from the
+        pose and kept within ``piece_shift_m`` and ``piece_turn_deg`` of it."""
+        cfg = self.cfg
+        poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+        r2 = cfg.fine_robust_m**2
+        n = len(pts)
+        cost = np.zeros(len(poses))
+        through = np.zeros(len(poses))
+        shift2, turn = cfg.piece_shift_m**2, math.radians(cfg.piece_turn_deg)
+        for idx in pieces:
+            sub = np.ascontiguousarray(pts[idx])
+            at = np.empty_like(poses)
+            for i, p0 in enumerate(poses):
+                p, c = _refine(self.dist, self.origin[0], self.origin[1], self.inv_cell, p0.copy(), sub, r2, 0.05, math.radians(1.0), 2)
+                if (p[0] - p0[0]) ** 2 + (p[1] - p0[1]) ** 2 > shift2 or abs(wrap_angle(float(p[2] - p0[2]))) > turn:
+                    p, c = p0, self.cost(p0, sub)
+                at[i] = p
+                cost[i] += c * len(idx)
+            if origins is not None:
+                through += self.scan_through_at(at, np.asarray(origins, dtype=np.float64)[idx], sub) * len(idx)
+        if origins is None:
+            through[:] = math.nan
+        return cost / max(n, 1), through / max(n, 1)
 
     def rescore(
         self, poses: np.ndarray, pts: np.ndarray, frame_pts: np.ndarray | None = None, scene_lines=None,
-        origins: np.ndarray | None = None,
+        origins: np.ndarray | None = None, times: np.ndarray | None = None,
     ) -> SearchResult:
         """Refine each hypothesis (robot poses in the map) on the scan ``pts`` (robot
-        frame), score it with the scan's sight through walls (from ``origins``, where each
+        frame), score it on the scan's pieces (:meth:`piece_scores`, by ``times``, when
+        each point was seen) with their sight through walls (from ``origins``, where each
         point was seen), merge those that meet, check the latest frame's points
         ``frame_pts`` for sight through walls with ``scene_lines(x, y)``, and decide
         (module docstring)."""
@@ -605,8 +668,13 @@ class GlobalLocalizer:
         if not refined:
             return SearchResult((), None, "no hypothesis", 0)
         refined_a = np.array(refined)
-        # All hypotheses' sight through walls in one kernel call (shared over the cores).
-        st = [math.nan] * len(refined) if origins is None else list(self.scan_through_at(refined_a, origins, pts))
+        pieces = self.pieces(times, len(pts))
+        if len(pieces) > 1:
+            rc_a, st_a = self.piece_scores(refined_a, pts, origins, pieces)
+            rc, st = list(rc_a), list(st_a)
+        else:
+            # All hypotheses' sight through walls in one kernel call (shared over the cores).
+            st = [math.nan] * len(refined) if origins is None else list(self.scan_through_at(refined_a, origins, pts))
         score = np.array([c if math.isnan(t) else c + cfg.through_weight * t for c, t in zip(rc, st, strict=True)])
         order = np.argsort(score, kind="stable")
         modes = []

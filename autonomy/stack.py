@@ -69,10 +69,14 @@ STALE_MOTION_RAD = 1e-3
 #: A mode is only accepted on a search of the whole map: one that passes the decision
 #: when re-scored brings the next whole-map search forward.
 FULL_SEARCH_EVERY = 5
-#: While relocalizing, what the near field shows (something closer than the camera's
-#: minimum range) is kept this long, in the dead-reckoning frame: about one look round,
-#: so a drive that sets out after it knows what stands beside the robot.
-NEAR_KEEP_S = 15.0
+#: While relocalizing, what the robot saw this long ago or less stands in for the map's
+#: walls where the camera cannot look: the scan's points, and what the near field shows
+#: (something closer than the camera's minimum range), in the dead-reckoning frame. About
+#: one look round, so a drive that sets out after it knows what stands beside the robot.
+#: Older points are not: dead reckoning a degree or two off over a few metres' drive puts
+#: what the robot saw before 0.1-0.2 m from where it is, and a 0.9 m door seen half a
+#: minute and two drives ago looks 0.6 m wide to a robot standing in it.
+SEEN_KEEP_S = 15.0
 #: An exploring plan may pass this much closer to a scan point than the robot's radius
 #: (the Kinect's noise on walls beside the path).
 EXPLORE_CLEAR_SLACK_M = 0.05
@@ -582,7 +586,7 @@ class RobotStack:
         rc = self.cfg.recovery.relocalization
         per = self.perception
         if self._fresh and per is not None:
-            self.scan.add(self.odom, per.points_2d)
+            self.scan.add(self.odom, per.points_2d, t)
             self._keep_near(per.near_lines, t)
         looked = self._swept() or self.scan.travelled_m >= rc.min_travel_m
         if not looked or t - self._last_search_t < rc.search_every_s or len(self.scan.points) < rc.min_scan_points:
@@ -597,13 +601,14 @@ class RobotStack:
         prior = None if self._prior is None else compose_pose(self._prior, self.odom)
         full = not self.modes or self._searches % FULL_SEARCH_EVERY == 0 or self._search_whole_map
         self._search_whole_map = False
+        times = self.scan.times
         if full:
-            res = gl.search(pts, frame_pts, lambda x, y: query.scene_lines(x, y)[0], prior, origins)
+            res = gl.search(pts, frame_pts, lambda x, y: query.scene_lines(x, y)[0], prior, origins, times)
         else:
             poses = [compose_pose(T, self.odom) for T, _ in self.modes]
             if prior is not None:
                 poses.append(prior)
-            res = gl.rescore(np.array(poses), pts, frame_pts, lambda x, y: query.scene_lines(x, y)[0], origins)
+            res = gl.rescore(np.array(poses), pts, frame_pts, lambda x, y: query.scene_lines(x, y)[0], origins, times)
         self._searches += 1
         inv = relative_pose(self.odom, np.zeros(3))
         self.modes = [(compose_pose(m.pose, inv), m.score) for m in res.modes]
@@ -614,7 +619,7 @@ class RobotStack:
         if prior is not None and res.modes and self._prior_trusted:
             # A false alarm ends where it began: the belief before the alarm, if it still
             # explains the scan about as well as the best mode.
-            kept = gl.rescore(prior[None, :], pts, origins=origins).modes
+            kept = gl.rescore(prior[None, :], pts, origins=origins, times=times).modes
             if kept and gl.keeps_prior(kept[0], res.modes, len(pts)):
                 self._accept(kept[0], t, f"the belief before the alarm explains the scan (score {kept[0].score:.3f})", len(res.modes))
                 return
@@ -642,11 +647,11 @@ class RobotStack:
 
     def _keep_near(self, near_lines: np.ndarray | None, t: float) -> None:
         """Keep this frame's near-field points (dead-reckoning frame, with their time) for
-        ``NEAR_KEEP_S``. Looking round in place, the robot sees nothing closer than
+        ``SEEN_KEEP_S``. Looking round in place, the robot sees nothing closer than
         0.8 m; a pillar beside it hides the floor only while the camera faces it, and
         the drive that sets out afterwards would turn into it."""
         kept = self._near_seen
-        kept = kept[kept[:, 2] >= t - NEAR_KEEP_S]
+        kept = kept[kept[:, 2] >= t - SEEN_KEEP_S]
         lines = np.zeros((0, 4)) if near_lines is None else np.asarray(near_lines, dtype=np.float64).reshape(-1, 4)
         if len(lines):
             w = points_from_frame(self.odom, line_points(lines, self.cfg.avoidance.near_field.point_step_m))
@@ -657,10 +662,10 @@ class RobotStack:
             kept = kept[np.sort(first)]
         self._near_seen = kept
 
-    def _seen_now(self) -> np.ndarray:
-        """What the robot has seen while relocalizing, relative to it now: the scan, and
-        the near field's points of the last ``NEAR_KEEP_S``."""
-        pts = self.scan.in_robot_frame(self.odom)
+    def _seen_now(self, t: float) -> np.ndarray:
+        """What the robot has seen in the last ``SEEN_KEEP_S`` while relocalizing,
+        relative to it now: the scan's points, and the near field's."""
+        pts = self.scan.recent_in_robot_frame(self.odom, t - SEEN_KEEP_S)
         if len(self._near_seen):
             pts = np.vstack([pts, points_in_frame(self.odom, self._near_seen[:, :2])])
         return pts
@@ -729,7 +734,7 @@ class RobotStack:
             return nav.look_around(t)
         if self._exploring_from is None:
             best = compose_pose(self.modes[0][0], self.odom)
-            node = self._explore_node(best)
+            node = self._explore_node(best, t)
             if node is None:
                 return nav.look_around(t)
             nav.pose_jumped()
@@ -752,7 +757,7 @@ class RobotStack:
         # The scan's walls count with the map's where the camera cannot look: the map is
         # placed through a mode that may be wrong (a door beside the robot that the
         # mode's map has elsewhere).
-        cmd = nav.command(best, obstacles, t, near, seen=self._seen_now())
+        cmd = nav.command(best, obstacles, t, near, seen=self._seen_now(t))
         gone = math.hypot(*(self.odom[:2] - self._exploring_from[:2]))
         if cmd.state == "arrived" or gone >= rec.explore_m or t - self._explore_t0 > rec.explore_timeout_s:
             # Look round again from here (the scan keeps what it saw on the way).
@@ -799,7 +804,7 @@ class RobotStack:
         nav = self.navigator
         assert nav is not None
         if self._probe is None:
-            rel = most_open_way(self._seen_now(), self.cfg.avoidance.robot_radius_m, rec.explore_m)
+            rel = most_open_way(self._seen_now(t), self.cfg.avoidance.robot_radius_m, rec.explore_m)
             self._probe = (self.odom.copy(), wrap_angle(float(self.odom[2]) + rel), t)
             # The memory and trail were placed through the belief before the alarm; this
             # drive sees the world in the odometry's frame.
@@ -812,7 +817,7 @@ class RobotStack:
             self.scan.turned_rad = 0.0
             nav.pose_jumped()
             return None
-        cmd = nav.head_for(self.odom, heading, obstacles, t, near, seen=self._seen_now())
+        cmd = nav.head_for(self.odom, heading, obstacles, t, near, seen=self._seen_now(t))
         cmd.state = "exploring" if cmd.state in ("driving", "turning") else cmd.state
         return cmd
 
@@ -832,10 +837,10 @@ class RobotStack:
                 return False
         return True
 
-    def _explore_node(self, pose: np.ndarray) -> int | None:
+    def _explore_node(self, pose: np.ndarray, t: float) -> int | None:
         """A navigation-graph node ``explore_m`` to twice that from the pose, among those
         not tried yet in this relocalization, whose plan's first ``explore_check_m`` the
-        scan shows clear: the one whose drive tells the most modes apart
+        scan's points of the last ``SEEN_KEEP_S`` show clear: the one whose drive tells the most modes apart
         (:func:`autonomy.active_localization.drive_value`), the one most nearly ahead (the
         robot goes on the way it faces) among equals.
 
@@ -858,7 +863,7 @@ class RobotStack:
             return None
         bearing = np.abs(wrap_angles(np.arctan2(xy[cand, 1] - pose[1], xy[cand, 0] - pose[0]) - pose[2]))
         order = cand[np.argsort(bearing, kind="stable")]
-        seen = self.scan.in_robot_frame(self.odom)
+        seen = self.scan.recent_in_robot_frame(self.odom, t - SEEN_KEEP_S)
         modes = self._compared_modes(pose)
         best, best_value = None, -1.0
         for k in order:

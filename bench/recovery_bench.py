@@ -33,7 +33,7 @@ def _panorama(query: SceneQuery, pose: np.ndarray, rng: np.random.Generator) -> 
     ok = (idx >= 0) & (t > 0.8) & (t < 4.0)
     pts = np.column_stack([t[ok] * np.cos(ang[ok]), t[ok] * np.sin(ang[ok])]) + rng.normal(0.0, 0.01, (int(ok.sum()), 2))
     scan = Scan(0.05, 6000)
-    scan.add(np.zeros(3), pts)
+    scan.add(np.zeros(3), pts, 0.0)
     return scan.in_robot_frame(np.zeros(3))
 
 

@@ -42,7 +42,7 @@ def test_scan_points_come_back_in_the_robot_frame_at_any_later_pose() -> None:
     world = cell_centres(rng, 300)
     seen_at = [np.array([0.3, -0.2, 0.4]), np.array([0.5, 0.1, 2.9]), np.array([0.4, 0.0, -2.8])]
     for k, p in enumerate(seen_at):
-        scan.add(p, robot_from_world(p, world[k * 100 : (k + 1) * 100]))
+        scan.add(p, robot_from_world(p, world[k * 100 : (k + 1) * 100]), 0.0)
     assert len(scan.points) == 300 and scan.frames == 3
     now = np.array([1.7, -3.1, -1.2])
     got = scan.in_robot_frame(now)
@@ -57,16 +57,29 @@ def test_one_point_per_cell_the_newest_kept() -> None:
     scan = Scan(CELL, 6000)
     world = cell_centres(rng, 200)
     p0, p1 = np.array([0.0, 0.0, 0.0]), np.array([0.2, 0.1, 0.5])
-    scan.add(p0, robot_from_world(p0, world))
+    scan.add(p0, robot_from_world(p0, world), 0.0)
     # The same cells seen again, each point moved within its cell.
     moved = world + rng.uniform(-0.45, 0.45, world.shape) * CELL
-    scan.add(p1, robot_from_world(p1, moved))
+    scan.add(p1, robot_from_world(p1, moved), 1.0)
     assert len(scan.points) == 200
     np.testing.assert_allclose(scan.points, moved, atol=1e-9)
+    assert (scan.times == 1.0).all()  # each cell keeps when it was seen last
     # Two points of one frame in one cell: one is kept.
     scan.clear()
-    scan.add(p0, np.array([[1.0 + 0.01, 2.0 + 0.01], [1.0 + 0.04, 2.0 + 0.03], [3.0 + 0.01, 0.01]]))
+    scan.add(p0, np.array([[1.0 + 0.01, 2.0 + 0.01], [1.0 + 0.04, 2.0 + 0.03], [3.0 + 0.01, 0.01]]), 0.0)
     assert len(scan.points) == 2
+
+
+def test_recent_points_are_those_seen_since_a_time_relative_to_the_robot_now() -> None:
+    rng = np.random.default_rng(4)
+    scan = Scan(CELL, 6000)
+    old, new = cell_centres(rng, 300)[:150], cell_centres(rng, 300)[150:] + 20.0
+    p0, p1, now = np.zeros(3), np.array([1.0, -0.5, 0.3]), np.array([2.0, 1.0, -1.2])
+    scan.add(p0, robot_from_world(p0, old), 3.0)
+    scan.add(p1, robot_from_world(p1, new), 10.0)
+    np.testing.assert_allclose(scan.recent_in_robot_frame(now, 10.0), robot_from_world(now, new), atol=1e-9)
+    assert len(scan.recent_in_robot_frame(now, 3.0)) == 300
+    assert len(scan.recent_in_robot_frame(now, 10.1)) == 0
 
 
 def test_max_points_keeps_the_newest_frames() -> None:
@@ -74,8 +87,8 @@ def test_max_points_keeps_the_newest_frames() -> None:
     scan = Scan(CELL, 250)
     world = cell_centres(rng, 400)
     p = np.array([0.1, 0.2, 0.3])
-    scan.add(p, robot_from_world(p, world[:200]))
-    scan.add(p, robot_from_world(p, world[200:]))
+    scan.add(p, robot_from_world(p, world[:200]), 0.0)
+    scan.add(p, robot_from_world(p, world[200:]), 0.0)
     assert len(scan.points) == 250
     kept = {tuple(np.round(q / CELL - 0.5).astype(int)) for q in scan.points}
     newest = {tuple(np.round(q / CELL - 0.5).astype(int)) for q in world[200:]}
@@ -87,7 +100,7 @@ def test_turned_and_travelled_accumulate_across_the_wrap() -> None:
     scan = Scan(CELL, 6000)
     poses = [(0.0, 0.0, 3.0), (0.0, 0.0, -3.0), (3.0, 4.0, -3.0), (3.0, 4.0, -2.5), (3.0, 5.0, 3.1)]
     for p in poses:
-        scan.add(np.array(p), np.zeros((0, 2)))  # frames without points count as motion
+        scan.add(np.array(p), np.zeros((0, 2)), 0.0)  # frames without points count as motion
     want_turn = sum(abs(wrap_angle(b[2] - a[2])) for a, b in zip(poses, poses[1:], strict=False))
     assert want_turn == pytest.approx((2 * math.pi - 6.0) + 0.5 + (2 * math.pi - 5.6))
     assert scan.turned_rad == pytest.approx(want_turn)
@@ -102,8 +115,8 @@ def test_the_scan_remembers_where_each_point_was_seen() -> None:
     scan = Scan(CELL, 6000)
     world = cell_centres(rng, 200)
     a, b = np.array([0.3, -0.2, 0.4]), np.array([2.5, 1.0, -2.0])
-    scan.add(a, robot_from_world(a, world[:100]))
-    scan.add(b, robot_from_world(b, world[100:]))
+    scan.add(a, robot_from_world(a, world[:100]), 0.0)
+    scan.add(b, robot_from_world(b, world[100:]), 0.0)
     assert scan.origins.shape == scan.points.shape
     seen_from = {tuple(np.round(q / CELL - 0.5).astype(int)): o for q, o in zip(scan.points, scan.origins, strict=True)}
     for k, q in enumerate(world):
@@ -139,7 +152,7 @@ def panorama(
     ok = (idx >= 0) & (t <= max_range_m)
     a, r = a[ok], t[ok] + rng.normal(0.0, noise_m, ok.sum())
     scan = Scan(RelocalizationConfig().scan_cell_m, RelocalizationConfig().max_scan_points)
-    scan.add(np.zeros(3), np.column_stack([r * np.cos(a), r * np.sin(a)]))
+    scan.add(np.zeros(3), np.column_stack([r * np.cos(a), r * np.sin(a)]), 0.0)
     pts = scan.points
     if clutter:
         k = int(round(clutter / (1.0 - clutter) * len(pts)))
@@ -241,6 +254,41 @@ def test_rescore_refines_a_nearby_pose_and_ranks_the_truth_first(building) -> No
     assert res.modes[0].cost < 0.05 < res.modes[1].cost
     assert gl.cost(res.modes[0].pose, pts) == pytest.approx(res.modes[0].cost)
     assert gl.cost(near, pts) > res.modes[0].cost + 0.1  # refined: better than where it started
+
+
+def test_the_scan_is_cut_into_pieces_by_when_its_points_were_seen(building) -> None:
+    gl, _ = building
+    times = np.array([0.0, 25.0, 3.0, 29.5, 12.0, 20.0, 19.9])
+    got = gl.pieces(times, len(times))
+    assert [sorted(p.tolist()) for p in got] == [[1, 3, 5, 6], [4], [0, 2]]  # 10 s each back from the newest
+    assert [p.tolist() for p in gl.pieces(None, 4)] == [[0, 1, 2, 3]]
+    whole = GlobalLocalizer(gl.fs, AvoidanceConfig().robot_radius_m, RelocalizationConfig(piece_s=0.0))
+    assert len(whole.pieces(times, len(times))) == 1
+
+
+def test_a_scan_whose_older_half_drifted_scores_at_the_truth_as_if_it_had_not(building) -> None:
+    """Dead reckoning turned the older half of a panorama 2.5 degrees (a minute of turning
+    and driving): as one piece, the truth pays for it; in pieces of when the points were
+    seen, each refined on its own, it scores about as the undrifted scan does. Kept within
+    the pieces' bounds (here none), every piece is scored at the mode's pose."""
+    gl, scene = building
+    truth = UNIQUE[1]
+    pts = panorama(scene, truth, np.random.default_rng(41))
+    a = np.arctan2(pts[:, 1], pts[:, 0])
+    old = a < 0.0
+    c, s = math.cos(math.radians(2.5)), math.sin(math.radians(2.5))
+    drifted = pts.copy()
+    drifted[old] = pts[old] @ np.array([[c, s], [-s, c]]) + np.array([0.05, -0.04])
+    times = np.where(old, 0.0, 30.0)
+    straight = gl.rescore(truth[None, :], pts).modes[0]
+    one = gl.rescore(truth[None, :], drifted).modes[0]
+    pieces = gl.rescore(truth[None, :], drifted, times=times).modes[0]
+    print(one.cost, pieces.cost, straight.cost)
+    assert one.cost > straight.cost + 0.015, (one.cost, straight.cost)
+    assert pieces.cost - straight.cost < 0.2 * (one.cost - straight.cost), (pieces.cost, one.cost, straight.cost)
+    tight = GlobalLocalizer(gl.fs, AvoidanceConfig().robot_radius_m, RelocalizationConfig(piece_shift_m=1e-9, piece_turn_deg=1e-9))
+    cost, through = tight.piece_scores(one.pose[None, :], drifted, None, tight.pieces(times, len(drifted)))
+    assert cost[0] == pytest.approx(gl.cost(one.pose, drifted), abs=1e-12) and math.isnan(through[0])
 
 
 def test_a_mode_whose_latest_frame_sees_through_walls_is_not_accepted(building) -> None:
@@ -375,7 +423,7 @@ def test_a_corner_seen_in_part_is_among_the_modes_only_with_the_coarse_sight_thr
     ok = (idx >= 0) & (t >= 0.8) & (t <= 8.0)
     r = t[ok] + rng.normal(0.0, 0.01, int(ok.sum()))
     scan = Scan(CELL, 6000)
-    scan.add(np.zeros(3), np.column_stack([r * np.cos(a[ok]), r * np.sin(a[ok])]))
+    scan.add(np.zeros(3), np.column_stack([r * np.cos(a[ok]), r * np.sin(a[ok])]), 0.0)
     pts = scan.points
     assert not any(is_at(m.pose, truth, 0.3, 5.0) for m in gl.search(pts).modes)
     found = [m for m in gl.search(pts, origins=scan.origins).modes if is_at(m.pose, truth, 0.3, 5.0)]

@@ -508,7 +508,7 @@ def test_an_exploring_drive_goes_where_the_modes_predict_different_walls(buildin
     def value(node: int) -> float:
         return active._drive_value(nav.plan_points(node, pose), modes)
 
-    chosen, ahead = active._explore_node(pose), plain._explore_node(pose)
+    chosen, ahead = active._explore_node(pose, 0.0), plain._explore_node(pose, 0.0)
     xy = nav.graph.node_xy()
     d = np.hypot(xy[:, 0] - pose[0], xy[:, 1] - pose[1])
     values = [value(int(nav.graph.nodes[int(k)].id)) for k in np.flatnonzero((d >= 6.0) & (d <= 12.0))]
@@ -518,14 +518,17 @@ def test_an_exploring_drive_goes_where_the_modes_predict_different_walls(buildin
 
 def test_an_exploring_drive_does_not_set_out_into_walls_the_scan_has_seen(building) -> None:
     """The exploring drive's node is the one most nearly ahead whose plan (on the best
-    mode's map) starts clear of the scan's points; a wrong mode's way out of a room can
-    lead into a wall the robot has seen. With every way blocked, the one ahead is tried."""
+    mode's map) starts clear of the scan's points of the last SEEN_KEEP_S; a wrong mode's
+    way out of a room can lead into a wall the robot has seen. With every way blocked,
+    the one ahead is tried. A wall seen longer ago no longer counts: dead reckoning has
+    moved it since."""
     from autonomy.geometry import points_in_frame
+    from autonomy.stack import SEEN_KEEP_S
 
     stack = make_stack(building, pose=None)
     stack.odom = np.zeros(3)
     pose = START.copy()  # the best mode's belief
-    ahead = stack._explore_node(pose)
+    ahead = stack._explore_node(pose, 0.0)
     assert ahead is not None
     path = points_in_frame(pose, stack.navigator.plan_points(ahead, pose))
     # A wall across that plan, 1.5 m along it, in the scan.
@@ -535,17 +538,20 @@ def test_an_exploring_drive_does_not_set_out_into_walls_the_scan_has_seen(buildi
     at = path[k] + f * (path[k + 1] - path[k])
     u = (path[k + 1] - path[k]) / seg_len[k]
     wall = at + np.outer(np.linspace(-1.0, 1.0, 41), [-u[1], u[0]])
-    stack.scan.add(np.zeros(3), wall)
-    other = stack._explore_node(pose)
+    stack.scan.add(np.zeros(3), wall, 0.0)
+    other = stack._explore_node(pose, 0.0)
     assert other is not None and other != ahead
+    stack._explored.clear()
+    assert stack._explore_node(pose, SEEN_KEEP_S + 0.1) == ahead
+    stack._explored.clear()
     from autonomy.geometry import polyline_clear
 
     r = stack.cfg.avoidance.robot_radius_m
     assert polyline_clear(points_in_frame(pose, stack.navigator.plan_points(other, pose)), wall, stack.cfg.recovery.explore_check_m, r - 0.05)
     # Walled in all round: the node ahead after all.
     ring = 0.9 * np.column_stack([np.cos(np.linspace(0, 2 * np.pi, 200)), np.sin(np.linspace(0, 2 * np.pi, 200))])
-    stack.scan.add(np.zeros(3), ring)
-    assert stack._explore_node(pose) == ahead
+    stack.scan.add(np.zeros(3), ring, 0.0)
+    assert stack._explore_node(pose, 0.0) == ahead
 
 
 def test_prepare_recovery_builds_the_map_search_up_front(building) -> None:
@@ -582,7 +588,7 @@ kernels = (_grid_costs, _refine, _through_counts, _straight_runs)
 warm = [len(k.signatures) for k in kernels]
 ring = np.column_stack([3.0 * np.cos(np.linspace(0, 6, 200)), 2.0 * np.sin(np.linspace(0, 6, 200))])
 stack._global.search(ring, origins=np.zeros_like(ring))
-stack.scan.add(stack.odom, ring)
+stack.scan.add(stack.odom, ring, 0.0)
 on_straight_runs(stack.scan.points, 1.5)
 print(warm, [len(k.signatures) for k in kernels])
 """
@@ -644,7 +650,7 @@ def test_a_scan_of_pillars_and_furniture_alone_sends_the_robot_to_find_walls(bui
         stack = make_stack(building, pose=None)
         rc = stack.cfg.recovery.relocalization
         stack = make_stack(building, pose=None, recovery=replace(stack.cfg.recovery, relocalization=replace(rc, min_wall_points=min_wall_points)))
-        stack.scan.add(stack.odom, clutter)
+        stack.scan.add(stack.odom, clutter, 1.0)
         stack.scan.turned_rad = 2 * math.pi
         cmd = stack.decide(1.0)
         assert cmd.state in ((want, "turning") if want == "exploring" else (want,)), (min_wall_points, cmd.state)
@@ -654,7 +660,7 @@ def test_a_scan_of_pillars_and_furniture_alone_sends_the_robot_to_find_walls(bui
             assert stack._probe is not None
             way = np.array([0.0, 0.0, 3.0 * math.cos(stack._probe[1]), 3.0 * math.sin(stack._probe[1])])
             assert point_segment_distance(clutter, way[None, :]).min() > stack.cfg.avoidance.robot_radius_m, math.degrees(stack._probe[1])
-            stack.scan.add(stack.odom, points_along((-1.5, 3.0), (1.5, 3.0)) + (0.0, 0.5))
+            stack.scan.add(stack.odom, points_along((-1.5, 3.0), (1.5, 3.0)) + (0.0, 0.5), 1.6)
             stack.decide(1.6)
             assert stack._probe is None
 
@@ -686,10 +692,11 @@ PILLAR = np.array([30.535, 14.157])  # its centre; 0.5 m square
 def test_what_the_near_field_shows_while_looking_round_keeps_a_drive_off_it(building) -> None:
     """Looking round beside the pillar, the scan holds nothing of it (it never lies within
     the camera's range), but the near field shows it whenever the camera faces it. Those
-    points are kept (dead-reckoning frame) for NEAR_KEEP_S and count with the scan's in
+    points are kept (dead-reckoning frame) for SEEN_KEEP_S and count with the scan's in
     the camera's blind spots: a drive set out towards the pillar swerves off it, where the
-    scan alone would let it drive straight on. Every point kept lies towards the pillar."""
-    from autonomy.stack import NEAR_KEEP_S
+    scan alone would let it drive straight on. Every point kept lies towards the pillar.
+    After SEEN_KEEP_S, neither the near field's points nor the scan's count."""
+    from autonomy.stack import SEEN_KEEP_S
 
     stack = make_stack(building, pose=None)
     noise = np.random.default_rng(2)
@@ -703,7 +710,8 @@ def test_what_the_near_field_shows_while_looking_round_keeps_a_drive_off_it(buil
     to_pillar = PILLAR - truth[:2]
     scan = stack.scan.in_robot_frame(stack.odom)
     assert not len(scan) or np.hypot(scan[:, 0], scan[:, 1]).min() > 1.0
-    seen = stack._seen_now()
+    seen = stack._seen_now(12.0)
+    assert len(seen) > len(scan)
     near = seen[len(scan):]
     assert len(near) > 20
     bearing = np.arctan2(near[:, 1], near[:, 0]) + truth[2]
@@ -724,5 +732,6 @@ def test_what_the_near_field_shows_while_looking_round_keeps_a_drive_off_it(buil
     assert free.state == "driving" and free.theta_star_rad == pytest.approx(0.0)
     kept = nav.head_for(facing, heading, np.zeros((0, 2)), 12.0, seen=turned(seen))
     assert kept.state == "blocked" or abs(kept.theta_star_rad) > math.radians(20.0), kept
-    stack._keep_near(None, 12.0 + NEAR_KEEP_S + 0.1)
-    assert len(stack._seen_now()) == len(scan)
+    late = 12.0 + SEEN_KEEP_S
+    stack._keep_near(None, late)
+    assert len(stack._seen_now(late)) == 0

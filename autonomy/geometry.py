@@ -51,6 +51,15 @@ def compose_pose(a: np.ndarray, inc: np.ndarray) -> np.ndarray:
     )
 
 
+def sensor_view(pose: np.ndarray, pts: np.ndarray, sensor_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The pose of a sensor mounted at ``sensor_xy`` (robot frame, facing as the robot)
+    on a robot at ``pose``, and robot-frame points ``pts`` (N, 2) relative to it
+    (C-contiguous): the camera's rays start there, not at the robot's centre."""
+    o = np.asarray(sensor_xy, dtype=np.float64).reshape(2)
+    at = compose_pose(np.asarray(pose, dtype=np.float64), np.array([o[0], o[1], 0.0]))
+    return at, np.ascontiguousarray(np.asarray(pts, dtype=np.float64).reshape(-1, 2) - o)
+
+
 def points_in_frame(pose: np.ndarray, xy: np.ndarray) -> np.ndarray:
     """World points (N, 2) expressed in the frame of ``pose`` (C-contiguous)."""
     p = np.asarray(pose, dtype=np.float64)

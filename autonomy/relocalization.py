@@ -50,7 +50,7 @@ import numpy as np
 
 from autonomy.errors import require_int, require_non_negative, require_positive
 from autonomy.freespace import FreeSpace
-from autonomy.geometry import points_from_frame, points_in_frame, wrap_angle
+from autonomy.geometry import points_from_frame, points_in_frame, sensor_view, wrap_angle
 from autonomy.health import explain_points
 
 
@@ -403,15 +403,17 @@ class Scan:
     ``cell_m`` cell (the newest), at most ``max_points``, each with where the robot stood
     and when it saw it."""
 
-    def __init__(self, cell_m: float, max_points: int) -> None:
+    def __init__(self, cell_m: float, max_points: int, sensor_xy: tuple[float, float] = (0.0, 0.0)) -> None:
+        """``sensor_xy``: where the camera sits in the robot frame (its rays start there)."""
         self.cell_m = cell_m
         self.max_points = max_points
+        self.sensor_xy = np.asarray(sensor_xy, dtype=np.float64).reshape(2)
         self.clear()
 
     def clear(self) -> None:
         self.points = np.zeros((0, 2))
         self.origins = np.zeros((0, 2))
-        """Where the robot stood (dead reckoning) when it saw each point."""
+        """Where the camera stood (dead reckoning) when it saw each point."""
         self.times = np.zeros(0)
         """When it saw each point (s)."""
         self.turned_rad = 0.0
@@ -433,7 +435,8 @@ class Scan:
             return
         w = points_from_frame(p, q)
         allp = np.vstack([w, self.points])  # newest first: np.unique keeps the first of a cell
-        allo = np.vstack([np.broadcast_to(p[:2], w.shape), self.origins])
+        at = points_from_frame(p, self.sensor_xy[None, :])
+        allo = np.vstack([np.broadcast_to(at, w.shape), self.origins])
         allt = np.concatenate([np.full(len(w), float(t)), self.times])
         key = np.floor(allp / self.cell_m).astype(np.int64)
         _, first = np.unique(key[:, 0] * 1_000_003 + key[:, 1], return_index=True)
@@ -462,12 +465,15 @@ class GlobalLocalizer:
 
     def __init__(
         self, free_space: FreeSpace, robot_radius_m: float, cfg: RelocalizationConfig = RelocalizationConfig(),
-        segments: np.ndarray | None = None,
+        segments: np.ndarray | None = None, sensor_xy: tuple[float, float] = (0.0, 0.0),
     ) -> None:
         """``segments``: the map's walls the free space was built from, to confirm the
         scan's sight through walls exactly (without them the grid decides, and a ray
-        through a door beside its jamb can count as seen through the wall)."""
+        through a door beside its jamb can count as seen through the wall).
+        ``sensor_xy``: where the camera sits in the robot frame; the latest frame's rays
+        start there."""
         self.cfg = cfg
+        self.sensor_xy = np.asarray(sensor_xy, dtype=np.float64).reshape(2)
         self.fs = free_space
         self.dist = np.ascontiguousarray(free_space.dist, dtype=np.float32)
         self.origin = free_space.origin
@@ -681,9 +687,9 @@ class GlobalLocalizer:
         for i in self._distinct(refined_a, order, cfg.modes):
             through = math.nan
             if frame_pts is not None and scene_lines is not None and len(frame_pts):
-                at = refined_a[i]
+                at, rel = sensor_view(refined_a[i], frame_pts, self.sensor_xy)
                 lines = np.ascontiguousarray(scene_lines(float(at[0]), float(at[1])), dtype=np.float64).reshape(-1, 4)
-                v = explain_points(lines, at, np.ascontiguousarray(frame_pts, dtype=np.float64), cfg.explain_m, cfg.through_m)
+                v = explain_points(lines, at, rel, cfg.explain_m, cfg.through_m)
                 through = float(np.count_nonzero(v < 0)) / len(v)
             modes.append(Mode(refined_a[i].copy(), float(rc[i]), through, float(st[i]), float(score[i])))
         return SearchResult(tuple(modes), *self._decide(modes, len(pts)), hypotheses=len(refined))

@@ -40,6 +40,7 @@ from autonomy.geometry import (
     points_in_frame,
     polyline_clear,
     relative_pose,
+    sensor_view,
     wrap_angle,
     wrap_angles,
 )
@@ -276,7 +277,10 @@ class RobotStack:
         """Dead reckoning from the odometry alone (the relocalization's scan frame)."""
         self.relocalizing = False
         """True while the stack is lost and searching the map (the navigator looks round)."""
-        self.scan = Scan(rec.relocalization.scan_cell_m, rec.relocalization.max_scan_points)
+        # The camera's rays start ahead of the robot's centre: from the centre, a ray
+        # through a door close by its jamb crosses the wall.
+        self._sensor_xy = (cam.mount.forward_m, cam.mount.lateral_m)
+        self.scan = Scan(rec.relocalization.scan_cell_m, rec.relocalization.max_scan_points, self._sensor_xy)
         self.modes: list[tuple[np.ndarray, float]] = []
         """Relocalization modes as (map-from-odometry transform, score), best first."""
         self.events: list[dict] = []
@@ -516,7 +520,8 @@ class RobotStack:
             lines = self._cgr_lines
             if lines is None:
                 lines = np.ascontiguousarray(self.scene.scene_lines(float(self.pose[0]), float(self.pose[1]))[0])
-            verdicts = explain_points(lines, self.pose, np.ascontiguousarray(per.points_2d, dtype=np.float64), hc.explain_m, hc.through_m)
+            at, rel = sensor_view(self.pose, per.points_2d, self._sensor_xy)
+            verdicts = explain_points(lines, at, rel, hc.explain_m, hc.through_m)
         was = self.health.state
         sample = self.health.update(t, verdicts, self.spread[0], self._correction, self._view_agree)
         if sample.state != was and "blind" in (sample.state, was) and sample.state != "lost":
@@ -543,7 +548,9 @@ class RobotStack:
         if self._global is None:
             r = self.cfg.avoidance.robot_radius_m
             fs = build_free_space(self.vectormap, FreeSpaceConfig(robot_radius_m=r))
-            self._global = GlobalLocalizer(fs, r, self.cfg.recovery.relocalization, segments=self.vectormap.segments)
+            self._global = GlobalLocalizer(
+                fs, r, self.cfg.recovery.relocalization, segments=self.vectormap.segments, sensor_xy=self._sensor_xy
+            )
         return self._global
 
     def _start_relocalizing(self, t: float, prior: np.ndarray | None, why: str) -> None:

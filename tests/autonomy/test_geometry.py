@@ -19,6 +19,7 @@ from autonomy.geometry import (
     polyline_clear,
     relative_pose,
     segments_cross_nb,
+    sensor_view,
     wrap_angle,
     wrap_angle_nb,
     wrap_angles,
@@ -91,6 +92,19 @@ def test_points_in_frame_undo_compose_pose_and_points_from_frame_redo_it(pose, p
     np.testing.assert_allclose(points_from_frame(pose, local), pts, atol=1e-9)
     direct = np.array([compose_pose(pose, np.array([q[0], q[1], 0.0]))[:2] for q in pts])
     np.testing.assert_allclose(points_from_frame(pose, pts), direct, atol=1e-9)
+
+
+@given(st.tuples(*[st.floats(-20, 20)] * 2, st.floats(-4, 4)), st.tuples(st.floats(-1, 1), st.floats(-1, 1)),
+       st.lists(st.tuples(st.floats(-10, 10), st.floats(-10, 10)), min_size=1, max_size=10))
+def test_a_sensor_sees_the_same_world_points_from_where_it_sits(pose, sensor, pts) -> None:
+    """The sensor's pose and the points relative to it put every point where the robot's
+    pose and the robot-frame points do; the sensor sits at ``sensor`` in the robot frame."""
+    pose, pts = np.array(pose), np.array(pts)
+    at, rel = sensor_view(pose, pts, np.array(sensor))
+    assert rel.flags.c_contiguous and rel.shape == pts.shape
+    np.testing.assert_allclose(points_from_frame(at, rel), points_from_frame(pose, pts), atol=1e-9)
+    np.testing.assert_allclose(at[:2], points_from_frame(pose, np.array([sensor]))[0], atol=1e-12)
+    assert wrap_angle(float(at[2] - pose[2])) == pytest.approx(0.0, abs=1e-12)
 
 
 coord = st.floats(-5, 5, allow_nan=False)

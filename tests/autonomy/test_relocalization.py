@@ -256,6 +256,23 @@ def test_rescore_refines_a_nearby_pose_and_ranks_the_truth_first(building) -> No
     assert gl.cost(near, pts) > res.modes[0].cost + 0.1  # refined: better than where it started
 
 
+def test_the_scan_keeps_where_the_camera_stood(building) -> None:
+    """Each point's origin is the camera's position (ahead of the robot's centre), where
+    its ray started. Seen through an office's 0.9 m door close by its jamb (a robot in the
+    west offices, kidnapped seed 5176, replayed), a ray from the camera passes the door
+    while one from the robot's centre crosses the wall beside it."""
+    gl, _ = building
+    pose = np.array([4.85, 25.75, 0.44])
+    point = np.array([[7.48, 28.2]])  # on the corridor's far wall, through the door
+    rel = robot_from_world(pose, point)
+    scan = Scan(CELL, 100, sensor_xy=(0.22, 0.0))
+    scan.add(pose, rel, 0.0)
+    np.testing.assert_allclose(scan.origins[0], pose[:2] + 0.22 * np.array([math.cos(pose[2]), math.sin(pose[2])]), atol=1e-12)
+    from_camera = scan.origins_in_robot_frame(pose)
+    assert gl.scan_through(pose, from_camera, rel) == 0.0
+    assert gl.scan_through(pose, np.zeros((1, 2)), rel) == 1.0
+
+
 def test_the_scan_is_cut_into_pieces_by_when_its_points_were_seen(building) -> None:
     gl, _ = building
     times = np.array([0.0, 25.0, 3.0, 29.5, 12.0, 20.0, 19.9])

@@ -116,10 +116,11 @@ class HealthConfig:
 
 @numba.njit(cache=True)
 def explain_points(lines, pose, pts, explain_m, through_m):  # pragma: no cover - numba
-    """Per point (robot frame) at ``pose``: 1 explained, -1 contradicts (seen through a
-    wall), 0 neither, against the first of ``lines`` (world frame) hit by its ray from
-    the robot's position (:func:`autonomy.raycast.ray_hit`'s kernel). Points whose ray
-    hits no line are neither."""
+    """Per point (in the frame of ``pose``) at ``pose``: 1 explained, -1 contradicts (seen
+    through a wall), 0 neither, against the first of ``lines`` (world frame) hit by its
+    ray from ``pose``'s position (:func:`autonomy.raycast.ray_hit`'s kernel). Give the
+    camera's pose and the points relative to it (:func:`autonomy.geometry.sensor_view`):
+    the rays start there. Points whose ray hits no line are neither."""
     x, y, th = pose[0], pose[1], pose[2]
     c, s = math.cos(th), math.sin(th)
     n = pts.shape[0]

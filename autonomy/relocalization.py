@@ -20,7 +20,7 @@ The scan is then matched against the whole map (ours; the papers re-localized by
 2. **Modes.** The best hypotheses are refined coarse to fine on the same field with all
    scan points, and **scored**: the cost plus ``through_weight`` times the fraction of
    the scan's points that the mode sees through the map's walls (each point's ray
-   from where the robot stood when it saw it, marched over the distance transform; a
+   from where the camera stood when it saw it, marched over the distance transform; a
    point counts when it lies behind a wall its ray crosses by more than ``through_m``
    along the ray and ``through_depth_m`` from the wall's line, so that drift does not
    count a wall seen at a glancing angle as seen through).
@@ -143,7 +143,7 @@ class RelocalizationConfig:
     on the tuning runs)."""
     through_weight: float = 3.0
     """A mode's score is its cost plus this times the fraction of the scan's points it
-    sees through the map's walls (each point's ray from where the robot stood when it
+    sees through the map's walls (each point's ray from where the camera stood when it
     saw it). Clutter can only hide walls, so one point seen through a wall speaks
     against a mode more than an unexplained one: scans in open halls full of furniture
     otherwise fit the many walls of offices elsewhere better than the hall itself."""
@@ -400,7 +400,7 @@ def _refine(dist, ox, oy, inv_cell, pose, pts, robust2, step_m, step_rad, levels
 
 class Scan:
     """Observation points gathered while looking, in the dead-reckoning frame, one per
-    ``cell_m`` cell (the newest), at most ``max_points``, each with where the robot stood
+    ``cell_m`` cell (the newest), at most ``max_points``, each with where the camera stood
     and when it saw it."""
 
     def __init__(self, cell_m: float, max_points: int, sensor_xy: tuple[float, float] = (0.0, 0.0)) -> None:

@@ -9,7 +9,8 @@ import pytest
 
 from autonomy.camera import DepthCamera
 from autonomy.errors import InputError
-from autonomy.navigator import Navigator, NavigatorConfig, in_camera_view
+from autonomy.geometry import point_segment_distance
+from autonomy.navigator import Navigator, NavigatorConfig, in_camera_view, wall_points
 from autonomy.vectormap import NavEdge, NavGraph, NavNode
 
 
@@ -480,3 +481,84 @@ def test_the_navigator_sees_through_its_camera() -> None:
     ahead = lambda pts: pts[np.abs(pts[:, 1]) < 0.05]  # noqa: E731
     assert len(ahead(near.map_blind_spots(pose))) == 0
     assert len(ahead(far.map_blind_spots(pose))) > 0
+
+
+# A corridor (y in [5.25, 7.4]) with a 0.906 m door in its south wall at x = 23.661,
+# into a room below: the shipped building's door where a robot turning off the corridor
+# once touched the west jamb.
+DOOR_X, DOOR_HALF = 23.661, 0.453
+DOOR_WALLS = np.array(
+    [
+        [18.0, 7.4, 28.0, 7.4],
+        [18.0, 5.25, DOOR_X - DOOR_HALF, 5.25],
+        [DOOR_X + DOOR_HALF, 5.25, 28.0, 5.25],
+        [21.4, 5.25, 21.4, 2.0],
+        [26.0, 5.25, 26.0, 2.0],
+        [21.4, 2.0, 26.0, 2.0],
+    ]
+)
+
+
+def door_graph(max_clearance: float = DOOR_HALF, has_door: bool = True) -> NavGraph:
+    pts = [(19.0, 6.325), (DOOR_X, 6.325), (DOOR_X, 5.25), (DOOR_X, 4.5), (DOOR_X, 3.0)]
+    nodes = tuple(NavNode(id=i, x=x, y=y) for i, (x, y) in enumerate(pts))
+    door = {(1, 2), (2, 3)}
+    edges = tuple(
+        NavEdge(s0_id=i, s1_id=i + 1, has_door=has_door and (i, i + 1) in door, max_clearance=max_clearance if (i, i + 1) in door else 1.075)
+        for i in range(4)
+    )
+    return NavGraph(nodes=nodes, edges=edges)
+
+
+def through_the_door(nav: Navigator, pose_error: tuple[float, float] = (0.0, 0.0)) -> float:
+    """Drive from the corridor's west end through the door into the room, the navigator
+    seeing the walls through its camera and believing the pose ``pose_error`` off;
+    returns the closest the robot's edge came to a wall (m)."""
+    world = wall_points(DOOR_WALLS, 0.03)
+    pose = np.array([19.0, 6.325, 0.0])
+    nav.set_goal(4, pose)
+    closest, t, dt = math.inf, 0.0, 1.0 / 30.0
+    while t < 30.0:
+        belief = pose + np.array([*pose_error, 0.0])
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        rx, ry = world[:, 0] - pose[0], world[:, 1] - pose[1]
+        bx, by = c * rx + s * ry, -s * rx + c * ry
+        seen = in_camera_view(bx - nav.camera.forward_m, by, nav.camera)
+        cmd = nav.command(belief, np.column_stack([bx[seen], by[seen]]), t)
+        if cmd.state == "arrived":
+            break
+        v = cmd.velocity
+        pose = pose + dt * np.array([c * v[0] - s * v[1], s * v[0] + c * v[1], v[2]])
+        closest = min(closest, float(point_segment_distance(pose[:2], DOOR_WALLS).min()) - nav.avoid.robot_radius_m)
+        t += dt
+    assert cmd.state == "arrived", "the robot did not get through the door"
+    return closest
+
+
+def test_enters_a_door_straight_on_a_short_carrot() -> None:
+    """Turning off the corridor 1 m before the door, the 0.8 m carrot cuts the corner and
+    the robot enters the door off its centre, nearer the west jamb; the short carrot
+    before and on narrow edges lines it up first, near the door's centre (0.153 m beside
+    the robot), so that a pose estimate 6 cm east of the truth (the map's jambs placed 6
+    cm west of the real ones) still clears the jamb."""
+    east = (0.06, 0.0)
+    centred = through_the_door(Navigator(door_graph(), walls=DOOR_WALLS))
+    assert centred > 0.12
+    assert through_the_door(Navigator(door_graph(), walls=DOOR_WALLS), east) > 0.06
+    off = NavigatorConfig(narrow_lookahead_m=0.0)
+    assert through_the_door(Navigator(door_graph(), off, walls=DOOR_WALLS)) < centred - 0.03
+    assert through_the_door(Navigator(door_graph(), off, walls=DOOR_WALLS), east) < 0.03
+    # A narrow edge not flagged as a door is taken the same way: its clearance says so.
+    assert through_the_door(Navigator(door_graph(has_door=False), walls=DOOR_WALLS)) == pytest.approx(centred)
+    # On a graph whose edges are wide, the carrot stays long everywhere.
+    wide = Navigator(door_graph(max_clearance=1.0, has_door=False))
+    wide.set_goal(4, np.array([19.0, 6.325, 0.0]))
+    assert {wide.lookahead(s) for s in np.linspace(0.0, 8.0, 81)} == {0.8}
+    nav = Navigator(door_graph())
+    nav.set_goal(4, np.array([19.0, 6.325, 0.0]))
+    # The plan: 4.661 m along the corridor to the corner, where the door's edges begin,
+    # then 1.825 m through the door to the room's node.
+    assert nav.lookahead(4.661 - 2.0 - 0.05) == 0.8 and nav.lookahead(4.661 - 2.0 + 0.05) == 0.3
+    assert nav.lookahead(4.661 + 1.825 + 0.25) == 0.3 and nav.lookahead(4.661 + 1.825 + 0.35) == 0.8
+    with pytest.raises(InputError, match="narrow_lookahead_m"):
+        NavigatorConfig(narrow_lookahead_m=1.0)

@@ -209,18 +209,27 @@ def candidate_angles(desired_rad: float, cfg: AvoidanceConfig) -> np.ndarray:
     return angles
 
 
+def eq5_scores(angles: np.ndarray, lengths: np.ndarray, desired_rad: float, horizon_m: float | None = None) -> np.ndarray:
+    """Eq. 5's d(theta) cos(theta - theta_d) per candidate, d capped at ``horizon_m`` when given."""
+    d = lengths if horizon_m is None else np.minimum(lengths, horizon_m)
+    return d * np.cos(angles - desired_rad)
+
+
 def choose_direction(
     points2d: np.ndarray,
     desired_rad: float,
     cfg: AvoidanceConfig | None = None,
     static_points2d: np.ndarray | None = None,
     static_radius_m: float | None = None,
+    horizon_m: float | None = None,
 ) -> AvoidanceResult:
     """theta* by Eq. 5 over the candidate fan around desired_rad, with its open length and safe speed.
 
     ``static_points2d`` (ours): known obstacles (map walls the camera cannot see) taken
     with their own radius ``static_radius_m`` (default ``cfg.radius_m``); d(theta) is the
-    shorter of the two open lengths.
+    shorter of the two open lengths. ``horizon_m`` (ours; None = uncapped, as the paper):
+    Eq. 5 scores d(theta) up to this, so that a direction open farther than it does not
+    win over the desired one for that alone; the speed still comes from the full length.
     """
     cfg = AvoidanceConfig() if cfg is None else cfg
     angles = candidate_angles(desired_rad, cfg)
@@ -229,7 +238,7 @@ def choose_direction(
     if static_points2d is not None and len(static_points2d):
         r = cfg.radius_m if static_radius_m is None else float(static_radius_m)
         lengths = np.minimum(lengths, open_path_lengths(static_points2d, angles, r, cfg.max_range_m))
-    score = lengths * np.cos(angles - d)  # Eq. 5
+    score = eq5_scores(angles, lengths, d, horizon_m)
     best = float(score.max())
     ties = np.flatnonzero(score >= best - 1e-12 * max(1.0, abs(best)))
     i = int(ties[np.argmin(np.abs(angles[ties] - d))])

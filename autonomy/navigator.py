@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from autonomy.avoidance import AvoidanceConfig, AvoidanceResult, choose_direction
+from autonomy.avoidance import AvoidanceConfig, AvoidanceResult, choose_direction, eq5_scores
 from autonomy.camera import KINECT_V1, DepthCamera
 from autonomy.errors import InputError, require_non_negative, require_positive
 from autonomy.geometry import (
@@ -85,13 +85,22 @@ class NavigatorConfig:
     and closes the offset over a few lookaheads, so a robot turning off a corridor 1 m
     before a 0.91 m door entered it 0.16 m off its centre, with 0.15 m beside the robot
     at the centre, and a pose estimate 6 cm off put it onto the jamb."""
+    narrow_horizon_m: float = 1.0
+    """While the carrot is short, Eq. 5 scores open lengths only up to this (ours; 0 =
+    uncapped): leaving a door towards a corridor's wall 1.8 m ahead, the corridor's two
+    ways, open 4 m at 35 degrees off the carrot, out-scored it, and the robot turned to
+    one and the other in turn rather than drive out."""
     narrow_slack_m: float = 0.25
     """An edge is narrow when it passes a door (``has_door``) or its ``max_clearance``
     leaves less than this beside the robot's radius ..."""
-    narrow_before_m: float = 2.0
-    """... and the short carrot holds from this far before such an edge (along the plan,
-    so that the corner before a door is taken tightly too) until the robot's back has
-    left it."""
+    narrow_before_m: float = 2.75
+    """... and the short carrot holds from this far before the narrow stretch of such an
+    edge (where the map's walls come within that distance of it; the whole edge without
+    walls) until the robot's back has left the stretch: a door's node 1.075 m off the
+    corridor's centre line has its stretch from 0.31 m before the door, so the corner
+    before it is taken tightly too, and the carrot is long again 0.3 m past the jambs
+    rather than 1 m on at the corridor's centre, where a short carrot pointing at the
+    far wall left the robot turning to and fro between the corridor's two ways."""
     arrival_radius_m: float = 0.35
     """The goal counts as reached within this distance."""
     heading_gain: float = 2.0
@@ -156,6 +165,15 @@ class NavigatorConfig:
     """... blocked this long without progress (a person walking past blocks briefly) ..."""
     blocked_check_m: float = 1.5
     """... with the obstacle on the plan's line no farther ahead than this."""
+    long_detour_m: float = 20.0
+    """A re-plan round a block (either way above) that is longer than what is left of the
+    plan by more than this ..."""
+    long_detour_wait_s: float = 10.0
+    """... is taken only once the block has held this long since such a re-plan was
+    first put off (ours; 0 = at once): a person stepping out at a corridor's corner
+    made the robot give that corridor up for ``blocked_edge_s`` and drive 100 m round
+    the building, where the person had gone a few seconds later. Meanwhile it waits,
+    backs off and tries the way again, as without marks."""
     look_turn_rate_rad_s: float = 0.6
     """Yaw rate of :meth:`Navigator.look_around` (turning in place so that the camera
     sweeps the walls, e.g. while the localization searches for the robot)."""
@@ -250,7 +268,8 @@ class NavigatorConfig:
             "map_blind_spots_m", "map_clearance_m", "proximity_speed_mps", "proximity_gap_m", "proximity_range_m",
             "corner_after_m", "corner_ramp_m", "near_wall_tol_m", "backoff_memory_s", "lane_shift_m", "lane_check_m",
             "trail_s", "trail_tolerance_m", "look_back_m", "blocked_edge_s", "blocked_wait_s", "blocked_check_m",
-            "narrow_lookahead_m", "narrow_slack_m", "narrow_before_m",
+            "long_detour_m", "long_detour_wait_s",
+            "narrow_lookahead_m", "narrow_slack_m", "narrow_before_m", "narrow_horizon_m",
         )
         if self.narrow_lookahead_m > self.lookahead_m:
             raise InputError(
@@ -336,6 +355,8 @@ class Navigator:
         self.plan_nodes: list[int] = []
         """The plan's graph nodes (the plan runs from the pose to the first of them, then on)."""
         self._waited_since: float | None = None
+        self._detour_from: float | None = None
+        """When a long re-plan round a block was first put off (``long_detour_wait_s``)."""
         self._look_back: tuple[float, np.ndarray | None, float] | None = None
         """A look back under way (``look_back_m``): the heading to face, where the drive
         that way began (None while turning) and when it ends at the latest."""
@@ -360,16 +381,43 @@ class Navigator:
         self._lane = 0.0
         self._corners = np.zeros(0)
         self._seg_speed = np.zeros(0)
-        self._seg_narrow = np.zeros(0, dtype=bool)
+        self._narrow_s = np.zeros((0, 2))
+        """The plan's narrow stretches (arc lengths from, to)."""
         self._edge_speed = {}
-        self._narrow_edges: set[tuple[int, int]] = set()
-        """Edges (both ways round) on which the carrot is ``narrow_lookahead_m`` ahead."""
+        self._edge_clearance: dict[tuple[int, int], float] = {}
+        self._narrow_edges: dict[tuple[int, int], tuple[float, float]] = {}
+        """Narrow edges (both ways round) and their narrow stretch (fractions along the
+        edge from its first node), before and on which the carrot is ``narrow_lookahead_m``
+        ahead."""
+        xy = graph.node_xy()
         for e in graph.edges:
             if e.max_speed > 0:  # 0 in a map file: no limit given (a robot would never move)
                 self._edge_speed[(e.s0_id, e.s1_id)] = float(e.max_speed)
                 self._edge_speed[(e.s1_id, e.s0_id)] = float(e.max_speed)
+            self._edge_clearance[(e.s0_id, e.s1_id)] = self._edge_clearance[(e.s1_id, e.s0_id)] = float(e.max_clearance)
             if e.has_door or e.max_clearance < avoid.robot_radius_m + cfg.narrow_slack_m:
-                self._narrow_edges.update({(e.s0_id, e.s1_id), (e.s1_id, e.s0_id)})
+                f0, f1 = self._narrow_stretch(xy[graph.index_of(e.s0_id)], xy[graph.index_of(e.s1_id)])
+                self._narrow_edges[(e.s0_id, e.s1_id)] = (f0, f1)
+                self._narrow_edges[(e.s1_id, e.s0_id)] = (1.0 - f1, 1.0 - f0)
+
+    def _narrow_stretch(self, a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+        """The stretch of a narrow edge a-b (fractions from a) where the map's walls come
+        within ``robot_radius_m + narrow_slack_m`` of it, or within 1 cm of its narrowest
+        point when they come no closer (a wide door); the whole edge without walls."""
+        L = float(np.hypot(*(b - a)))
+        if self.walls is None or not len(self.walls) or L < 1e-6:
+            return 0.0, 1.0
+        lim = self.avoid.robot_radius_m + self.cfg.narrow_slack_m
+        lo, hi = np.minimum(a, b) - lim - 1.0, np.maximum(a, b) + lim + 1.0
+        w = self.walls
+        near = (np.maximum(w[:, 0], w[:, 2]) >= lo[0]) & (np.minimum(w[:, 0], w[:, 2]) <= hi[0])
+        near &= (np.maximum(w[:, 1], w[:, 3]) >= lo[1]) & (np.minimum(w[:, 1], w[:, 3]) <= hi[1])
+        if not near.any():
+            return 0.0, 1.0
+        f = np.linspace(0.0, 1.0, max(2, int(math.ceil(L / 0.02)) + 1))
+        c = point_segment_distance(a + f[:, None] * (b - a), w[near]).min(axis=1)
+        on = f[c <= max(lim, float(c.min()) + 0.01)]
+        return float(on.min()), float(on.max())
 
     # -- planning ----------------------------------------------------------------------
     def nearest_reachable_node(self, xy: np.ndarray, avoid: np.ndarray | None = None) -> int:
@@ -454,20 +502,42 @@ class Navigator:
         """Make the path from the pose through ``nodes`` the plan (its segments, speed
         limits and corners) and start the stuck clock at ``t``."""
         self.plan_nodes = list(nodes)
-        pts = np.vstack([np.asarray(pose[:2], dtype=np.float64)[None, :], path_points(self.graph, nodes)])
-        # Speed limit of each segment: the edge's max_speed; none from the pose to the plan.
-        pairs = list(zip(nodes[:-1], nodes[1:], strict=True))
-        speeds = np.array([math.inf] + [self._edge_speed.get(ab, math.inf) for ab in pairs])
-        narrow = np.array([False] + [ab in self._narrow_edges for ab in pairs])
-        keep = np.concatenate([[True], np.hypot(*np.diff(pts, axis=0).T) > 1e-6])
+        xy = np.asarray(pose[:2], dtype=np.float64)
+        node_pts = path_points(self.graph, nodes)
+        pairs: list[tuple[int, int] | None] = list(zip(nodes[:-1], nodes[1:], strict=True))
+        if self._starts_on_first_edge(xy, nodes, node_pts):
+            # The robot stands on the first edge, short of its first node (a waypoint
+            # reached 0.3 m before it, the plan going back the way it came): the plan
+            # runs from the pose along that edge, not forward to the node and back, where
+            # a carrot on the doubled-back line jumps behind the robot.
+            pts = np.vstack([xy[None, :], node_pts[1:]])
+        else:
+            # From the pose to the plan's first node: no edge (no speed limit, not narrow).
+            pts = np.vstack([xy[None, :], node_pts])
+            pairs = [None, *pairs]
+        seg_len = np.hypot(*np.diff(pts, axis=0).T)
+        keep = np.concatenate([[True], seg_len > 1e-6])
         self.path = pts[keep]
-        self._seg_speed = speeds[keep[1:]] if len(speeds) else speeds
-        self._seg_narrow = narrow[keep[1:]] if len(narrow) else narrow
+        kept = [ab for ab, k in zip(pairs, keep[1:], strict=True) if k]
+        self._seg_speed = np.array([math.inf if ab is None else self._edge_speed.get(ab, math.inf) for ab in kept])
         seg = np.hypot(*np.diff(self.path, axis=0).T) if len(self.path) > 1 else np.zeros(0)
         self._cum = np.concatenate([[0.0], np.cumsum(seg)])
         self._segments = np.hstack([self.path[:-1], self.path[1:]])
         d = self._segments[:, 2:] - self._segments[:, :2]
         self._seg_len = np.sqrt(np.einsum("ij,ij->i", d, d))  # as _project's t measures them
+        # Narrow stretches in arc length: each edge's stretch put on its segment (on the
+        # first, which may start part way along its edge, a stretch behind the pose has
+        # negative arc lengths: the robot's back may still be in it).
+        spans = []
+        all_xy = self.graph.node_xy()
+        for k, ab in enumerate(kept):
+            if ab is None or ab not in self._narrow_edges or self._seg_len[k] <= 0:
+                continue
+            f0, f1 = self._narrow_edges[ab]
+            a, b = all_xy[self.graph.index_of(ab[0])], all_xy[self.graph.index_of(ab[1])]
+            u = (self.path[k + 1] - self.path[k]) / self._seg_len[k]
+            spans.append([self._cum[k] + float((a + f * (b - a) - self.path[k]) @ u) for f in (f0, f1)])
+        self._narrow_s = np.array(spans, dtype=np.float64).reshape(-1, 2)
         # Corners: inner vertices where the plan turns by more than corner_angle_rad.
         self._corners = np.zeros(0)
         if len(self.path) > 2:
@@ -478,6 +548,17 @@ class Navigator:
         self.goal = goal_id
         self._best_s = 0.0
         self._progress_t = t
+
+    def _starts_on_first_edge(self, xy: np.ndarray, nodes: list[int], node_pts: np.ndarray) -> bool:
+        """Whether ``xy`` lies part way along the plan's first edge (projecting inside it,
+        within its ``max_clearance``) with a straight way free of walls to its second node."""
+        if len(nodes) < 2:
+            return False
+        a, b = node_pts[0], node_pts[1]
+        t, dist = point_segment_projection(xy, np.array([[*a, *b]]))
+        if not (0.0 < t[0] < 1.0) or dist[0] > self._edge_clearance.get((nodes[0], nodes[1]), 0.0):
+            return False
+        return self.walls is None or not len(self.walls) or not crosses_any(xy, b, self.walls)
 
     def _project(self, xy: np.ndarray) -> float:
         """Arc length of the point of the plan nearest ``xy``."""
@@ -514,13 +595,13 @@ class Navigator:
 
     def lookahead(self, s: float) -> float:
         """Carrot distance at arc length ``s``: ``narrow_lookahead_m`` from
-        ``narrow_before_m`` before a narrow edge of the plan until ``robot_radius_m`` past
-        it, else ``lookahead_m``."""
+        ``narrow_before_m`` before a narrow stretch of the plan until ``robot_radius_m``
+        past it, else ``lookahead_m``."""
         cfg = self.cfg
-        if cfg.narrow_lookahead_m <= 0 or not self._seg_narrow.any():
+        if cfg.narrow_lookahead_m <= 0 or not len(self._narrow_s):
             return cfg.lookahead_m
         lo, hi = s - self.avoid.robot_radius_m, s + cfg.narrow_before_m
-        on = (self._cum[1:] > lo) & (self._cum[:-1] < hi) & self._seg_narrow
+        on = (self._narrow_s[:, 1] >= lo) & (self._narrow_s[:, 0] <= hi)
         return cfg.narrow_lookahead_m if on.any() else cfg.lookahead_m
 
     def obstacle_near_path(self, obstacles: np.ndarray, theta: float) -> bool:
@@ -855,6 +936,38 @@ class Navigator:
             self._blocked_pts[e] = on[:: max(1, int(math.ceil(len(on) / _BLOCKED_POINTS_KEPT)))]
         return new
 
+    def _marks(self) -> tuple[dict, dict, int]:
+        """The blocked edges' marks, to restore (:meth:`_restore_marks`)."""
+        return dict(self.blocked), dict(self._blocked_pts), self.blocked_edges
+
+    def _restore_marks(self, marks: tuple[dict, dict, int]) -> None:
+        self.blocked, self._blocked_pts, self.blocked_edges = dict(marks[0]), dict(marks[1]), marks[2]
+
+    def _detour_put_off(self, t: float) -> bool:
+        """Whether a long re-plan round a block is being put off at ``t``."""
+        w = self.cfg.long_detour_wait_s
+        return self._detour_from is not None and t - self._detour_from < w
+
+    def _put_off_detour(self, pose: np.ndarray, t: float) -> bool:
+        """Whether to put off, for now, the re-plan round the edges marked blocked: it is
+        longer than what is left of the plan by more than ``long_detour_m`` and the block
+        has held less than ``long_detour_wait_s`` since such a re-plan was first put off
+        (a first put-off more than three waits ago is forgotten: a new block)."""
+        cfg = self.cfg
+        if cfg.long_detour_wait_s <= 0 or self.goal is None or len(self.path) < 2:
+            return False
+        xy = np.asarray(pose[:2], dtype=np.float64)
+        nodes = self._route(self.goal, xy)
+        if nodes is None or nodes == self.plan_nodes:
+            return False
+        pts = np.vstack([xy[None, :], path_points(self.graph, nodes)])
+        detour = float(np.hypot(*np.diff(pts, axis=0).T).sum())
+        if detour <= float(self._cum[-1]) - self._project(xy) + cfg.long_detour_m:
+            return False
+        if self._detour_from is None or t - self._detour_from > 3.0 * cfg.long_detour_wait_s:
+            self._detour_from = t
+        return t - self._detour_from < cfg.long_detour_wait_s
+
     def look_around(self, t: float) -> NavCommand:
         """Turn in place at ``look_turn_rate_rad_s`` (state "looking"), no translation:
         the camera sweeps the walls round the robot (while the localization searches
@@ -1025,7 +1138,7 @@ class Navigator:
         j = int(np.flatnonzero(pick)[np.argmin(np.abs(offsets[pick]))])
         return float(offsets[j])
 
-    def _keep_side(self, res: AvoidanceResult, desired: float) -> AvoidanceResult:
+    def _keep_side(self, res: AvoidanceResult, desired: float, horizon: float | None = None) -> AvoidanceResult:
         """Hysteresis on Eq. 5: once the robot swerves to one side of the carrot direction,
         it keeps to that side while a direction there scores at least ``side_hysteresis``
         of the best (flipping left-right-left in front of an obstacle wastes the approach)."""
@@ -1034,7 +1147,7 @@ class Navigator:
         side = _side_of(res.theta_star, desired, band)
         prev = self._side
         if prev != 0 and side == -prev and not res.blocked:
-            score = res.lengths * np.cos(res.angles - desired)
+            score = eq5_scores(res.angles, res.lengths, desired, horizon)
             same = np.array([_side_of(a, desired, band) != -prev for a in res.angles])
             if same.any():
                 j = int(np.flatnonzero(same)[np.argmax(score[same])])
@@ -1121,7 +1234,7 @@ class Navigator:
         turn = float(np.clip(cfg.heading_gain * desired, -cfg.max_turn_rate_rad_s, cfg.max_turn_rate_rad_s))
         if abs(desired) > cfg.turn_in_place_rad:
             return NavCommand(np.array([0.0, 0.0, turn]), "turning", carrot=carrot, desired_rad=desired)
-        res = self._choose_direction(pose, obstacles, desired)
+        res = self._choose_direction(pose, obstacles, desired, self.lookahead(s) < cfg.lookahead_m)
         if res.blocked:
             return self._when_blocked(pose, obstacles, t, carrot, desired, turn, res, located)
         speed = min(cfg.cruise_speed_mps, res.safe_speed_mps, 0.8 * to_goal + 0.05, self.corner_speed_limit(s), self.edge_speed_limit(s))
@@ -1181,7 +1294,10 @@ class Navigator:
         self._stuck_backoff = True
         self.replans += 1
         assert self.goal is not None
+        marks = self._marks()
         self._mark_blocked(pose, obstacles if located is None else located, t)
+        if self._put_off_detour(pose, t):
+            self._restore_marks(marks)
         self.set_goal(self.goal, pose, t + cfg.backoff_time_s)
         v = self._backoff_velocity(pose, obstacles)
         if v.any():
@@ -1238,18 +1354,21 @@ class Navigator:
             carrot = carrot + shift * np.array([-t0[1], t0[0]])
         return carrot
 
-    def _choose_direction(self, pose: np.ndarray, obstacles: np.ndarray, desired: float) -> AvoidanceResult:
+    def _choose_direction(self, pose: np.ndarray, obstacles: np.ndarray, desired: float, short: bool = False) -> AvoidanceResult:
         """Eq. 3-5 on the obstacles and the map's walls in the camera's blind spots,
-        with hysteresis on the side (:meth:`_keep_side`)."""
+        with hysteresis on the side (:meth:`_keep_side`); ``short``: the carrot is short
+        (``narrow_horizon_m``)."""
         static = self.map_blind_spots(pose)
+        horizon = self.cfg.narrow_horizon_m if short and self.cfg.narrow_horizon_m > 0 else None
         res = choose_direction(
             np.asarray(obstacles, dtype=np.float64).reshape(-1, 2),
             desired,
             self.avoid,
             static,
             self.avoid.robot_radius_m + self.cfg.map_clearance_m,
+            horizon,
         )
-        return self._keep_side(res, desired)
+        return self._keep_side(res, desired, horizon)
 
     def _when_blocked(
         self,
@@ -1294,8 +1413,14 @@ class Navigator:
             and self.goal is not None
             and t - self._progress_t >= cfg.blocked_wait_s
             and self._progress_t != self._waited_since
-            and self._mark_blocked(pose, located, t)
+            and not self._detour_put_off(t)
         ):
+            return False
+        marks = self._marks()
+        if not self._mark_blocked(pose, located, t):
+            return False
+        if self._put_off_detour(pose, t):
+            self._restore_marks(marks)
             return False
         nodes = self._route(self.goal, np.asarray(pose[:2]))
         if nodes is None or nodes == self.plan_nodes:

@@ -72,15 +72,18 @@ def step(pose: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.array([pose[0] + dt * (c * v[0] - s * v[1]), pose[1] + dt * (s * v[0] + c * v[1]), pose[2] + dt * v[2]])
 
 
-def drive(nav: Navigator, pose: np.ndarray, goal: int, seconds: float, box=BOX, t0: float = 0.0):
-    """Drive to ``goal``; returns (final pose, time, arrived, nodes of every plan, closest
-    approach of the robot's edge to the box)."""
-    world_pts = np.vstack([wall_points(WALLS, 0.03), box_outline(box)]) if box is not None else wall_points(WALLS, 0.03)
+def drive(nav: Navigator, pose: np.ndarray, goal: int, seconds: float, box=BOX, t0: float = 0.0, box_until: float = math.inf):
+    """Drive to ``goal`` (the box there until ``box_until``); returns (final pose, time,
+    arrived, nodes of every plan, closest approach of the robot's edge to the box)."""
+    walls_only = wall_points(WALLS, 0.03)
+    world_pts = np.vstack([walls_only, box_outline(box)]) if box is not None else walls_only
     nav.set_goal(goal, pose, t0)
     plans = {tuple(nav.plan_nodes)}
     closest = math.inf
     t = t0
     while t < t0 + seconds:
+        if t >= box_until:
+            box, world_pts = None, walls_only
         cmd = nav.command(pose, sense(pose, world_pts), t)
         plans.add(tuple(nav.plan_nodes))
         if cmd.state == "arrived":
@@ -127,6 +130,30 @@ def test_a_box_across_the_corridor_is_passed_the_other_way_round(blocked_wait_s:
     assert not arrived and off.recoveries >= 3 and off.blocked_edges == 0 and not off.blocked
     assert all(D not in p and E not in p for p in plans)
     assert closest > 0.0 and pose[0] < BOX[0]
+
+
+def test_a_long_way_round_is_taken_only_once_the_block_has_held() -> None:
+    """The way round is 6 m longer than the bottom corridor; with re-plans longer by more
+    than 3 m put off, the robot waits for a box that is gone after 6 s (a person who
+    walks on) and takes the short way, nothing marked; a box that stays is gone round
+    once it has held ``long_detour_wait_s``. At once, without the put-off."""
+    start = np.array([0.0, 0.0, 0.0])
+    patient = NavigatorConfig(long_detour_m=3.0)
+    nav = Navigator(ring_graph(), patient, walls=WALLS)
+    _, t_short, arrived, plans, closest = drive(nav, start, C, 60.0, box_until=6.0)
+    assert arrived and closest > 0.0 and not nav.blocked
+    assert all(D not in p and E not in p for p in plans)
+    hasty = Navigator(ring_graph(), walls=WALLS)
+    _, _, arrived, plans, _ = drive(hasty, start, C, 60.0, box_until=6.0)
+    assert arrived and any(D in p and E in p for p in plans)  # gone round, the box gone
+    # The box stays: the long way, after the wait.
+    nav = Navigator(ring_graph(), patient, walls=WALLS)
+    _, t_wait, arrived, plans, closest = drive(nav, start, C, 90.0)
+    _, t_hasty, _, _, _ = drive(Navigator(ring_graph(), walls=WALLS), start, C, 90.0)
+    assert arrived and closest > 0.0 and edge_key(A, B) in nav.blocked and nav.plan_nodes[-3:] == [D, E, C]
+    assert t_wait > t_hasty + 0.5 * patient.long_detour_wait_s
+    with pytest.raises(InputError, match="long_detour_wait_s"):
+        NavigatorConfig(long_detour_wait_s=-1.0)
 
 
 def test_blocked_edges_expire_and_are_forgotten_when_they_leave_no_path() -> None:

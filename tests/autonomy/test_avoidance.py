@@ -167,6 +167,22 @@ def test_wide_gap_is_chosen_over_the_wall() -> None:
     assert not res.blocked
 
 
+def test_a_horizon_keeps_the_desired_way_over_a_longer_one() -> None:
+    """A wall 1.8 m straight ahead, open 4 m on both diagonals: Eq. 5 prefers a diagonal;
+    with open lengths scored up to 1 m, straight ahead wins, at the speed its full open
+    length allows."""
+    cfg = AvoidanceConfig()
+    pts = _wall(1.8 + cfg.radius_m, -0.6, 0.6)
+    res = choose_direction(pts, 0.0, cfg)
+    assert abs(res.theta_star) > 0.3
+    capped = choose_direction(pts, 0.0, cfg, horizon_m=1.0)
+    assert capped.theta_star == 0.0
+    assert capped.open_length_m == pytest.approx(1.8, abs=0.02)
+    assert capped.safe_speed_mps == pytest.approx(math.sqrt(2 * cfg.max_decel_mps2 * (capped.open_length_m - cfg.stop_distance_m)))
+    # With nothing in range the desired direction wins either way.
+    assert choose_direction(np.zeros((0, 2)), 0.2, cfg, horizon_m=1.0).theta_star == choose_direction(np.zeros((0, 2)), 0.2, cfg).theta_star == pytest.approx(0.2)
+
+
 def test_narrow_gap_is_not_taken() -> None:
     cfg = AvoidanceConfig()
     D, gap = 2.0, (0.5, 1.1)  # 0.6 m < 2 r = 0.8 m

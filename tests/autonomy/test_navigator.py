@@ -510,14 +510,13 @@ def door_graph(max_clearance: float = DOOR_HALF, has_door: bool = True) -> NavGr
     return NavGraph(nodes=nodes, edges=edges)
 
 
-def through_the_door(nav: Navigator, pose_error: tuple[float, float] = (0.0, 0.0)) -> float:
-    """Drive from the corridor's west end through the door into the room, the navigator
+def drive_by_the_door(nav: Navigator, pose: np.ndarray, goal: int, pose_error: tuple[float, float] = (0.0, 0.0)) -> tuple[np.ndarray, list[str]]:
+    """Drive from ``pose`` to the node ``goal`` among :data:`DOOR_WALLS`, the navigator
     seeing the walls through its camera and believing the pose ``pose_error`` off;
-    returns the closest the robot's edge came to a wall (m)."""
+    returns the true poses (one per frame, 30 Hz) and the navigator's states."""
     world = wall_points(DOOR_WALLS, 0.03)
-    pose = np.array([19.0, 6.325, 0.0])
-    nav.set_goal(4, pose)
-    closest, t, dt = math.inf, 0.0, 1.0 / 30.0
+    nav.set_goal(goal, pose)
+    poses, states, t, dt = [pose], [], 0.0, 1.0 / 30.0
     while t < 30.0:
         belief = pose + np.array([*pose_error, 0.0])
         c, s = math.cos(pose[2]), math.sin(pose[2])
@@ -525,14 +524,22 @@ def through_the_door(nav: Navigator, pose_error: tuple[float, float] = (0.0, 0.0
         bx, by = c * rx + s * ry, -s * rx + c * ry
         seen = in_camera_view(bx - nav.camera.forward_m, by, nav.camera)
         cmd = nav.command(belief, np.column_stack([bx[seen], by[seen]]), t)
+        states.append(cmd.state)
         if cmd.state == "arrived":
             break
         v = cmd.velocity
         pose = pose + dt * np.array([c * v[0] - s * v[1], s * v[0] + c * v[1], v[2]])
-        closest = min(closest, float(point_segment_distance(pose[:2], DOOR_WALLS).min()) - nav.avoid.robot_radius_m)
+        poses.append(pose)
         t += dt
-    assert cmd.state == "arrived", "the robot did not get through the door"
-    return closest
+    assert states[-1] == "arrived", f"the robot did not reach node {goal}"
+    return np.array(poses), states
+
+
+def through_the_door(nav: Navigator, pose_error: tuple[float, float] = (0.0, 0.0)) -> float:
+    """Drive from the corridor's west end through the door into the room; returns the
+    closest the robot's edge came to a wall (m)."""
+    poses, _ = drive_by_the_door(nav, np.array([19.0, 6.325, 0.0]), 4, pose_error)
+    return float(point_segment_distance(poses[:, :2], DOOR_WALLS).min()) - nav.avoid.robot_radius_m
 
 
 def test_enters_a_door_straight_on_a_short_carrot() -> None:
@@ -554,11 +561,41 @@ def test_enters_a_door_straight_on_a_short_carrot() -> None:
     wide = Navigator(door_graph(max_clearance=1.0, has_door=False))
     wide.set_goal(4, np.array([19.0, 6.325, 0.0]))
     assert {wide.lookahead(s) for s in np.linspace(0.0, 8.0, 81)} == {0.8}
-    nav = Navigator(door_graph())
-    nav.set_goal(4, np.array([19.0, 6.325, 0.0]))
     # The plan: 4.661 m along the corridor to the corner, where the door's edges begin,
-    # then 1.825 m through the door to the room's node.
-    assert nav.lookahead(4.661 - 2.0 - 0.05) == 0.8 and nav.lookahead(4.661 - 2.0 + 0.05) == 0.3
-    assert nav.lookahead(4.661 + 1.825 + 0.25) == 0.3 and nav.lookahead(4.661 + 1.825 + 0.35) == 0.8
+    # 1.075 m to the door, then 0.75 m to the room's node. The jambs come within 0.55 m
+    # (the robot's radius and the slack) of the edges from 0.31 m before the door to
+    # 0.31 m past it: the carrot is short from 2.75 m before that until 0.3 m after.
+    nav = Navigator(door_graph(), walls=DOOR_WALLS)
+    nav.set_goal(4, np.array([19.0, 6.325, 0.0]))
+    door, reach = 4.661 + 1.075, math.sqrt(0.55**2 - DOOR_HALF**2)
+    assert nav.lookahead(door - reach - 2.75 - 0.02) == 0.8 and nav.lookahead(door - reach - 2.75 + 0.02) == 0.3
+    assert nav.lookahead(door + reach + 0.3 - 0.02) == 0.3 and nav.lookahead(door + reach + 0.3 + 0.02) == 0.8
+    # Without the map's walls the whole of each narrow edge is narrow.
+    blind = Navigator(door_graph())
+    blind.set_goal(4, np.array([19.0, 6.325, 0.0]))
+    assert blind.lookahead(4.661 - 2.75 - 0.05) == 0.8 and blind.lookahead(4.661 - 2.75 + 0.05) == 0.3
+    assert blind.lookahead(door + 0.75 + 0.25) == 0.3 and blind.lookahead(door + 0.75 + 0.35) == 0.8
     with pytest.raises(InputError, match="narrow_lookahead_m"):
         NavigatorConfig(narrow_lookahead_m=1.0)
+
+
+def test_a_plan_starting_on_its_first_edge_does_not_double_back() -> None:
+    """A robot that reached the door's node 0.3 m short of it (within the arrival radius)
+    and is sent back along the corridor stands on the door's edge: the plan runs from
+    there along that edge, not forward to the door's node (the nearest) and back, where
+    the carrot on the doubled-back line jumped behind the robot and it turned to and fro.
+    Leaving the door on the short carrot, Eq. 5 scores open lengths up to 1 m, so the
+    corridor's two ways (open 4 m, 35 degrees off the carrot) do not out-score the way
+    out towards the corridor's far wall."""
+    nav = Navigator(door_graph(), walls=DOOR_WALLS)
+    start = np.array([DOOR_X, 5.25 + 0.3, -math.pi / 2])  # facing the room
+    assert nav.set_goal(0, start) == pytest.approx(0.775 + 4.661)
+    np.testing.assert_allclose(nav.path[1], [DOOR_X, 6.325])
+    poses, states = drive_by_the_door(nav, start, 0)
+    assert poses[:, 1].min() > start[1] - 0.02  # never towards the door
+    assert "recovering" not in states
+    assert states.count("turning") < 90  # turning round (about 55 frames), then once
+    uncapped = Navigator(door_graph(), NavigatorConfig(narrow_horizon_m=0.0), walls=DOOR_WALLS)
+    assert drive_by_the_door(uncapped, start, 0)[1].count("turning") > 2 * states.count("turning")
+    # Off the edge's line by more than its clearance, the plan goes by its first node.
+    assert nav.set_goal(0, np.array([DOOR_X + 0.6, 5.55, 0.0])) > 0.775 + 4.661 + 0.5

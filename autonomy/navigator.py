@@ -948,16 +948,16 @@ class Navigator:
         w = self.cfg.long_detour_wait_s
         return self._detour_from is not None and t - self._detour_from < w
 
-    def _put_off_detour(self, pose: np.ndarray, t: float) -> bool:
-        """Whether to put off, for now, the re-plan round the edges marked blocked: it is
-        longer than what is left of the plan by more than ``long_detour_m`` and the block
-        has held less than ``long_detour_wait_s`` since such a re-plan was first put off
-        (a first put-off more than three waits ago is forgotten: a new block)."""
+    def _put_off_detour(self, pose: np.ndarray, nodes: list[int] | None, t: float) -> bool:
+        """Whether to put off, for now, the re-plan ``nodes`` round the edges marked
+        blocked (:meth:`_route` with the marks): it is longer than what is left of the
+        plan by more than ``long_detour_m`` and the block has held less than
+        ``long_detour_wait_s`` since such a re-plan was first put off (a first put-off
+        more than three waits ago is forgotten: a new block)."""
         cfg = self.cfg
         if cfg.long_detour_wait_s <= 0 or self.goal is None or len(self.path) < 2:
             return False
         xy = np.asarray(pose[:2], dtype=np.float64)
-        nodes = self._route(self.goal, xy)
         if nodes is None or nodes == self.plan_nodes:
             return False
         pts = np.vstack([xy[None, :], path_points(self.graph, nodes)])
@@ -1296,7 +1296,7 @@ class Navigator:
         assert self.goal is not None
         marks = self._marks()
         self._mark_blocked(pose, obstacles if located is None else located, t)
-        if self._put_off_detour(pose, t):
+        if self._put_off_detour(pose, self._route(self.goal, np.asarray(pose[:2])), t):
             self._restore_marks(marks)
         self.set_goal(self.goal, pose, t + cfg.backoff_time_s)
         v = self._backoff_velocity(pose, obstacles)
@@ -1419,10 +1419,10 @@ class Navigator:
         marks = self._marks()
         if not self._mark_blocked(pose, located, t):
             return False
-        if self._put_off_detour(pose, t):
+        nodes = self._route(self.goal, np.asarray(pose[:2]))
+        if self._put_off_detour(pose, nodes, t):
             self._restore_marks(marks)
             return False
-        nodes = self._route(self.goal, np.asarray(pose[:2]))
         if nodes is None or nodes == self.plan_nodes:
             # No other way: the plan and the stuck clock stay as they were.
             if nodes is None:

@@ -156,7 +156,6 @@ class Run:
     estimates: Column = field(default_factory=lambda: Column(3))
     loc_errors: Column = field(default_factory=Column)
     heading_errors: Column = field(default_factory=Column)
-    reset_points: list[np.ndarray] = field(default_factory=list)
     fspf_counts: Column = field(default_factory=lambda: Column(4, np.int32))
     nav_states: dict[str, int] = field(default_factory=dict)
     near_frames: int = 0
@@ -460,7 +459,6 @@ def check_localization(run: Run, frame: SimFrame) -> None:
                  "fault": fault_at(run, t) or unknown_start(run)}
             )
             open_ = run.failures[-1]
-            run.reset_points.append(frame.pose[:2].copy())
     if open_ is None:
         return
     open_["max_error_m"] = max(open_["max_error_m"], round(err, 3))
@@ -743,6 +741,17 @@ def run_metrics(run: Run, wall_s: float) -> dict:
     return metrics
 
 
+def failure_markers(failures: list[dict]) -> dict[str, np.ndarray]:
+    """The trajectory figure's markers for where localization failures started: the
+    paper's resets (no injected fault behind them) apart from the failures a fault
+    caused (a kidnapping is meant to make one); empty sets left out."""
+    groups = {
+        "resets (the paper's count)": [f for f in failures if f.get("fault") is None],
+        "failures from faults": [f for f in failures if f.get("fault") is not None],
+    }
+    return {name: np.array([[f["x"], f["y"]] for f in fs]) for name, fs in groups.items() if fs}
+
+
 def write_outputs(run: Run, out: Path, metrics: dict, rrd: str | Path | None) -> dict[str, str]:
     """Trajectories (TUM), the trajectory figure, the incidents; the files written."""
     scn, graph, vm = run.scn, run.building.navgraph, run.building.vectormap
@@ -755,13 +764,16 @@ def write_outputs(run: Run, out: Path, metrics: dict, rrd: str | Path | None) ->
     if scn.report.figures:
         from sim.viz.maps import render_map
 
+        n_faulted = len(run.failures) - run.resets
+        faulted = f" (and {n_faulted} failures from faults)" if n_faulted else ""
+
         render_map(
             vm,
             out / "trajectory.png",
             graph,
             trajectories={"ground truth": truth[:, :2], **({"CGR estimate": np.array(run.estimates)[:, :2]} if run.localizing else {})},
-            markers={"waypoints": path_points(graph, run.mission.waypoints), **({"resets": np.array(run.reset_points)} if run.reset_points else {})},
-            title=f"{scn.name} (seed {run.seed}): {run.distance_m:.0f} m, {run.resets} resets, {run.collisions} contacts in {metrics['collision_incidents']} incidents",
+            markers={"waypoints": path_points(graph, run.mission.waypoints), **failure_markers(run.failures)},
+            title=f"{scn.name} (seed {run.seed}): {run.distance_m:.0f} m, {run.resets} resets{faulted}, {run.collisions} contacts in {metrics['collision_incidents']} incidents",
         )
         files["trajectory_figure"] = "trajectory.png"
     assert run.blackbox is not None

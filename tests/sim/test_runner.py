@@ -198,3 +198,18 @@ def _deep_size(obj) -> int:
     if isinstance(obj, (list, tuple)):
         return sys.getsizeof(obj) + sum(_deep_size(x) for x in obj)
     return sys.getsizeof(obj)
+
+
+def test_the_trajectory_figure_keeps_fault_failures_apart_from_the_papers_resets() -> None:
+    from sim.experiments.runner import failure_markers
+
+    failures = [
+        {"x": 1.0, "y": 2.0, "fault": None},
+        {"x": 3.0, "y": 4.0, "fault": "kidnap"},
+        {"x": 5.0, "y": 6.0, "fault": "slip"},
+    ]
+    m = failure_markers(failures)
+    np.testing.assert_array_equal(m["resets (the paper's count)"], [[1.0, 2.0]])
+    np.testing.assert_array_equal(m["failures from faults"], [[3.0, 4.0], [5.0, 6.0]])
+    assert list(failure_markers(failures[1:])) == ["failures from faults"]
+    assert failure_markers([]) == {}

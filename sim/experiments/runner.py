@@ -584,12 +584,22 @@ NOTICE_WINDOW_S = 60.0
 AFTER_WINDOW_S = 10.0
 
 
+def truth_at(run: Run, t: float) -> list[float] | None:
+    """The true pose [x, y, theta] of the last frame at or before ``t`` (None before the
+    first), rounded to the millimetre."""
+    k = int(np.searchsorted(np.asarray(run.times), t + 1e-9, side="right")) - 1
+    if k < 0 or k >= len(run.truth):
+        return None
+    return [round(float(v), 3) for v in np.asarray(run.truth[k])[:3]]
+
+
 def fault_report(run: Run) -> list[dict]:
-    """Per injected fault: when it happened, when the stack noticed it (its first lost,
-    blind or mount-corrected event, or a frame it refused, after the start), when it was
-    over for the robot (kidnap: its relocalization; the others: the fault's end, then the
-    error back below ``recovered_error_m``), the true error before and after, the
-    contacts in between."""
+    """Per injected fault: when it happened and the true pose before and after it started
+    (a kidnapping's two places), when the stack noticed it (its first lost, blind or
+    mount-corrected event, or a frame it refused, after the start) and the true pose
+    then, when it was over for the robot (kidnap: its relocalization; the others: the
+    fault's end, then the error back below ``recovered_error_m``), the true error before
+    and after, the contacts in between."""
     out = []
     times = np.array(run.times[1 : 1 + len(run.loc_errors)])
     errs = np.array(run.loc_errors)
@@ -601,12 +611,13 @@ def fault_report(run: Run) -> list[dict]:
     for ev in fault_events(run):
         t0 = float(ev["t_start"])
         end = float(ev["t_end"]) if ev.get("t_end") is not None else (float(run.times[-1]) if ev["kind"] != "kidnap" else t0)
-        rec = {k: ev[k] for k in ("kind", "t_start", "t_end", "distance_m") if k in ev}
+        rec = {k: ev[k] for k in ("kind", "t_start", "t_end", "distance_m", "truth_before", "truth_after") if k in ev}
         if ev.get("skipped"):
             rec["skipped"] = ev["skipped"]
         seen = [(t, what) for t, what in signals if t0 <= t <= t0 + NOTICE_WINDOW_S]
         rec["noticed_t"] = round(seen[0][0], 3) if seen else None
         rec["noticed_by"] = seen[0][1] if seen else None
+        rec["truth_noticed"] = truth_at(run, seen[0][0]) if seen else None
         k0 = int(np.searchsorted(times, t0)) if len(times) else 0
         rec["error_before_m"] = round(float(errs[max(k0 - 1, 0)]), 3) if len(errs) else None
         if ev["kind"] == "kidnap":

@@ -4,6 +4,7 @@ run without the recovery, which must fail the same criterion."""
 
 from __future__ import annotations
 
+import math
 import textwrap
 from pathlib import Path
 
@@ -90,6 +91,14 @@ def test_kidnap_is_noticed_and_relocalized_without_truth(tmp_path):
     assert lost and lost[0]["why"] == "view jumped" and f["noticed_t"] - f["t_start"] < 0.1, (lost, f)
     assert f["ended_by"] == "robot" and f["recovered_t"] is not None
     assert m["truth_resets_needed"] == 0 and m["relocalizations"] >= 1
+    # Where the robot was carried from and to, and where it was when the stack noticed,
+    # read against the run's own true trajectory.
+    track = truth_track(tmp_path, "fault")
+    landed = track[np.searchsorted(track[:, 0], f["t_start"] + 1e-6)]
+    assert np.allclose(f["truth_after"][:2], landed[1:], atol=0.05), (f, landed)
+    assert math.hypot(f["truth_after"][0] - f["truth_before"][0], f["truth_after"][1] - f["truth_before"][1]) > 1.0
+    noticed = track[np.searchsorted(track[:, 0], f["noticed_t"] + 1e-6, side="right") - 1]
+    assert np.allclose(f["truth_noticed"][:2], noticed[1:], atol=0.05), (f, noticed)
     assert f["error_after_m"] is not None and f["error_after_m"] < OK_M
     assert m["collisions"] == 0
 

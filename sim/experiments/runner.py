@@ -586,8 +586,9 @@ AFTER_WINDOW_S = 10.0
 
 def truth_at(run: Run, t: float) -> list[float] | None:
     """The true pose [x, y, theta] of the last frame at or before ``t`` (None before the
-    first), rounded to the millimetre."""
-    k = int(np.searchsorted(np.asarray(run.times), t + 1e-9, side="right")) - 1
+    first), rounded to the millimetre. The stack's events carry times rounded to the
+    millisecond, so a frame up to half a millisecond after ``t`` counts as at it."""
+    k = int(np.searchsorted(np.asarray(run.times), t + 5e-4, side="right")) - 1
     if k < 0 or k >= len(run.truth):
         return None
     return [round(float(v), 3) for v in np.asarray(run.truth[k])[:3]]

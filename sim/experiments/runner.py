@@ -753,15 +753,30 @@ def run_metrics(run: Run, wall_s: float) -> dict:
     return metrics
 
 
+#: Labels of the trajectory figure's failure markers, by what the failure is put down to.
+RESETS_LABEL, FAULTS_LABEL, UNKNOWN_START_LABEL = "resets (the paper's count)", "failures from faults", "unknown start"
+
+
 def failure_markers(failures: list[dict]) -> dict[str, np.ndarray]:
     """The trajectory figure's markers for where localization failures started: the
-    paper's resets (no injected fault behind them) apart from the failures a fault
-    caused (a kidnapping is meant to make one); empty sets left out."""
-    groups = {
-        "resets (the paper's count)": [f for f in failures if f.get("fault") is None],
-        "failures from faults": [f for f in failures if f.get("fault") is not None],
-    }
-    return {name: np.array([[f["x"], f["y"]] for f in fs]) for name, fs in groups.items() if fs}
+    paper's resets (nothing injected behind them) apart from the failures a fault caused
+    (a kidnapping is meant to make one) and the error of a robot started without its
+    pose before it found itself; empty sets left out."""
+    def label(f: dict) -> str:
+        why = f.get("fault")
+        return RESETS_LABEL if why is None else UNKNOWN_START_LABEL if why == "unknown start" else FAULTS_LABEL
+
+    groups: dict[str, list[list[float]]] = {RESETS_LABEL: [], FAULTS_LABEL: [], UNKNOWN_START_LABEL: []}
+    for f in failures:
+        groups[label(f)].append([f["x"], f["y"]])
+    return {name: np.array(xy) for name, xy in groups.items() if xy}
+
+
+def failures_title(failures: list[dict]) -> str:
+    """The figure title's count of failures: the paper's resets, and the others by kind."""
+    n = {name: len(xy) for name, xy in failure_markers(failures).items()}
+    others = [f"{n[k]} {k}" for k in (FAULTS_LABEL, UNKNOWN_START_LABEL) if k in n]
+    return f"{n.get(RESETS_LABEL, 0)} resets" + (f" (and {', '.join(others)})" if others else "")
 
 
 def write_outputs(run: Run, out: Path, metrics: dict, rrd: str | Path | None) -> dict[str, str]:
@@ -776,16 +791,13 @@ def write_outputs(run: Run, out: Path, metrics: dict, rrd: str | Path | None) ->
     if scn.report.figures:
         from sim.viz.maps import render_map
 
-        n_faulted = len(run.failures) - run.resets
-        faulted = f" (and {n_faulted} failures from faults)" if n_faulted else ""
-
         render_map(
             vm,
             out / "trajectory.png",
             graph,
             trajectories={"ground truth": truth[:, :2], **({"CGR estimate": np.array(run.estimates)[:, :2]} if run.localizing else {})},
             markers={"waypoints": path_points(graph, run.mission.waypoints), **failure_markers(run.failures)},
-            title=f"{scn.name} (seed {run.seed}): {run.distance_m:.0f} m, {run.resets} resets{faulted}, {run.collisions} contacts in {metrics['collision_incidents']} incidents",
+            title=f"{scn.name} (seed {run.seed}): {run.distance_m:.0f} m, {failures_title(run.failures)}, {run.collisions} contacts in {metrics['collision_incidents']} incidents",
         )
         files["trajectory_figure"] = "trajectory.png"
     assert run.blackbox is not None

@@ -201,7 +201,7 @@ def _deep_size(obj) -> int:
 
 
 def test_the_trajectory_figure_keeps_fault_failures_apart_from_the_papers_resets() -> None:
-    from sim.experiments.runner import failure_markers
+    from sim.experiments.runner import failure_markers, failures_title
 
     failures = [
         {"x": 1.0, "y": 2.0, "fault": None},
@@ -213,3 +213,8 @@ def test_the_trajectory_figure_keeps_fault_failures_apart_from_the_papers_resets
     np.testing.assert_array_equal(m["failures from faults"], [[3.0, 4.0], [5.0, 6.0]])
     assert list(failure_markers(failures[1:])) == ["failures from faults"]
     assert failure_markers([]) == {}
+    # A robot started without its pose is neither a reset nor a fault's failure.
+    searching = {"x": 7.0, "y": 8.0, "fault": "unknown start"}
+    np.testing.assert_array_equal(failure_markers([searching])["unknown start"], [[7.0, 8.0]])
+    assert failures_title(failures + [searching]) == "1 resets (and 2 failures from faults, 1 unknown start)"
+    assert failures_title([]) == "0 resets"

@@ -36,6 +36,14 @@ or at once when
    ``view_frames`` frames in a row: the robot was carried or pushed, and its belief
    went nowhere;
 
+or, for ``hold_s`` of frames with evidence, when
+
+6. the short-term fraction of the pixels expecting a mapped wall within the camera's
+   range that saw past it (:mod:`autonomy.missing_walls`: mostly the floor beyond where
+   the wall should stand) is above ``lost_missing``: the walls the belief puts in view
+   are not there, which in an open hall, where the camera sees nothing but floor, is the
+   only evidence there is;
+
 and **blind** when no usable frame has arrived for ``blind_s`` (a
 camera blackout, dropped or corrupted frames: the estimate is dead reckoning then).
 The thresholds were chosen on tuning seeds; docs/localization.md gives the method and
@@ -60,6 +68,9 @@ STATES = ("ok", "blind", "lost")
 #: The lost tests on the short-term averages of the map's verdicts: their hold counts
 #: only the time of frames with evidence.
 MAP_TESTS = ("sees through walls", "explains little")
+
+#: The lost test on the short-term missing-wall fraction, held on its own evidence.
+MISSING_TEST = "walls missing"
 
 
 @dataclass(frozen=True)
@@ -104,12 +115,16 @@ class HealthConfig:
     view_frames: int = 1
     """... on this many frames with evidence in a row (a robot put down elsewhere gives
     one such frame when the view check compares consecutive frames, ``lag_s`` 0)."""
+    lost_missing: float = 0.4
+    """Lost when the short-term fraction of the pixels expecting a mapped wall that saw
+    past it (:mod:`autonomy.missing_walls`) is above this for ``hold_s`` of frames with
+    that evidence (0 turns the test off)."""
     blind_s: float = 0.5
     """Blind when no usable frame has arrived for this long."""
 
     def __post_init__(self) -> None:
         require_positive(self, "recovery.health.", "explain_m", "through_m", "fast_s", "slow_s", "lost_spread_m", "blind_s", "jump_m", "jump_s")
-        require_non_negative(self, "recovery.health.", "lost_through", "lost_ratio", "hold_s", "ratio_hold_s", "min_history_s", "jump_ratio", "view_agree")
+        require_non_negative(self, "recovery.health.", "lost_through", "lost_ratio", "hold_s", "ratio_hold_s", "min_history_s", "jump_ratio", "view_agree", "lost_missing")
         require_int(self, "recovery.health.", "min_points", minimum=1)
         require_int(self, "recovery.health.", "view_frames", minimum=1)
 
@@ -170,6 +185,11 @@ class HealthSample:
     """How far the localizer moved the belief beyond the odometry within ``jump_s`` (net)."""
     view_agree: float = math.nan
     """This frame's agreement of the view with the odometry (NaN: no evidence)."""
+    missing: float = math.nan
+    """This frame's fraction of the pixels expecting a mapped wall that saw past it (NaN:
+    no evidence)."""
+    missing_fast: float = math.nan
+    """Its short-term average."""
 
 
 class HealthMonitor:
@@ -185,6 +205,8 @@ class HealthMonitor:
         of the place is kept when asked (the robot is where it was believed to be)."""
         self.e_fast = math.nan
         self.th_fast = math.nan
+        self.m_fast = math.nan
+        self._m_t = math.nan
         if not keep_long_term:
             self.e_slow = math.nan
             self.history_s = 0.0
@@ -209,13 +231,16 @@ class HealthMonitor:
         spread_m: float,
         correction: tuple[float, float] | None = None,
         view_agree: float = math.nan,
+        missing: float = math.nan,
     ) -> HealthSample:
         """Fold in one frame's per-point verdicts (:func:`explain_points`; None: no usable
         frame; fewer than ``min_points``: a frame, but no evidence), the belief's spread,
         the localizer's ``correction`` this frame (world x, y: the belief after the update
         minus the odometry's prediction of it; None: none) and the view's agreement with
-        the odometry (:class:`autonomy.view_check.ViewCheck`; NaN: no evidence); returns
-        the frame's :class:`HealthSample`."""
+        the odometry (:class:`autonomy.view_check.ViewCheck`; NaN: no evidence) and the
+        fraction of the pixels expecting a mapped wall that saw past it
+        (:func:`autonomy.missing_walls.missing_walls`; NaN: no evidence); returns the
+        frame's :class:`HealthSample`."""
         cfg = self.cfg
         dt = 0.0 if math.isnan(self.last_t) else max(0.0, t - self.last_t)
         self.last_t = t
@@ -235,19 +260,24 @@ class HealthMonitor:
             self.th_fast = th if math.isnan(self.th_fast) else self.th_fast + a_fast * (th - self.th_fast)
             self.e_slow = e if math.isnan(self.e_slow) else self.e_slow + a_slow * (e - self.e_slow)
             self.history_s += dt
+        m = float(missing)
+        if math.isfinite(m):
+            a = 1.0 if math.isnan(self._m_t) else 1.0 - math.exp(-max(0.0, t - self._m_t) / cfg.fast_s)
+            self.m_fast = m if math.isnan(self.m_fast) else self.m_fast + a * (m - self.m_fast)
+            self._m_t = t
         self._track_moves(t, correction)
         reason = self._lost_reason(spread_m)
         if reason:
             if math.isnan(self.bad_since):
                 self.bad_since = t
                 self.bad_evidence_s = 0.0
-            elif not math.isnan(e):
+            elif math.isfinite(m) if reason == MISSING_TEST else not math.isnan(e):
                 self.bad_evidence_s += dt
             hold = {"explains little": cfg.ratio_hold_s, "belief jumped": 0.0, "view jumped": 0.0}.get(reason, cfg.hold_s)
             # The map tests' short-term averages move only on frames with evidence; held
             # on without any (the camera facing open space past its range, or blocked),
             # they would say lost on a few frames seen seconds ago.
-            held = self.bad_evidence_s if reason in MAP_TESTS else t - self.bad_since
+            held = self.bad_evidence_s if (reason in MAP_TESTS or reason == MISSING_TEST) else t - self.bad_since
             state = "lost" if held >= hold else ("blind" if t - self.last_evidence_t > cfg.blind_s else "ok")
         else:
             self.bad_since = math.nan
@@ -255,7 +285,7 @@ class HealthMonitor:
             state = "blind" if t - self.last_evidence_t > cfg.blind_s else "ok"
             reason = "no frames" if state == "blind" else ""
         self.state, self.reason = state, reason if state != "ok" else ""
-        self.last = HealthSample(t, state, e, th, self.e_fast, self.e_slow, self.th_fast, float(spread_m), self.reason, self.jump_m, float(view_agree))
+        self.last = HealthSample(t, state, e, th, self.e_fast, self.e_slow, self.th_fast, float(spread_m), self.reason, self.jump_m, float(view_agree), m, self.m_fast)
         return self.last
 
     def _ratio(self) -> float:
@@ -291,6 +321,8 @@ class HealthMonitor:
             return "spread"
         if not math.isnan(self.th_fast) and self.th_fast > cfg.lost_through:
             return "sees through walls"
+        if cfg.lost_missing > 0.0 and not math.isnan(self.m_fast) and self.m_fast > cfg.lost_missing:
+            return MISSING_TEST
         if self._jumped():
             return "belief jumped"
         if self.view_low >= cfg.view_frames:

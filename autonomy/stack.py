@@ -45,6 +45,7 @@ from autonomy.geometry import (
     wrap_angles,
 )
 from autonomy.health import HealthConfig, HealthMonitor, HealthSample, explain_points
+from autonomy.missing_walls import MissingWallsConfig, missing_walls
 from autonomy.mount_check import MountCheck, MountCheckConfig
 from autonomy.navigator import NavCommand, Navigator, NavigatorConfig
 from autonomy.nearfield import NearField, line_points
@@ -133,6 +134,9 @@ class RecoveryConfig:
     view: ViewCheckConfig = field(default_factory=ViewCheckConfig)
     """The check of each view against the odometry (:mod:`autonomy.view_check`), which
     tells the health monitor that the robot was carried."""
+    missing: MissingWallsConfig = field(default_factory=MissingWallsConfig)
+    """Which pixels expect a mapped wall, for the health monitor's missing-wall test
+    (:mod:`autonomy.missing_walls`)."""
     restart_std_xy_m: float = 0.15
     """CGR restarts around an accepted mode with this position spread ..."""
     restart_std_theta_rad: float = math.radians(4.0)
@@ -272,6 +276,9 @@ class RobotStack:
             self.view_check = ViewCheck(rec.view, cam.intrinsics, cam.mount.robot_from_camera(), cam.min_range_m, cam.max_range_m)
         self._depth: np.ndarray | None = None
         self._view_agree = math.nan
+        self._missing = (0, 0, 0)
+        """The last checked frame's pixels expecting a mapped wall, those of them that
+        returned a depth, and those that saw past the wall (:mod:`autonomy.missing_walls`)."""
         self._global: GlobalLocalizer | None = None
         self.odom = np.zeros(3)
         """Dead reckoning from the odometry alone (the relocalization's scan frame)."""
@@ -514,6 +521,7 @@ class RobotStack:
         assert self.health is not None and self.scene is not None
         per, hc = self.perception, self.cfg.recovery.health
         verdicts = None
+        missing = math.nan
         if self._fresh and per is not None:
             # The lines CGR's update just used (seen from its proposal mean, centimetres
             # from the estimate) serve the check too; a second query costs 0.15 ms.
@@ -522,8 +530,15 @@ class RobotStack:
                 lines = np.ascontiguousarray(self.scene.scene_lines(float(self.pose[0]), float(self.pose[1]))[0])
             at, rel = sensor_view(self.pose, per.points_2d, self._sensor_xy)
             verdicts = explain_points(lines, at, rel, hc.explain_m, hc.through_m)
+            if self._depth is not None and hc.lost_missing > 0.0:
+                cam, mc = self.cfg.camera, self.cfg.recovery.missing
+                self._missing = missing_walls(
+                    self._depth, lines, self.pose, cam.intrinsics, self.mount.robot_from_camera(), cam.min_range_m, cam.max_range_m, mc
+                )
+                if self._missing[1] >= mc.min_returned:
+                    missing = self._missing[2] / self._missing[1]
         was = self.health.state
-        sample = self.health.update(t, verdicts, self.spread[0], self._correction, self._view_agree)
+        sample = self.health.update(t, verdicts, self.spread[0], self._correction, self._view_agree, missing)
         if sample.state != was and "blind" in (sample.state, was) and sample.state != "lost":
             self.events.append({"t": round(t, 3), "event": sample.state if sample.state == "blind" else "seeing"})
         if sample.state == "lost":

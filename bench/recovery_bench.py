@@ -1,6 +1,6 @@
-"""Recovery benchmarks: the health check of one frame, the view check of one frame, and
-one global relocalization search (autonomy.health, autonomy.view_check,
-autonomy.relocalization)."""
+"""Recovery benchmarks: the health check of one frame, the view check and the missing-wall
+count of one frame, and one global relocalization search (autonomy.health,
+autonomy.view_check, autonomy.missing_walls, autonomy.relocalization)."""
 
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ from autonomy.camera import DepthCamera
 from autonomy.freespace import FreeSpaceConfig, build_free_space
 from autonomy.geometry import compose_pose
 from autonomy.health import HealthConfig, explain_points
+from autonomy.missing_walls import MissingWallsConfig, missing_walls
 from autonomy.raycast import SceneQuery, VisibilityGrid, rays_hit
 from autonomy.relocalization import GlobalLocalizer, Scan
 from autonomy.stack import LOCALIZATION_GRID
@@ -69,6 +70,16 @@ def bench_recovery(results: dict[str, Result], quick: bool) -> None:
         check.update(clock[0], clock[1], depths[k])
 
     results["view_check_frame"] = entry(timeit(view_frame, 200 if quick else 2000, warmup=3), target=0.5)
+    # The missing-wall count of one frame at the pose it was rendered from (every pixel
+    # expecting a wall is looked up).
+    rc, mw = cam.mount.robot_from_camera(), MissingWallsConfig()
+    results["missing_walls_frame"] = entry(
+        timeit(
+            lambda: missing_walls(depths[0], lines, pose, cam.intrinsics, rc, cam.min_range_m, cam.max_range_m, mw),
+            200 if quick else 2000, warmup=3,
+        ),
+        target=0.5,
+    )
     # As the stack searches: each point's viewpoint (the robot turned in place) for the
     # sight-through-walls score, and when it was seen (a 40 s look: four of the pieces
     # the modes are scored in).

@@ -541,6 +541,7 @@ def health_scalars(stack: RobotStack) -> dict[str, float]:
         "health/through_fast": h.through_fast,
         "health/jump_m": h.jump_m,
         "health/view_agree": h.view_agree,
+        "health/missing_fast": h.missing_fast,
     }
 
 

@@ -377,7 +377,7 @@ def test_a_second_frame_at_the_same_time_moves_no_average() -> None:
 
 @pytest.mark.parametrize(
     ("field", "value"), [("explain_m", 0.0), ("through_m", -1.0), ("blind_s", math.nan), ("hold_s", -0.1), ("lost_ratio", "0.3"),
-     ("jump_m", 0.0), ("jump_s", -1.0), ("jump_ratio", -0.1), ("view_agree", -0.5), ("view_frames", 0), ("view_frames", 1.5)]
+     ("jump_m", 0.0), ("jump_s", -1.0), ("jump_ratio", -0.1), ("view_agree", -0.5), ("lost_missing", -0.1), ("view_frames", 0), ("view_frames", 1.5)]
 )
 def test_bad_config_is_a_one_line_error_naming_the_field(field, value) -> None:
     with pytest.raises(InputError, match=rf"health\.{field}: expected"):
@@ -512,3 +512,52 @@ def test_the_view_test_off_or_agreeing_views_never_say_lost() -> None:
     assert all(s.state == "ok" for s in feed_views(mon, 10.0, [0.0] * 30, rng))
     mon, rng = settled(15)
     assert all(s.state == "ok" for s in feed_views(mon, 10.0, [CFG.view_agree] * 30 + [math.nan] * 5, rng))
+
+
+# --------------------------------------------------------------------------- the missing-wall test
+
+
+def feed_missing(mon: HealthMonitor, t0: float, missing: list[float], rng: np.random.Generator, explained: float = 0.8):
+    """Frames the map explains at ``explained`` with the missing-wall fractions ``missing``
+    at 30 Hz; returns (times, samples)."""
+    ts = t0 + np.arange(1, len(missing) + 1) / FPS
+    return ts, [mon.update(float(t), frame(rng, explained), 0.1, None, math.nan, m) for t, m in zip(ts, missing, strict=True)]
+
+
+@pytest.mark.parametrize("after", [1.0, 0.6])
+def test_walls_missing_is_lost_after_the_closed_form_delay(after: float) -> None:
+    """A landing in an open hall: from a view where every expected wall was there, to one
+    where the camera sees past ``after`` of them. The short-term average relaxes to ``after``
+    (a first-order filter sampled at the frames is exact for a step), passes
+    ``lost_missing``, and lost follows ``hold_s`` later."""
+    mon, rng = settled(21)
+    feed_missing(mon, 10.0, [0.0] * 60, rng)
+    ts, samples = feed_missing(mon, 12.0, [after] * int(8 * FPS), rng)
+    dt = ts - 12.0
+    fast = after * (1.0 - np.exp(-dt / CFG.fast_s))
+    bad = dt[np.argmax(fast > CFG.lost_missing)]
+    want = float(dt[np.argmax(dt - bad >= CFG.hold_s - 1e-9)])
+    lost = first_state(ts, samples, "lost") - 12.0
+    assert abs(lost - want) < 1.5 / FPS, (lost, want)
+    s = samples[int(round(lost * FPS)) - 1]
+    assert s.reason == "walls missing" and s.missing == after and s.missing_fast > CFG.lost_missing
+    assert s.explained_fast > 0.7  # the map tests alone saw nothing wrong
+
+
+def test_walls_missing_holds_only_on_frames_with_that_evidence() -> None:
+    """Every other frame without pixels expecting a wall (NaN): twice as long to say lost."""
+    mon, rng = settled(22)
+    ts, samples = feed_missing(mon, 10.0, [1.0] * int(6 * FPS), rng)
+    every = first_state(ts, samples, "lost") - 10.0
+    mon, rng = settled(22)
+    ts, samples = feed_missing(mon, 10.0, [1.0, math.nan] * int(6 * FPS), rng)
+    other = first_state(ts, samples, "lost") - 10.0
+    assert abs(every - CFG.hold_s) < 1.5 / FPS and abs(other - 2 * CFG.hold_s) < 2.5 / FPS, (every, other)
+
+
+def test_walls_missing_off_or_below_the_threshold_never_says_lost() -> None:
+    mon, rng = settled(23, HealthConfig(lost_missing=0.0))
+    assert all(s.state == "ok" for s in feed_missing(mon, 10.0, [1.0] * 300, rng)[1])
+    mon, rng = settled(24)
+    _, samples = feed_missing(mon, 10.0, [CFG.lost_missing * 0.9] * 600, rng)
+    assert all(s.state == "ok" for s in samples) and abs(samples[-1].missing_fast - CFG.lost_missing * 0.9) < 1e-3

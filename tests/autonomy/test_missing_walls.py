@@ -1,0 +1,159 @@
+"""The missing-wall count against a brute-force numpy reference, and its verdict on
+closed-form renders of the shipped building: the right belief sees past no wall, a
+belief beside a wall while the camera looks across the open atrium sees past it (the
+floor beyond), and pixels that return nothing are no evidence either way."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from autonomy.camera import DepthCamera, pixel_rays
+from autonomy.errors import InputError
+from autonomy.health import HealthConfig
+from autonomy.missing_walls import MissingWallsConfig, missing_walls
+from autonomy.raycast import SceneQuery, load_or_build
+from autonomy.stack import LOCALIZATION_GRID
+from sim.simulator.blueprints import ASSETS_DIR, load_blueprint
+from sim.simulator.map_depth import MapDepth
+
+CAM = DepthCamera()
+CFG = MissingWallsConfig()
+RC = CAM.mount.robot_from_camera()
+LOST_MISSING = HealthConfig().lost_missing
+_RENDER = MapDepth(CAM)
+#: In the atrium's middle, facing south across open floor (no wall within 4 m).
+OPEN = np.array([30.0, 12.0, -math.pi / 2])
+#: Beside the atrium's east wall (x = 39.6), facing south along it.
+BESIDE_WALL = np.array([38.5, 16.0, -math.pi / 2])
+
+
+@pytest.fixture(scope="module")
+def scene() -> SceneQuery:
+    bp = load_blueprint("corridor_loop")
+    return SceneQuery(bp.vectormap, load_or_build(bp.vectormap, ASSETS_DIR / "corridor_loop.vectormap.txt", LOCALIZATION_GRID))
+
+
+def count(scene: SceneQuery, depth: np.ndarray, pose: np.ndarray, cfg: MissingWallsConfig = CFG) -> tuple[int, int, int]:
+    lines = scene.scene_lines(float(pose[0]), float(pose[1]))[0]
+    return missing_walls(depth, lines, pose, CAM.intrinsics, RC, CAM.min_range_m, CAM.max_range_m, cfg)
+
+
+def reference(depth, lines, pose, cfg=CFG):
+    """Brute force in numpy: every grid pixel's ray against every line at once."""
+    intr = CAM.intrinsics
+    h, w = depth.shape
+    rays = pixel_rays(intr) @ RC[:3, :3].T  # robot frame, unit planar depth
+    t_cam = RC[:3, 3]
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    ox, oy = pose[0] + c * t_cam[0] - s * t_cam[1], pose[1] + s * t_cam[0] + c * t_cam[1]
+    with np.errstate(invalid="ignore"):
+        valid = np.isfinite(depth) & (depth > 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        to_floor = np.where(rays[..., 2] < 0, -t_cam[2] / rays[..., 2], np.inf)
+    n_exp = n_ret = n_past = 0
+    for v in range(cfg.stride_v_px // 2, h, cfg.stride_v_px):
+        for u in range(cfg.stride_u_px // 2, w, cfg.stride_u_px):
+            r = rays[v, u]
+            hn = math.hypot(r[0], r[1])
+            d = np.array([c * r[0] - s * r[1], s * r[0] + c * r[1]]) / hn
+            a = lines[:, :2] - (ox, oy)
+            e = lines[:, 2:] - lines[:, :2]
+            den = d[0] * e[:, 1] - d[1] * e[:, 0]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = (a[:, 0] * e[:, 1] - a[:, 1] * e[:, 0]) / den
+                uu = (a[:, 0] * d[1] - a[:, 1] * d[0]) / den
+            ok = (den != 0) & (t >= 0) & (uu >= 0) & (uu <= 1)
+            if not ok.any():
+                continue
+            j = np.flatnonzero(ok)[np.argmin(t[ok])]
+            z = t[j] / hn
+            if not (CAM.min_range_m + cfg.margin_m <= z <= CAM.max_range_m - cfg.margin_m) or to_floor[v, u] < z:
+                continue
+            cos_inc = abs(d[0] * e[j, 1] - d[1] * e[j, 0]) / np.hypot(*e[j])
+            if cos_inc < math.cos(cfg.max_incidence_rad):
+                continue
+            n_exp += 1
+            row = slice(max(0, u - cfg.window_px), u + cfg.window_px + 1)
+            seen = depth[v, row][valid[v, row]]
+            if len(seen):
+                n_ret += 1
+                n_past += bool(np.all(seen > z + cfg.tol_m + cfg.tol_per_m2 * z * z))
+    return n_exp, n_ret, n_past
+
+
+# --------------------------------------------------------------------------- kernel
+
+
+@settings(max_examples=12, deadline=None)
+@given(
+    st.floats(24.5, 38.5), st.floats(6.0, 20.0), st.floats(-math.pi, math.pi),
+    st.floats(-0.8, 0.8), st.floats(-0.8, 0.8), st.floats(0.0, 0.6), st.integers(0, 2**31),
+)
+def test_the_kernel_counts_as_the_brute_force_reference(scene, x, y, th, dx, dy, drop, seed) -> None:
+    """A render from one pose with random holes, judged from a pose nearby."""
+    truth = np.array([x, y, th])
+    depth = _RENDER.render(scene, truth)
+    rng = np.random.default_rng(seed)
+    depth[rng.random(depth.shape) < drop] = 0.0
+    belief = truth + (dx, dy, 0.0)
+    lines = scene.scene_lines(float(belief[0]), float(belief[1]))[0]
+    got = missing_walls(depth, lines, belief, CAM.intrinsics, RC, CAM.min_range_m, CAM.max_range_m, CFG)
+    assert got == reference(depth, lines, belief)
+    assert got[0] >= got[1] >= got[2] >= 0
+
+
+def test_the_right_belief_sees_past_nothing(scene) -> None:
+    for pose in (BESIDE_WALL, np.array([20.0, 6.4, math.pi]), np.array([38.3, 33.3, -2.56])):
+        n_exp, n_ret, n_past = count(scene, _RENDER.render(scene, pose), pose)
+        assert n_ret >= CFG.min_returned and n_ret == n_exp and n_past == 0
+
+
+def test_a_belief_beside_a_wall_sees_past_it_in_an_open_view(scene) -> None:
+    """The camera sees only floor; the belief puts a wall beside the robot, in range."""
+    depth = _RENDER.render(scene, OPEN)
+    assert count(scene, depth, OPEN) == (0, 0, 0)  # nothing in range: no evidence either way
+    n_exp, n_ret, n_past = count(scene, depth, BESIDE_WALL)
+    assert n_ret >= CFG.min_returned and n_past / n_ret > LOST_MISSING
+    assert n_exp > n_ret  # the rows above the floor's range return nothing: no evidence
+
+
+def test_no_return_is_no_evidence(scene) -> None:
+    """Something closer than the minimum range over part of the view (a door jamb, a
+    person right in front), or a blank frame: those pixels neither agree nor see past."""
+    depth = _RENDER.render(scene, OPEN)
+    n_exp, n_ret, n_past = count(scene, depth, BESIDE_WALL)
+    blocked = depth.copy()
+    blocked[:, : depth.shape[1] // 16] = 0.0
+    b_exp, b_ret, b_past = count(scene, blocked, BESIDE_WALL)
+    assert b_exp == n_exp and b_ret < n_ret and b_past < n_past
+    assert b_past / b_ret > LOST_MISSING
+    assert count(scene, np.zeros_like(depth), BESIDE_WALL) == (n_exp, 0, 0)
+
+
+def test_a_person_in_front_of_a_wall_is_no_contradiction(scene) -> None:
+    """Anything nearer than the wall (people, furniture the map lacks) agrees."""
+    pose = np.array([20.0, 6.4, math.pi])
+    depth = _RENDER.render(scene, pose)
+    person = depth.copy()
+    person[:, 200:300] = np.where(person[:, 200:300] > 1.5, 1.5, person[:, 200:300])
+    assert count(scene, person, pose)[2] == 0
+
+
+def test_grazing_and_out_of_range_walls_expect_nothing(scene) -> None:
+    pose = np.array([20.0, 6.4, math.pi])  # along the south corridor, walls 1 m to each side
+    depth = _RENDER.render(scene, pose)
+    wide = count(scene, depth, pose, MissingWallsConfig(max_incidence_rad=math.radians(89.0)))
+    assert count(scene, depth, pose)[0] < wide[0]
+    assert count(scene, depth, pose, MissingWallsConfig(margin_m=1.6))[0] == 0  # 2.4 m > 4 - 1.6
+
+
+def test_bad_config_names_the_key() -> None:
+    for kw, key in [({"stride_u_px": 0}, "stride_u_px"), ({"stride_v_px": 1.5}, "stride_v_px"), ({"margin_m": -0.1}, "margin_m"),
+                    ({"min_returned": 0}, "min_returned"), ({"tol_m": -1.0}, "tol_m"), ({"max_incidence_rad": 0.0}, "max_incidence_rad")]:
+        with pytest.raises(InputError, match=f"recovery.missing.{key}"):
+            MissingWallsConfig(**kw)

@@ -735,3 +735,35 @@ def test_what_the_near_field_shows_while_looking_round_keeps_a_drive_off_it(buil
     late = 12.0 + SEEN_KEEP_S
     stack._keep_near(None, late)
     assert len(stack._seen_now(late)) == 0
+
+
+@pytest.mark.parametrize("missing_test", [True, False])
+def test_a_landing_facing_open_floor_is_noticed_by_the_walls_seen_past(building, missing_test: bool) -> None:
+    """Carried from beside the atrium's east wall (the wall at the edge of an otherwise
+    open view) into its middle, facing open floor with no wall in range: FSPF finds no
+    plane, and the view check compares too few points across the landing (the wall's
+    points fall where the new view returns nothing), so the map tests and the view test
+    have no evidence. The floor seen past the wall the belief still puts beside the robot
+    tells (:mod:`autonomy.missing_walls`); without that test, nothing does while the
+    robot stands there (a kidnapped run's robot drove 23 m on such a belief)."""
+    scene = building[1]
+    hc = RecoveryConfig().health
+    if not missing_test:
+        hc = replace(hc, lost_missing=0.0)
+    stack = make_stack(building, pose=np.array([38.5, 16.0, -math.pi / 2]), recovery=RecoveryConfig(health=hc))
+    t = settle(stack, scene, hc.min_history_s + 1.0)
+    kidnap = t
+    landing = render(scene, np.array([30.0, 12.0, -math.pi / 2]))
+    while t < kidnap + 10.0 and not stack.relocalizing:
+        t += 0.1
+        stack.perceive(landing)
+        stack.localize(np.zeros(3), t)
+    lost = [e for e in stack.events if e["event"] == "lost"]
+    if missing_test:
+        assert len(lost) == 1 and lost[0]["why"] == "walls missing", lost
+        # The short-term average passes the threshold within one or two of its time
+        # constants (from 0 beside the wall), then the test holds for hold_s.
+        assert hc.hold_s <= lost[0]["t"] - kidnap <= hc.hold_s + 2.0 * hc.fast_s, lost
+    else:
+        assert lost == [] and stack.health_state == "ok"
+        assert math.isnan(stack.health_sample.view_agree) and math.isnan(stack.health_sample.explained)

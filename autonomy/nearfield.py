@@ -87,7 +87,12 @@ class NearField:
         min_range_m: float,
         robot_radius_m: float,
         cfg: NearFieldConfig = NearFieldConfig(),
+        shift_band: bool = False,
     ) -> None:
+        """``shift_band``: when no row sees the floor in the configured band, take the
+        band of the same width from the nearest floor the camera sees instead of raising
+        (a mount the stack corrected at run time, tilted up: the configured band is the
+        user's choice for the mount they gave, and checked strictly for it)."""
         if not (math.isfinite(min_range_m) and min_range_m > 0):
             raise InputError(f"near field: the camera's minimum range must be a positive number, got {min_range_m!r}")
         self.cfg = cfg
@@ -105,7 +110,14 @@ class NearField:
         # Depth at which a flat floor (z = 0) is met: t_z + depth * d_z = 0.
         with np.errstate(divide="ignore", invalid="ignore"):
             floor = np.where(d[..., 2] < 0, -t[2] / d[..., 2], np.inf)
-        expected = (floor >= self.min_range_m + cfg.margin_m) & (floor <= cfg.band_max_depth_m)
+        lo, hi = self.min_range_m + cfg.margin_m, cfg.band_max_depth_m
+        expected = (floor >= lo) & (floor <= hi)
+        if cfg.enabled and not expected.any() and shift_band and np.isfinite(floor[floor >= lo]).any():
+            nearest = float(floor[floor >= lo].min())
+            lo, hi = nearest, nearest + (hi - lo)
+            expected = (floor >= lo) & (floor <= hi)
+        self.band_m = (lo, hi)
+        """The floor depths (m) whose pixels are watched."""
         if cfg.enabled and not expected.any():
             # Silently off would be worse: the robot would drive into what it cannot see.
             raise InputError(

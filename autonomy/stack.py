@@ -432,7 +432,18 @@ class RobotStack:
             self.view_check.set_mount(mount.robot_from_camera())
         if self.near_field is not None:
             cam = self.cfg.camera
-            self.near_field = NearField(cam.intrinsics, mount, cam.min_range_m, self.cfg.avoidance.robot_radius_m, self.cfg.avoidance.near_field)
+            try:
+                # A camera tilted up may no longer see the configured band of near floor:
+                # the nearest floor it sees takes its place (the robot is blind a little
+                # farther out, and the event says how far).
+                self.near_field = NearField(
+                    cam.intrinsics, mount, cam.min_range_m, self.cfg.avoidance.robot_radius_m, self.cfg.avoidance.near_field, shift_band=True
+                )
+                self.events[-1]["near_floor_m"] = [round(v, 2) for v in self.near_field.band_m]
+            except InputError:
+                # No floor in view at all: the last near field stays (it watches the
+                # pixels the floor was last seen in).
+                self.events[-1]["near_floor_m"] = None
 
     def _reject(self, why: str) -> Perception:
         self.frame_fault = why

@@ -201,3 +201,24 @@ def test_navigator_ignores_near_field_a_mapped_wall_explains() -> None:
     assert nav.near_points(np.array([0.0, 0.0, 0.0]), lines).shape == (0, 2)
     # Moved 0.3 m along the wall's normal (the estimate far off), the map no longer explains it.
     assert len(nav.near_points(np.array([-0.3, 0.0, 0.0]), lines)) > 0
+
+
+def test_a_mount_tilted_up_shifts_the_band_to_the_nearest_floor_it_sees() -> None:
+    """Tilted 9 degrees up, the camera's lowest row meets the floor 1.24 m away, past the
+    configured band (0.9-1.15 m): strict, an error naming it; with ``shift_band`` (a mount
+    the stack corrected at run time), the band of the same width from the nearest floor."""
+    up = CameraMount(pitch_down_rad=math.radians(8.0))
+    with pytest.raises(InputError, match="no image row sees the floor"):
+        NearField(INTR, up, MIN_RANGE, 0.3)
+    nf = NearField(INTR, up, MIN_RANGE, 0.3, shift_band=True)
+    cfg = NearFieldConfig()
+    lowest = (INTR.height - 1 - INTR.cy) / INTR.fy  # the bottom row's ray, optical frame
+    nearest = up.translation()[2] / math.sin(up.pitch_down_rad + math.atan(lowest)) * math.cos(math.atan(lowest))
+    lo, hi = nf.band_m
+    assert abs(lo - nearest) < 0.02 and abs((hi - lo) - (cfg.band_max_depth_m - MIN_RANGE - cfg.margin_m)) < 1e-9
+    assert nf.active and len(nf.rows) > 0
+    # The configured band stays where the camera sees it.
+    assert NearField(INTR, MOUNT, MIN_RANGE, 0.3, shift_band=True).band_m == (MIN_RANGE + cfg.margin_m, cfg.band_max_depth_m)
+    # A camera looking over the floor entirely (no row meets it): still an error.
+    with pytest.raises(InputError, match="no image row sees the floor"):
+        NearField(INTR, CameraMount(pitch_down_rad=math.radians(-30.0)), MIN_RANGE, 0.3, shift_band=True)

@@ -767,3 +767,18 @@ def test_a_landing_facing_open_floor_is_noticed_by_the_walls_seen_past(building,
     else:
         assert lost == [] and stack.health_state == "ok"
         assert math.isnan(stack.health_sample.view_agree) and math.isnan(stack.health_sample.explained)
+
+
+def test_a_mount_corrected_upwards_past_the_near_floor_band_keeps_a_near_field(building) -> None:
+    """Two tilt faults in the same direction left the camera 9 degrees up, and the mount
+    check's correction put the configured near-floor band out of view: the near field
+    watches the nearest floor the camera still sees (the run went on), and the event says
+    where."""
+    stack = make_stack(building)
+    up = replace(stack.mount, pitch_down_rad=math.radians(8.0))
+    stack._correct_mount(up)
+    ev = stack.events[-1]
+    assert ev["event"] == "mount corrected" and ev["near_floor_m"][0] > stack.cfg.avoidance.near_field.band_max_depth_m
+    assert stack.near_field.band_m[0] == pytest.approx(ev["near_floor_m"][0], abs=0.01) and stack.mount is up
+    # It still sees something close in front: a blank frame blocks its columns.
+    assert stack.near_field.blocked_columns(np.zeros(SHAPE, np.float32)).all()

@@ -321,12 +321,14 @@ class HealthMonitor:
             return "spread"
         if not math.isnan(self.th_fast) and self.th_fast > cfg.lost_through:
             return "sees through walls"
-        if cfg.lost_missing > 0.0 and not math.isnan(self.m_fast) and self.m_fast > cfg.lost_missing:
-            return MISSING_TEST
         if self._jumped():
             return "belief jumped"
         if self.view_low >= cfg.view_frames:
             return "view jumped"
+        # After the tests that say lost at once: held first, this one would keep them
+        # waiting for its hold.
+        if cfg.lost_missing > 0.0 and not math.isnan(self.m_fast) and self.m_fast > cfg.lost_missing:
+            return MISSING_TEST
         if (
             not math.isnan(self.e_fast)
             and self.history_s >= cfg.min_history_s

@@ -41,7 +41,7 @@ import numba
 import numpy as np
 
 from autonomy.camera import CameraIntrinsics
-from autonomy.errors import require_int, require_non_negative, require_positive
+from autonomy.errors import InputError, require_int, require_non_negative, require_positive
 from autonomy.raycast import _ray_hit_kernel
 
 __all__ = ["MissingWallsConfig", "missing_walls"]
@@ -148,6 +148,8 @@ def missing_walls(
     non-finite invalid) at the robot ``pose`` (x, y, theta) against the scene's ``lines``
     (M, 4) world frame (module docstring)."""
     d = np.ascontiguousarray(depth, dtype=np.float32)
+    if d.shape != (intr.height, intr.width):
+        raise InputError(f"missing walls: depth image expected {intr.height}x{intr.width}, got shape {d.shape}")
     rc = np.ascontiguousarray(robot_from_camera, dtype=np.float64)
     ln = np.ascontiguousarray(lines, dtype=np.float64).reshape(-1, 4)
     p = np.asarray(pose, dtype=np.float64)

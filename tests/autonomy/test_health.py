@@ -561,3 +561,12 @@ def test_walls_missing_off_or_below_the_threshold_never_says_lost() -> None:
     mon, rng = settled(24)
     _, samples = feed_missing(mon, 10.0, [CFG.lost_missing * 0.9] * 600, rng)
     assert all(s.state == "ok" for s in samples) and abs(samples[-1].missing_fast - CFG.lost_missing * 0.9) < 1e-3
+
+
+def test_a_view_jump_while_walls_are_missing_is_lost_at_once() -> None:
+    """The held missing-wall test must not keep a test that says lost at once waiting."""
+    mon, rng = settled(25)
+    feed_missing(mon, 10.0, [1.0] * 10, rng)  # the missing-wall test holds, not yet for hold_s
+    assert mon.state == "ok" and mon.bad_evidence_s < CFG.hold_s
+    s = mon.update(10.5, frame(rng, 0.8), 0.1, None, 0.0, 1.0)
+    assert s.state == "lost" and s.reason == "view jumped"

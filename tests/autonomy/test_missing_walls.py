@@ -157,3 +157,8 @@ def test_bad_config_names_the_key() -> None:
                     ({"min_returned": 0}, "min_returned"), ({"tol_m": -1.0}, "tol_m"), ({"max_incidence_rad": 0.0}, "max_incidence_rad")]:
         with pytest.raises(InputError, match=f"recovery.missing.{key}"):
             MissingWallsConfig(**kw)
+
+
+def test_a_depth_image_of_another_size_is_a_one_line_error(scene) -> None:
+    with pytest.raises(InputError, match="missing walls: depth image expected 480x640"):
+        count(scene, np.zeros((240, 320), np.float32), BESIDE_WALL)

@@ -219,11 +219,15 @@ def cmd_warmup(args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from sim.experiments.kinds import load_experiment
+    from sim.experiments.kinds import RunCrashed, load_experiment
 
     exp, scn = load_experiment(args.scenario, args.set or [])
     out = Path(args.out) if args.out else Path("runs") / scn.name
-    report = exp.run(scn, out, seed=args.seed, rrd=args.rrd, spawn=args.spawn)
+    try:
+        report = exp.run(scn, out, seed=args.seed, rrd=args.rrd, spawn=args.spawn)
+    except RunCrashed as exc:
+        print(f"depthnav: {scn.name}: {exc}", file=sys.stderr)
+        return 1
     m = report["metrics"]
     summary = ", ".join(f"{k}={v}" for k, v in m.items())
     print(f"{scn.name}: {summary}")

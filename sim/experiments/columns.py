@@ -45,6 +45,19 @@ class Column:
         self._chunk[self._n] = row
         self._n += 1
 
+    def truncate(self, n: int) -> None:
+        """Keep the first ``n`` rows (a no-op when there are no more than ``n``)."""
+        n = max(0, int(n))
+        if n >= len(self):
+            return
+        if n >= self._spilled:
+            self._n = n - self._spilled
+            return
+        # Rows on disk past n: the in-memory chunk goes and the file is cut at row n.
+        row_bytes = self._chunk[:1].nbytes
+        self._file.truncate(n * row_bytes)
+        self._spilled, self._n = n, 0
+
     def _spill(self) -> None:
         if self._file is None:
             self._file = tempfile.TemporaryFile(prefix="depthnav-column-")

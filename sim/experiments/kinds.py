@@ -32,6 +32,20 @@ KINDS: dict[str, str] = {
 }
 
 
+class RunCrashed(RuntimeError):
+    """An experiment's loop stopped on an error (``what``: where and which); the report
+    of what it finished was written first (``report_path``), the traceback beside it in
+    ``crash.txt``."""
+
+    def __init__(self, what: str, report_path: str) -> None:
+        super().__init__(what, report_path)
+        self.what, self.report_path = what, report_path
+
+    def __str__(self) -> str:
+        traceback_path = Path(self.report_path).with_name("crash.txt")
+        return f"{self.what}; what it finished is in {self.report_path}, the traceback in {traceback_path}"
+
+
 @dataclass(frozen=True)
 class Experiment:
     """What a scenario kind provides (see the module docstring)."""

@@ -41,11 +41,16 @@ def trial(cfg: Scenario, spec: dict) -> dict:
     """One run, headless and quiet; its metrics (plus the seed) as the result."""
     import dataclasses
 
+    from sim.experiments.kinds import RunCrashed
     from sim.experiments.runner import run_scenario
 
     quiet = dataclasses.replace(cfg, report=dataclasses.replace(cfg.report, figures=False, progress=False))
     with tempfile.TemporaryDirectory(prefix="depthnav-trial-") as d:
-        report = run_scenario(quiet, d, seed=int(spec["seed"]), progress=False)
+        try:
+            report = run_scenario(quiet, d, seed=int(spec["seed"]), progress=False)
+        except RunCrashed as exc:
+            # The trial's directory goes with it: the sweep gets where and which error.
+            raise RuntimeError(f"seed {spec['seed']}: {exc.what}") from None
     if report["interrupted"]:
         raise KeyboardInterrupt
     return {"seed": report["seed"], "metrics": report["metrics"], "timing_ms": report["timing_ms"], "events": report["events"]}

@@ -6,7 +6,8 @@ One control tick is one Kinect frame (1/30 s). The robot stack decides on the la
 and the stack perceives and localizes on the new frame. Every stage is timed. A run
 writes ``report.json`` (the contract in the README), a trajectory figure, the true and
 estimated trajectories in TUM format and, on request, a rerun recording. Ctrl-C stops a
-run early and still writes what it measured.
+run early and still writes what it measured; so does an error inside the loop, which
+then also writes its traceback to ``crash.txt`` and raises :class:`RunCrashed`.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import math
 import os
 import sys
 import time
+import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -34,6 +36,7 @@ from sim.experiments.blackbox import (
     starts_incident,
 )
 from sim.experiments.columns import Column
+from sim.experiments.kinds import RunCrashed
 from sim.experiments.memory import release_free_memory, resident_mb
 from sim.experiments.waypoints import Mission, close_leg, leg_timeout, plan_mission
 from sim.scenario import Scenario
@@ -171,6 +174,9 @@ class Run:
     health_frames: dict[str, int] = field(default_factory=dict)
     """Frames spent in each of the stack's health states."""
     faults: FaultInjector | None = None
+    crash: dict | None = None
+    """Where and how the loop stopped on an error (None when it did not)."""
+    crash_traceback: str = ""
     """The fault injector when the scenario has faults."""
     rejected: list[tuple[float, str]] = field(default_factory=list)
     """(time, why) of each frame the stack did not use (dropped, invalid, stale)."""
@@ -250,14 +256,66 @@ def run_scenario(
     wall_start = time.perf_counter()
     interrupted = drive(run, recorder, progress)
     wall = time.perf_counter() - wall_start
+    try:
+        if run.crash is None:
+            report = finish_report(run, out, recorder, rrd, wall, interrupted)
+        else:
+            report = crash_report(run, out, recorder, rrd, wall)
+    finally:
+        run.camera.close()
+    (out / "report.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    if run.crash is not None:
+        c = run.crash
+        raise RunCrashed(
+            f"the run stopped on an error at t = {c['t']:.2f} s (frame {c['frame']}, {c['distance_m']:.0f} m): {c['type']}: {c['message']}",
+            str(out / "report.json"),
+        )
+    return report
+
+
+def finish_report(run: Run, out: Path, recorder, rrd: str | Path | None, wall: float, interrupted: bool) -> dict:
+    """Metrics, figures, trajectories and the recording's close: the report dict."""
     metrics = run_metrics(run, wall)
     if recorder is not None:
         metrics.update(close_recording(recorder, run, wall))
     files = write_outputs(run, out, metrics, rrd if recorder is not None else None)
-    report = build_report(run, metrics, files, interrupted)
-    run.camera.close()
-    (out / "report.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    return build_report(run, metrics, files, interrupted)
+
+
+def crash_report(run: Run, out: Path, recorder, rrd: str | Path | None, wall: float) -> dict:
+    """The report of a run the loop stopped on an error, with the traceback in ``crash.txt``.
+    The frame that failed is dropped, so every record ends on the last whole frame; if
+    the full report cannot be made from what is left, a short one with the loop's counts
+    is written instead of nothing."""
+    assert run.crash is not None
+    (out / run.crash["traceback_file"]).write_text(run.crash_traceback, encoding="utf-8")
+    try:
+        report = finish_report(run, out, recorder, rrd, wall, True)
+    except Exception as exc:  # the state the error left may not be reportable; the counts are
+        run.crash["report_error"] = f"{type(exc).__name__}: {exc}"
+        report = {
+            "version": REPORT_VERSION, "scenario": run.scn.name, "seed": run.seed, "interrupted": True,
+            "metrics": {"frames": run.frames, "distance_m": round(run.distance_m, 4), "collisions": run.collisions,
+                        "waypoints_reached": run.mission.reached, "wall_time_s": round(wall, 3)},
+            "files": {},
+        }
+    report["error"] = run.crash
     return report
+
+
+def note_crash(run: Run, exc: Exception) -> None:
+    """Keep where and how the loop stopped, and end every per-frame record on the last
+    whole frame (the failed one may have written some of its rows)."""
+    run.crash = {
+        "type": type(exc).__name__, "message": str(exc).strip().splitlines()[0] if str(exc).strip() else "",
+        "t": round(float(run.world.data.time), 4), "frame": run.frames, "distance_m": round(run.distance_m, 3),
+        "traceback_file": "crash.txt",
+    }
+    run.crash_traceback = "".join(traceback.format_exception(exc))
+    for col in (run.times, run.truth, run.estimates):
+        col.truncate(run.frames + 1)
+    for col in (run.loc_errors, run.heading_errors, run.fspf_counts, *run.timing.values()):
+        col.truncate(run.frames)
 
 
 # --------------------------------------------------------------------------- the loop
@@ -282,17 +340,17 @@ def drive(run: Run, recorder, progress: bool | None) -> bool:
         from tqdm import tqdm
 
         bar = tqdm(total=max_frames, unit="frame", desc=scn.name, leave=False)
-    first = run.sim.first()
-    if progress is not False and scn.report.progress:
-        # The depth backend decides the speed of a run by 20x: say which one this is.
-        print(f"{scn.name}: depth camera {depth_backend_line(run.camera.backend_name, run.camera.cfg.render_process)}", file=sys.stderr)
-    run.truth.append(first.pose)
-    run.times.append(0.0)
-    # The first frame, so the navigator sees before it moves.
-    run.stack.perceive(first.depth)
-    mission.timeout_s = leg_timeout(scn.mission, run.stack.set_goal(mission.goal, 0.0, mission.start_pose), scn.navigator.cruise_speed_mps)
-    mission.started_at = 0.0
     try:
+        first = run.sim.first()
+        if progress is not False and scn.report.progress:
+            # The depth backend decides the speed of a run by 20x: say which one this is.
+            print(f"{scn.name}: depth camera {depth_backend_line(run.camera.backend_name, run.camera.cfg.render_process)}", file=sys.stderr)
+        run.truth.append(first.pose)
+        run.times.append(0.0)
+        # The first frame, so the navigator sees before it moves.
+        run.stack.perceive(first.depth)
+        mission.timeout_s = leg_timeout(scn.mission, run.stack.set_goal(mission.goal, 0.0, mission.start_pose), scn.navigator.cruise_speed_mps)
+        mission.started_at = 0.0
         while run.frames < max_frames and not mission.done:
             if not tick(run, recorder):
                 break
@@ -301,6 +359,9 @@ def drive(run: Run, recorder, progress: bool | None) -> bool:
                 if run.frames % 30 == 0:
                     bar.set_postfix(dist=f"{run.distance_m:.0f}m", wp=f"{mission.reached}/{len(mission.waypoints)}", coll=run.collisions, resets=run.resets)
     except KeyboardInterrupt:
+        return True
+    except Exception as exc:  # a bug in the loop: report what finished (run_scenario raises after)
+        note_crash(run, exc)
         return True
     finally:
         if bar is not None:
@@ -823,6 +884,7 @@ def build_report(run: Run, metrics: dict, files: dict[str, str], interrupted: bo
         "scenario": scn.name,
         "seed": run.seed,
         "interrupted": interrupted,
+        "error": run.crash,
         "metrics": metrics,
         "paper": PAPER_FIGURES.get(scn.name, {}),
         "timing_ms": {k: round(float(np.median(v) * 1000.0) if v else 0.0, 4) for k, v in run.timing.items()},

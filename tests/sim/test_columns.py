@@ -38,6 +38,22 @@ def test_row_column_matches_a_list_of_rows(rows, chunk):
         np.testing.assert_array_equal(c[-1], expected[-1])
 
 
+@given(st.lists(st.tuples(finite, finite), max_size=60), st.integers(1, 6), st.integers(0, 70), st.lists(st.tuples(finite, finite), max_size=10))
+def test_truncate_keeps_the_first_rows_and_appends_after_them(rows, chunk, n, more):
+    c = Column(2, chunk=chunk)
+    for r in rows:
+        c.append(np.array(r))
+    c.truncate(n)
+    for r in more:
+        c.append(np.array(r))
+    expected = np.array(rows[:n] + more, dtype=np.float64).reshape(-1, 2)
+    assert len(c) == len(expected)
+    np.testing.assert_array_equal(np.asarray(c), expected)
+    if len(expected):
+        np.testing.assert_array_equal(c[-1], expected[-1])
+        np.testing.assert_array_equal(c[0], expected[0])
+
+
 def test_indexing_past_the_end_is_an_index_error():
     c = Column(chunk=2)
     for v in range(5):

@@ -77,6 +77,72 @@ def test_interrupted_run_still_writes_its_report(tmp_path: Path, monkeypatch: py
     assert json.loads((tmp_path / "report.json").read_text())["interrupted"] is True
 
 
+def _fail_at_call(monkeypatch: pytest.MonkeyPatch, n: int) -> None:
+    """Make the runner's localization check raise on its ``n``-th call: mid-frame, after
+    the frame's FSPF counts are recorded and before its poses are."""
+    import sim.experiments.runner as runner
+
+    calls = {"n": 0}
+    real = runner.check_localization
+
+    def failing(*args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == n:
+            raise ZeroDivisionError("a bug in the loop\nsecond line")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(runner, "check_localization", failing)
+
+
+def test_a_run_that_stops_on_an_error_keeps_its_report(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from sim.experiments.kinds import RunCrashed
+
+    _fail_at_call(monkeypatch, 40)
+    with pytest.raises(RunCrashed) as info:
+        run_scenario(_short_demo(["report.figures=true"]), tmp_path, seed=1, progress=False)
+    msg = str(info.value)
+    assert "\n" not in msg and "ZeroDivisionError: a bug in the loop" in msg and "crash.txt" in msg
+    assert info.value.report_path == str(tmp_path / "report.json")
+    rep = json.loads((tmp_path / "report.json").read_text())
+    assert rep["interrupted"] is True
+    err = rep["error"]
+    assert err["type"] == "ZeroDivisionError" and err["message"] == "a bug in the loop" and err["frame"] == 39
+    assert 1.2 < err["t"] < 1.4 and err["distance_m"] == pytest.approx(rep["metrics"]["distance_m"], abs=1e-3)
+    trace = (tmp_path / "crash.txt").read_text()
+    assert trace.startswith("Traceback") and "failing" in trace and "second line" in trace
+    # The failed frame's rows are dropped: every record ends on the last whole frame.
+    m = rep["metrics"]
+    assert m["frames"] == 39 and "loc_error_max_m" in m
+    assert len(np.loadtxt(tmp_path / "trajectory_estimate.tum")) == 40
+    assert len(np.loadtxt(tmp_path / "trajectory_truth.tum")) == 40
+    assert (tmp_path / "trajectory.png").exists()
+
+
+def test_a_sweep_trial_that_stops_on_an_error_names_its_seed(monkeypatch: pytest.MonkeyPatch) -> None:
+    from sim.experiments.mission import trial
+
+    _fail_at_call(monkeypatch, 5)
+    with pytest.raises(RuntimeError, match=r"^seed 11: the run stopped on an error at t = .*ZeroDivisionError: a bug in the loop$"):
+        trial(_short_demo(), {"id": "trial-0000", "seed": 11})
+
+
+def test_a_run_without_an_error_reports_none(tmp_path: Path) -> None:
+    rep = run_scenario(_short_demo(["mission.max_duration_s=1.0"]), tmp_path, seed=1, progress=False)
+    assert rep["error"] is None and not (tmp_path / "crash.txt").exists()
+
+
+def test_the_cli_says_in_one_line_where_a_failed_run_left_its_report(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    _fail_at_call(monkeypatch, 10)
+    out = tmp_path / "out"
+    code = main(["run", "scenarios/demo.toml", "--out", str(out), "--set", "map.name=\"small_floor\"", "--set", "report.progress=false"])
+    assert code == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("depthnav: demo: the run stopped on an error at t = ")
+    assert str(out / "report.json") in err[0] and json.loads((out / "report.json").read_text())["error"]["frame"] == 9
+
+
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_background_run_stops_on_a_signal_and_keeps_its_report(tmp_path: Path, sig: int) -> None:
     """A run started in the background by a shell without job control inherits SIGINT

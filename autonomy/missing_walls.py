@@ -42,9 +42,12 @@ import numpy as np
 
 from autonomy.camera import CameraIntrinsics
 from autonomy.errors import InputError, require_int, require_non_negative, require_positive
-from autonomy.raycast import _ray_hit_kernel
+from autonomy.raycast import _bearing_index, _ray_hit_indexed
 
 __all__ = ["MissingWallsConfig", "missing_walls"]
+
+#: Bins of direction around the camera for the ray casts (about half a degree each).
+BEARING_BINS = 512
 
 
 @dataclass(frozen=True)
@@ -88,6 +91,8 @@ def _missing_kernel(depth, lines, px, py, pth, rot, trans, fx, fy, cx, cy, su, s
     ox = px + c * trans[0] - s * trans[1]
     oy = py + s * trans[0] + c * trans[1]
     cam_h = trans[2]
+    # Each ray is tested only against the lines in its direction.
+    offsets, ids = _bearing_index(lines, ox, oy, BEARING_BINS)
     n_exp = 0
     n_ret = 0
     n_past = 0
@@ -101,9 +106,11 @@ def _missing_kernel(depth, lines, px, py, pth, rot, trans, fx, fy, cx, cy, su, s
             hn = math.sqrt(rx * rx + ry * ry)
             if hn <= 0.0:
                 continue
+            if rz < 0.0 and -cam_h / rz < zlo:
+                continue  # the floor comes before any wall that could count: no ray to cast
             dx = (c * rx - s * ry) / hn
             dy = (s * rx + c * ry) / hn
-            bj, t = _ray_hit_kernel(lines, ox, oy, dx, dy)
+            bj, t = _ray_hit_indexed(lines, offsets, ids, ox, oy, dx, dy)
             if bj < 0:
                 continue
             z = t / hn  # planar depth of the wall along this pixel's ray

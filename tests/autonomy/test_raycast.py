@@ -382,6 +382,42 @@ def test_ray_hit_against_brute_force():
         rays_hit(lines, 0, 0, np.zeros(3))
 
 
+def _indexed_matches_brute_force(lines: np.ndarray, ox: float, oy: float, dirs: np.ndarray, nb: int) -> None:
+    offsets, ids = rc._bearing_index(lines, ox, oy, nb)
+    assert offsets[0] == 0 and np.all(np.diff(offsets) >= 0) and offsets[-1] == len(ids)
+    for b in range(nb):
+        assert np.all(np.diff(ids[offsets[b] : offsets[b + 1]]) > 0)  # ascending: ties go to the lower id
+    for dx, dy in dirs:
+        assert rc._ray_hit_indexed(lines, offsets, ids, ox, oy, dx, dy) == rc._ray_hit_kernel(lines, ox, oy, dx, dy)
+
+
+@pytest.mark.parametrize("nb", [1, 7, 512])
+def test_bearing_index_gives_the_brute_force_hit(nb):
+    rng = np.random.default_rng(nb)
+    ox, oy = 0.3, -0.2
+    lines = rng.uniform(-6, 6, (50, 4))
+    # Lines through the origin, ending at it, and very short and far ones.
+    lines[0] = [ox - 1.0, oy - 2.0, ox + 1.0, oy + 2.0]
+    lines[1] = [ox, oy, ox + 3.0, oy - 1.0]
+    lines[2] = [ox + 2.0, oy + 2.0, ox + 2.0 + 1e-9, oy + 2.0]
+    lines[3] = [ox + 1.0, oy, ox + 5.0, oy]  # on the line through the origin, away from it
+    ang = rng.uniform(-math.pi, math.pi, 2000)
+    dirs = np.column_stack([np.cos(ang), np.sin(ang)]) * rng.uniform(0.1, 3.0, (2000, 1))
+    # Rays straight at every endpoint and along the axes, where pseudo-angles change form.
+    ends = np.concatenate([lines[:, :2], lines[:, 2:]]) - (ox, oy)
+    axes = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0], [1.0, 1.0], [-1.0, -1.0]])
+    _indexed_matches_brute_force(lines, ox, oy, np.concatenate([dirs, ends[np.any(ends != 0, axis=1)], axes]), nb)
+
+
+def test_bearing_index_on_a_building_matches_brute_force(corridor_loop):
+    rng = np.random.default_rng(3)
+    ang = np.linspace(-math.pi, math.pi, 1441)
+    dirs = np.column_stack([np.cos(ang), np.sin(ang)])
+    for x, y in free_points(corridor_loop, 6, 7):
+        lines = np.ascontiguousarray(scene_lines(corridor_loop.segments, x, y)[0])
+        _indexed_matches_brute_force(lines, x, y, dirs[rng.permutation(len(dirs))[:400]], 512)
+
+
 def test_ray_hit_on_scene_lines_matches_map():
     vm = generate_building(BuildingConfig(), 1).vectormap
     dirs = np.stack([np.cos(np.linspace(0, 6.28, 720)), np.sin(np.linspace(0, 6.28, 720))], 1)

@@ -686,19 +686,20 @@ class Navigator:
         ahead = (o[:, 0] > 0.0) & (np.abs(o[:, 1]) < self.avoid.radius_m)
         return bool(np.any(ahead & (rng < self.camera.min_range_m + 0.1)))
 
-    def map_points(self, pose: np.ndarray, radius_m: float) -> np.ndarray:
+    def map_points(self, pose: np.ndarray, radius_m: float, with_seen: bool = True) -> np.ndarray:
         """The map's walls within ``radius_m`` of the pose as points every
         ``WALL_STEP_M``, in the robot frame: what is known to be there even where the
         camera cannot look. The walls are sampled once; the points near the robot are
         cached and re-selected only after it has moved ``_LOCAL_MARGIN_M``. The points
         this frame's :meth:`command` was given as ``seen`` within the radius join them:
         a pose on a wrong relocalization mode puts the map's walls where none are, and the
-        robot's own sight of the walls around it is then the only knowledge it has."""
+        robot's own sight of the walls around it is then the only knowledge it has
+        (``with_seen`` False: the map's alone)."""
         rel = self._near_walls(pose, radius_m)
         c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
         pts = np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]])
         seen = self._seen
-        if len(seen):
+        if with_seen and len(seen):
             pts = np.vstack([pts, seen[seen[:, 0] * seen[:, 0] + seen[:, 1] * seen[:, 1] < radius_m * radius_m]])
         return pts
 
@@ -1168,16 +1169,25 @@ class Navigator:
         lines = np.zeros((0, 4)) if near_lines is None else np.asarray(near_lines, dtype=np.float64).reshape(-1, 4)
         if not len(lines):
             return np.zeros((0, 2))
+        return line_points(lines[~self.walls_explain(pose, lines)], self.avoid.near_field.point_step_m)
+
+    def walls_explain(self, pose: np.ndarray, lines: np.ndarray, with_seen: bool = True) -> np.ndarray:
+        """Per near-field sight line (robot frame, (K, 4)): whether a wall passes within
+        ``near_wall_tol_m`` of it at the pose (the map's, and with ``with_seen`` those
+        given to this frame's :meth:`command` as seen: :meth:`map_points`)."""
+        lines = np.asarray(lines, dtype=np.float64).reshape(-1, 4)
+        if not len(lines):
+            return np.zeros(0, dtype=bool)
         reach = float(np.max(np.hypot(lines[:, 2], lines[:, 3]))) + self.cfg.near_wall_tol_m
-        w = self.map_points(pose, reach)
-        if len(w):
-            a, d = lines[None, :, :2], lines[None, :, 2:] - lines[None, :, :2]
-            rel = w[:, None, :] - a
-            dd = np.maximum(np.einsum("mkj,mkj->mk", d, d), 1e-12)
-            s = np.clip(np.einsum("mkj,mkj->mk", rel, d) / dd, 0.0, 1.0)
-            gap = np.hypot(rel[..., 0] - s * d[..., 0], rel[..., 1] - s * d[..., 1])
-            lines = lines[~(gap < self.cfg.near_wall_tol_m).any(axis=0)]
-        return line_points(lines, self.avoid.near_field.point_step_m)
+        w = self.map_points(pose, reach, with_seen)
+        if not len(w):
+            return np.zeros(len(lines), dtype=bool)
+        a, d = lines[None, :, :2], lines[None, :, 2:] - lines[None, :, :2]
+        rel = w[:, None, :] - a
+        dd = np.maximum(np.einsum("mkj,mkj->mk", d, d), 1e-12)
+        s = np.clip(np.einsum("mkj,mkj->mk", rel, d) / dd, 0.0, 1.0)
+        gap = np.hypot(rel[..., 0] - s * d[..., 0], rel[..., 1] - s * d[..., 1])
+        return (gap < self.cfg.near_wall_tol_m).any(axis=0)
 
     def command(
         self, pose: np.ndarray, obstacles: np.ndarray, t: float, near_lines: np.ndarray | None = None, seen: np.ndarray | None = None

@@ -177,14 +177,19 @@ class NearField:
 def line_points(lines: np.ndarray, step_m: float) -> np.ndarray:
     """(k, 2) points along each segment (x0, y0, x1, y1), both ends included, at most
     ``step_m`` apart."""
+    return line_points_indexed(lines, step_m)[0]
+
+
+def line_points_indexed(lines: np.ndarray, step_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`line_points` and, per point, the index of its segment."""
     lines = np.asarray(lines, dtype=np.float64).reshape(-1, 4)
     if not len(lines):
-        return np.zeros((0, 2))
+        return np.zeros((0, 2)), np.zeros(0, np.int64)
     a, d = lines[:, :2], lines[:, 2:] - lines[:, :2]
     n = np.maximum(1, np.ceil(np.hypot(d[:, 0], d[:, 1]) / step_m).astype(np.int64)) + 1
     seg = np.repeat(np.arange(len(lines)), n)
     frac = (np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)) / np.repeat(n - 1, n)
-    return a[seg] + frac[:, None] * d[seg]
+    return a[seg] + frac[:, None] * d[seg], seg
 
 
 def _wide_runs(mask: np.ndarray, n: int) -> np.ndarray:

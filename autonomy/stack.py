@@ -48,7 +48,7 @@ from autonomy.health import HealthConfig, HealthMonitor, HealthSample, explain_p
 from autonomy.missing_walls import MissingWallsConfig, missing_walls
 from autonomy.mount_check import MountCheck, MountCheckConfig
 from autonomy.navigator import NavCommand, Navigator, NavigatorConfig
-from autonomy.nearfield import NearField, line_points
+from autonomy.nearfield import NearField, line_points_indexed
 from autonomy.observation import ObservationConfig, correspond
 from autonomy.raycast import SceneQuery, VisibilityGridConfig, load_or_build
 from autonomy.relocalization import GlobalLocalizer, Mode, RelocalizationConfig, Scan
@@ -311,7 +311,7 @@ class RobotStack:
         self._explored: set[int] = set()
         self._probe: tuple[np.ndarray, float, float] | None = None
         self._walls: tuple[float, int, int] | None = None
-        self._near_seen = np.zeros((0, 3))
+        self._near_seen = np.zeros((0, 7))
         self._goal: int | None = None
         self._last_depth_key: np.ndarray | None = None
         self._maybe_stale = False
@@ -595,7 +595,7 @@ class RobotStack:
         self._explored: set[int] = set()
         self._probe = None
         self._walls = None
-        self._near_seen = np.zeros((0, 3))
+        self._near_seen = np.zeros((0, 7))
         self._confirmed = 0
         self._candidate: np.ndarray | None = None
         if self.health is not None:
@@ -679,29 +679,45 @@ class RobotStack:
                 self._search_whole_map = True
 
     def _keep_near(self, near_lines: np.ndarray | None, t: float) -> None:
-        """Keep this frame's near-field points (dead-reckoning frame, with their time) for
-        ``SEEN_KEEP_S``. Looking round in place, the robot sees nothing closer than
-        0.8 m; a pillar beside it hides the floor only while the camera faces it, and
-        the drive that sets out afterwards would turn into it."""
+        """Keep this frame's near-field points (dead-reckoning frame, each with the ends of
+        its sight line and its time) for ``SEEN_KEEP_S``. Looking round in place, the
+        robot sees nothing closer than 0.8 m; a pillar beside it hides the floor only
+        while the camera faces it, and the drive that sets out afterwards would turn into
+        it."""
         kept = self._near_seen
-        kept = kept[kept[:, 2] >= t - SEEN_KEEP_S]
+        kept = kept[kept[:, 6] >= t - SEEN_KEEP_S]
         lines = np.zeros((0, 4)) if near_lines is None else np.asarray(near_lines, dtype=np.float64).reshape(-1, 4)
         if len(lines):
-            w = points_from_frame(self.odom, line_points(lines, self.cfg.avoidance.near_field.point_step_m))
-            w = np.column_stack([w, np.full(len(w), t)])
+            pts, line = line_points_indexed(lines, self.cfg.avoidance.near_field.point_step_m)
+            ends = points_from_frame(self.odom, lines.reshape(-1, 2)).reshape(-1, 4)
+            w = np.column_stack([points_from_frame(self.odom, pts), ends[line], np.full(len(pts), t)])
             kept = np.vstack([w, kept])  # newest first: np.unique keeps the first of a cell
             key = np.floor(kept[:, :2] / self.scan.cell_m).astype(np.int64)
             _, first = np.unique(key[:, 0] * 1_000_003 + key[:, 1], return_index=True)
             kept = kept[np.sort(first)]
         self._near_seen = kept
 
-    def _seen_now(self, t: float) -> np.ndarray:
+    def _seen_now(self, t: float, pose: np.ndarray | None = None) -> np.ndarray:
         """What the robot has seen in the last ``SEEN_KEEP_S`` while relocalizing,
-        relative to it now: the scan's points, and the near field's."""
+        relative to it now: the scan's points, and the near field's. With the ``pose`` of
+        the mode a drive is planned on, the near field's points whose sight line a wall
+        of that mode's map explains are left out, as the navigator leaves out this
+        frame's (:meth:`autonomy.navigator.Navigator.near_points`): the map's wall counts
+        there already, where it stands, whereas the sight line's points lie anywhere
+        from the robot's edge to the camera's minimum range, and kept from a look round
+        beside a wall they ring the robot (a robot put down in an office by its door
+        could not turn to the door)."""
         pts = self.scan.recent_in_robot_frame(self.odom, t - SEEN_KEEP_S)
-        if len(self._near_seen):
-            pts = np.vstack([pts, points_in_frame(self.odom, self._near_seen[:, :2])])
-        return pts
+        kept = self._near_seen
+        if not len(kept):
+            return pts
+        near = points_in_frame(self.odom, kept[:, :2])
+        if pose is not None and self.navigator is not None:
+            ends = points_in_frame(self.odom, kept[:, 2:6].reshape(-1, 2)).reshape(-1, 4)
+            lines, inverse = np.unique(ends, axis=0, return_inverse=True)
+            explained = self.navigator.walls_explain(pose, lines, with_seen=False)
+            near = near[~explained[inverse.reshape(-1)]]
+        return np.vstack([pts, near])
 
     def _accept(self, mode: Mode, t: float, reason: str, n_modes: int) -> None:
         """Restart CGR on the accepted mode; the navigator re-plans to its goal from there."""
@@ -790,7 +806,7 @@ class RobotStack:
         # The scan's walls count with the map's where the camera cannot look: the map is
         # placed through a mode that may be wrong (a door beside the robot that the
         # mode's map has elsewhere).
-        cmd = nav.command(best, obstacles, t, near, seen=self._seen_now(t))
+        cmd = nav.command(best, obstacles, t, near, seen=self._seen_now(t, best))
         gone = math.hypot(*(self.odom[:2] - self._exploring_from[:2]))
         if cmd.state == "arrived" or gone >= rec.explore_m or t - self._explore_t0 > rec.explore_timeout_s:
             # Look round again from here (the scan keeps what it saw on the way).

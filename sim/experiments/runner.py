@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from autonomy.errors import InputError
 from autonomy.geometry import wrap_angle
 from autonomy.navigator import NavCommand, in_camera_view
 from autonomy.planner import path_points
@@ -174,10 +175,11 @@ class Run:
     health_frames: dict[str, int] = field(default_factory=dict)
     """Frames spent in each of the stack's health states."""
     faults: FaultInjector | None = None
+    """The fault injector when the scenario has faults."""
     crash: dict | None = None
     """Where and how the loop stopped on an error (None when it did not)."""
-    crash_traceback: str = ""
-    """The fault injector when the scenario has faults."""
+    crash_exc: Exception | None = None
+    """That error."""
     rejected: list[tuple[float, str]] = field(default_factory=list)
     """(time, why) of each frame the stack did not use (dropped, invalid, stale)."""
 
@@ -266,10 +268,12 @@ def run_scenario(
     (out / "report.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
     if run.crash is not None:
         c = run.crash
-        raise RunCrashed(
-            f"the run stopped on an error at t = {c['t']:.2f} s (frame {c['frame']}, {c['distance_m']:.0f} m): {c['type']}: {c['message']}",
-            str(out / "report.json"),
-        )
+        where = f"the run stopped at t = {c['t']:.2f} s (frame {c['frame']}, {c['distance_m']:.0f} m)"
+        if isinstance(run.crash_exc, InputError):
+            # A user's mistake found only on the way (a waypoint the user's map has no
+            # path to): the one-line error, with where the finished part was kept.
+            raise InputError(f"{c['message']} ({where}; what it finished is in {out / 'report.json'})") from None
+        raise RunCrashed(f"{where} on an error: {c['type']}: {c['message']}", str(out / "report.json"))
     return report
 
 
@@ -287,8 +291,8 @@ def crash_report(run: Run, out: Path, recorder, rrd: str | Path | None, wall: fl
     The frame that failed is dropped, so every record ends on the last whole frame; if
     the full report cannot be made from what is left, a short one with the loop's counts
     is written instead of nothing."""
-    assert run.crash is not None
-    (out / run.crash["traceback_file"]).write_text(run.crash_traceback, encoding="utf-8")
+    assert run.crash is not None and run.crash_exc is not None
+    (out / run.crash["traceback_file"]).write_text("".join(traceback.format_exception(run.crash_exc)), encoding="utf-8")
     try:
         report = finish_report(run, out, recorder, rrd, wall, True)
     except Exception as exc:  # the state the error left may not be reportable; the counts are
@@ -311,7 +315,7 @@ def note_crash(run: Run, exc: Exception) -> None:
         "t": round(float(run.world.data.time), 4), "frame": run.frames, "distance_m": round(run.distance_m, 3),
         "traceback_file": "crash.txt",
     }
-    run.crash_traceback = "".join(traceback.format_exception(exc))
+    run.crash_exc = exc
     for col in (run.times, run.truth, run.estimates):
         col.truncate(run.frames + 1)
     for col in (run.loc_errors, run.heading_errors, run.fspf_counts, *run.timing.values()):

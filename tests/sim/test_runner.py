@@ -77,9 +77,10 @@ def test_interrupted_run_still_writes_its_report(tmp_path: Path, monkeypatch: py
     assert json.loads((tmp_path / "report.json").read_text())["interrupted"] is True
 
 
-def _fail_at_call(monkeypatch: pytest.MonkeyPatch, n: int) -> None:
-    """Make the runner's localization check raise on its ``n``-th call: mid-frame, after
-    the frame's FSPF counts are recorded and before its poses are."""
+def _fail_at_call(monkeypatch: pytest.MonkeyPatch, n: int, exc: Exception | None = None) -> None:
+    """Make the runner's localization check raise ``exc`` (a bug's ZeroDivisionError) on
+    its ``n``-th call: mid-frame, after the frame's FSPF counts are recorded and before
+    its poses are."""
     import sim.experiments.runner as runner
 
     calls = {"n": 0}
@@ -88,7 +89,7 @@ def _fail_at_call(monkeypatch: pytest.MonkeyPatch, n: int) -> None:
     def failing(*args, **kwargs):
         calls["n"] += 1
         if calls["n"] == n:
-            raise ZeroDivisionError("a bug in the loop\nsecond line")
+            raise exc if exc is not None else ZeroDivisionError("a bug in the loop\nsecond line")
         return real(*args, **kwargs)
 
     monkeypatch.setattr(runner, "check_localization", failing)
@@ -122,8 +123,26 @@ def test_a_sweep_trial_that_stops_on_an_error_names_its_seed(monkeypatch: pytest
     from sim.experiments.mission import trial
 
     _fail_at_call(monkeypatch, 5)
-    with pytest.raises(RuntimeError, match=r"^seed 11: the run stopped on an error at t = .*ZeroDivisionError: a bug in the loop$"):
+    with pytest.raises(RuntimeError, match=r"^seed 11: the run stopped at t = .* on an error: ZeroDivisionError: a bug in the loop$"):
         trial(_short_demo(), {"id": "trial-0000", "seed": 11})
+
+
+def test_a_users_mistake_found_on_the_way_is_still_a_one_line_error(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """An InputError raised inside the loop (a waypoint the user's map has no path to)
+    keeps the report of what finished and stays the CLI's one-line user error (exit 2)."""
+    from autonomy.planner import NoPathError
+
+    _fail_at_call(monkeypatch, 10, NoPathError("navigation graph: no path from node 3 to node 9"))
+    out = tmp_path / "out"
+    code = main(["run", "scenarios/demo.toml", "--out", str(out), "--set", "map.name=\"small_floor\"", "--set", "report.progress=false"])
+    assert code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("depthnav: error: navigation graph: no path from node 3 to node 9 (the run stopped at t = ")
+    assert str(out / "report.json") in err[0]
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["error"]["type"] == "NoPathError" and rep["metrics"]["frames"] == 9
 
 
 def test_a_run_without_an_error_reports_none(tmp_path: Path) -> None:
@@ -139,7 +158,7 @@ def test_the_cli_says_in_one_line_where_a_failed_run_left_its_report(
     code = main(["run", "scenarios/demo.toml", "--out", str(out), "--set", "map.name=\"small_floor\"", "--set", "report.progress=false"])
     assert code == 1
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("depthnav: demo: the run stopped on an error at t = ")
+    assert len(err) == 1 and err[0].startswith("depthnav: demo: the run stopped at t = ")
     assert str(out / "report.json") in err[0] and json.loads((out / "report.json").read_text())["error"]["frame"] == 9
 
 

@@ -18,9 +18,13 @@ moved into the current robot frame by the odometry between the two frames, proje
 into the current image, and compared with the depths within ``window_px`` of its pixel
 (lateral noise and a little odometry error move it by a pixel or two): it **agrees** when
 one of them is within ``tol_m + tol_per_m2 z^2`` of its predicted depth z (the Kinect's
-axial noise and disparity steps grow with z squared). The current frame's points are
-compared with the stored image the same way. Points projected outside the image or the
-camera's range, or onto pixels with no return, are not compared.
+axial noise and disparity steps grow with z squared). It **disagrees** too when none of
+them returned anything although z lies well inside the camera's range (``empty_margin_m``
+from either end): the camera would have seen the point there. The current frame's points
+are compared with the stored image the same way. Points projected outside the image or
+the camera's range, or onto pixels with no return near either end of the range, are not
+compared. A frame with no valid pixel on the grid (a blackout, a blocked lens) compares
+nothing.
 
 The agreement fraction is NaN (no evidence) with fewer than ``min_points`` compared;
 :class:`autonomy.health.HealthMonitor` says lost when it falls below a threshold. Between
@@ -44,7 +48,7 @@ from autonomy.camera import CameraIntrinsics
 from autonomy.errors import InputError, require_int, require_non_negative, require_positive
 from autonomy.geometry import points_from_frame, relative_pose
 
-__all__ = ["ViewCheckConfig", "ViewCheck", "sample_points", "view_agreement", "move_points"]
+__all__ = ["ViewCheckConfig", "ViewCheck", "sample_points", "lowest_returns", "view_agreement", "move_points"]
 
 
 @dataclass(frozen=True)
@@ -80,6 +84,16 @@ class ViewCheckConfig:
     """... plus this times the depth squared (m per m^2)."""
     window_px: int = 2
     """The current depths within this many pixels of the predicted pixel are tried."""
+    count_empty: bool = True
+    """A point predicted onto pixels that all returned nothing disagrees, when its depth
+    there lies ``empty_margin_m`` inside the camera's range. A view of an open hall holds
+    nothing but floor within the camera's 4 m: compared only where both frames returned,
+    a robot carried from such a view to a corridor, or the other way, compared too few
+    points to be judged, and one put down beside a door drove on its old belief for 10 s
+    (a kidnapped run) ..."""
+    empty_margin_m: float = 0.3
+    """... so far inside the range: nearer the ends the Kinect's noise or a few
+    centimetres of motion take a point in or out of range."""
     min_points: int = 300
     """With fewer compared points (both ways) the frame carries no evidence (NaN): a
     robot turning towards a person a metre away compared 102 points, most of them on
@@ -92,7 +106,7 @@ class ViewCheckConfig:
         require_int(self, "recovery.view.", "min_points", minimum=1)
         require_int(self, "recovery.view.", "max_gap_frames", minimum=0)
         require_positive(self, "recovery.view.", "max_lag_s", "tol_m")
-        require_non_negative(self, "recovery.view.", "lag_s", "floor_m", "tol_per_m2")
+        require_non_negative(self, "recovery.view.", "lag_s", "floor_m", "tol_per_m2", "empty_margin_m")
         if self.lag_s > self.max_lag_s:
             raise InputError(f"recovery.view.lag_s: expected at most max_lag_s = {self.max_lag_s}, got {self.lag_s!r}")
 
@@ -128,10 +142,32 @@ def _sample_kernel(depth, stride, fx, fy, cx, cy, rot, trans, floor_m):  # pragm
     return out[:n].copy()
 
 
+def lowest_returns(depth: np.ndarray) -> np.ndarray:
+    """Per image column, the lowest row (largest index) with a valid depth; -1 for a
+    column that returned nothing."""
+    return _lowest_kernel(np.ascontiguousarray(depth, dtype=np.float32))
+
+
 @numba.njit(cache=True)
-def _agreement_kernel(pts, rot, trans, depth, fx, fy, cx, cy, zmin, zmax, tol_m, tol_q, win):  # pragma: no cover - numba
+def _lowest_kernel(depth):  # pragma: no cover - numba
+    """:func:`lowest_returns`, each column scanned upwards from the bottom row."""
+    h, w = depth.shape
+    out = np.full(w, -1, np.int32)
+    for u in range(w):
+        for v in range(h - 1, -1, -1):
+            d = depth[v, u]
+            if d > 0.0 and math.isfinite(d):
+                out[u] = v
+                break
+    return out
+
+
+@numba.njit(cache=True)
+def _agreement_kernel(pts, rot, trans, depth, lowest, fx, fy, cx, cy, zmin, zmax, tol_m, tol_q, win, empty_lo, empty_hi):  # pragma: no cover - numba
     """(compared, agreeing) of robot-frame ``pts`` against ``depth`` (module docstring);
-    ``rot``, ``trans``: robot_from_camera."""
+    ``rot``, ``trans``: robot_from_camera. A point at a depth in [``empty_lo``,
+    ``empty_hi``] whose window returned nothing, in a column with a return below the
+    window (``lowest``, :func:`lowest_returns`), is compared and disagrees."""
     h, w = depth.shape
     n_cmp = 0
     n_ok = 0
@@ -170,6 +206,8 @@ def _agreement_kernel(pts, rot, trans, depth, fx, fy, cx, cy, zmin, zmax, tol_m,
             if ok:
                 break
         if not seen:
+            if empty_lo <= z <= empty_hi and lowest[u] > v + win:
+                n_cmp += 1
             continue
         n_cmp += 1
         if ok:
@@ -187,17 +225,24 @@ def view_agreement(
     tol_m: float,
     tol_per_m2: float,
     window_px: int,
+    empty_margin_m: float | None = None,
+    lowest: np.ndarray | None = None,
 ) -> tuple[int, int]:
     """(compared, agreeing) points: robot-frame ``pts`` (n, 3) of an earlier frame, already
-    moved into the current robot frame, against the current ``depth`` image."""
+    moved into the current robot frame, against the current ``depth`` image. With
+    ``empty_margin_m``, a point that far inside the range whose pixels returned nothing,
+    in a column of ``depth`` that returned something lower down, disagrees; without, it is
+    not compared. ``lowest``: :func:`lowest_returns` of ``depth`` if already known."""
     p = np.ascontiguousarray(pts, dtype=np.float64).reshape(-1, 3)
     d = np.ascontiguousarray(depth, dtype=np.float32)
     if d.shape != (intr.height, intr.width):
         raise InputError(f"view check: depth image expected {intr.height}x{intr.width}, got shape {d.shape}")
     rc = np.ascontiguousarray(robot_from_camera, dtype=np.float64)
+    empty_lo, empty_hi = (math.inf, -math.inf) if empty_margin_m is None else (min_range_m + empty_margin_m, max_range_m - empty_margin_m)
+    low = lowest_returns(d) if lowest is None else np.ascontiguousarray(lowest, dtype=np.int32)
     n_cmp, n_ok = _agreement_kernel(
-        p, rc[:3, :3].copy(), rc[:3, 3].copy(), d, float(intr.fx), float(intr.fy), float(intr.cx), float(intr.cy),
-        float(min_range_m), float(max_range_m), float(tol_m), float(tol_per_m2), int(window_px),
+        p, rc[:3, :3].copy(), rc[:3, 3].copy(), d, low, float(intr.fx), float(intr.fy), float(intr.cx), float(intr.cy),
+        float(min_range_m), float(max_range_m), float(tol_m), float(tol_per_m2), int(window_px), float(empty_lo), float(empty_hi),
     )
     return int(n_cmp), int(n_ok)
 
@@ -231,28 +276,29 @@ class ViewCheck:
 
     def reset(self) -> None:
         """Forget the stored frames."""
-        self._frames: deque[tuple[float, np.ndarray, np.ndarray, np.ndarray]] = deque()
+        self._frames: deque[tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = deque()
+        """(time, odometry pose, sampled points, depth image, its lowest returns) each."""
         self._gap = 0
         """Frames given to :meth:`update` since the last one stored."""
 
-    def _agreement(self, pts: np.ndarray, then: np.ndarray, now: np.ndarray, depth: np.ndarray) -> tuple[int, int]:
+    def _agreement(self, pts: np.ndarray, then: np.ndarray, now: np.ndarray, depth: np.ndarray, lowest: np.ndarray) -> tuple[int, int]:
         """(compared, agreeing) of ``pts`` seen at odometry pose ``then`` against ``depth``
-        seen at ``now``."""
+        (lowest returns ``lowest``) seen at ``now``."""
         if not len(pts):
             return 0, 0
         cfg = self.cfg
         return view_agreement(
             move_points(pts, then, now), depth, self.intr, self.robot_from_camera, self.min_range_m, self.max_range_m,
-            cfg.tol_m, cfg.tol_per_m2, cfg.window_px,
+            cfg.tol_m, cfg.tol_per_m2, cfg.window_px, cfg.empty_margin_m if cfg.count_empty else None, lowest,
         )
 
-    def _keep(self, t: float, odom: np.ndarray, pts: np.ndarray, depth: np.ndarray) -> bool:
+    def _keep(self, t: float, odom: np.ndarray, pts: np.ndarray, depth: np.ndarray, lowest: np.ndarray) -> bool:
         """Store this frame as a reference, unless the camera saw nothing on the grid
         (blocked): such a frame is no reference at all. Whether it was stored."""
-        if not len(pts) and not bool(np.any(depth[:: self.cfg.stride_px, :: self.cfg.stride_px] > 0.0)):
+        if not len(pts) and not bool(np.any(lowest >= 0)):
             self._gap += 1
             return False
-        self._frames.append((float(t), np.asarray(odom, dtype=np.float64).copy(), pts, np.array(depth, dtype=np.float32)))
+        self._frames.append((float(t), np.asarray(odom, dtype=np.float64).copy(), pts, np.array(depth, dtype=np.float32), lowest))
         self._gap = 0
         return True
 
@@ -261,7 +307,7 @@ class ViewCheck:
         listening: the stack is relocalizing)."""
         pts = sample_points(depth, self.intr, self.robot_from_camera, self.cfg.stride_px, self.cfg.floor_m)
         self._frames.clear()
-        self._keep(t, odom, pts, depth)
+        self._keep(t, odom, pts, depth, lowest_returns(depth))
         self.last = math.nan
 
     def update(self, t: float, odom: np.ndarray, depth: np.ndarray) -> float:
@@ -269,10 +315,10 @@ class ViewCheck:
         the newest stored frame at least ``lag_s`` old, both ways: that frame's points in
         this image and this frame's points in that image (a robot carried from an open
         hall, where the last view held nothing but floor, into a room is caught the
-        second way). NaN: no stored frame, or fewer than ``min_points`` compared. The
-        frame is stored unless it was compared without evidence or has no valid depth on
-        the grid; after more than ``max_gap_frames`` frames not stored, the stored ones
-        are forgotten."""
+        second way). NaN: no stored frame, no valid pixel in this frame, or fewer than
+        ``min_points`` compared. The frame is stored unless it has no valid depth, or was
+        compared without evidence while showing ``min_points`` points or more; after
+        more than ``max_gap_frames`` frames not stored, the stored ones are forgotten."""
         cfg = self.cfg
         frames = self._frames
         if self._gap > cfg.max_gap_frames:
@@ -287,18 +333,21 @@ class ViewCheck:
                 ref = frames[0]
                 break
         pts = sample_points(depth, self.intr, self.robot_from_camera, cfg.stride_px, cfg.floor_m)
+        lowest = lowest_returns(depth)
         frac = math.nan
-        if ref is not None:
-            _, odom0, pts0, depth0 = ref
-            n1, ok1 = self._agreement(pts0, odom0, odom, depth)
-            n2, ok2 = self._agreement(pts, odom, odom0, depth0)
+        if ref is not None and bool(np.any(lowest >= 0)):
+            _, odom0, pts0, depth0, lowest0 = ref
+            n1, ok1 = self._agreement(pts0, odom0, odom, depth, lowest)
+            n2, ok2 = self._agreement(pts, odom, odom0, depth0, lowest0)
             if n1 + n2 >= cfg.min_points:
                 frac = (ok1 + ok2) / (n1 + n2)
-        # A frame that could not be checked against a stored one does not become the next
-        # one's reference while that one lasts: a landing whose first view shares too few
-        # points with the last one would otherwise pass on the next frame.
-        if ref is None or not math.isnan(frac):
-            self._keep(t, odom, pts, depth)
+        # A frame showing something that could not be checked against a stored one does
+        # not become the next one's reference while that one lasts: a landing whose first
+        # view shares too few points with the last one would otherwise pass on the next
+        # frame. A view of nothing but floor is kept: in an open hall each frame is, and
+        # the landing that comes after one is judged against it.
+        if ref is None or not math.isnan(frac) or len(pts) < cfg.min_points:
+            self._keep(t, odom, pts, depth, lowest)
         else:
             self._gap += 1
         self.last = frac

@@ -761,20 +761,24 @@ def test_what_the_near_field_shows_while_looking_round_keeps_a_drive_off_it(buil
     assert len(stack._seen_now(late)) == 0
 
 
-@pytest.mark.parametrize("missing_test", [True, False])
-def test_a_landing_facing_open_floor_is_noticed_by_the_walls_seen_past(building, missing_test: bool) -> None:
+@pytest.mark.parametrize("tests", ["view", "missing walls", "neither"])
+def test_a_landing_facing_open_floor_is_noticed_by_the_walls_seen_past(building, tests: str) -> None:
     """Carried from beside the atrium's east wall (the wall at the edge of an otherwise
     open view) into its middle, facing open floor with no wall in range: FSPF finds no
-    plane, and the view check compares too few points across the landing (the wall's
-    points fall where the new view returns nothing), so the map tests and the view test
-    have no evidence. The floor seen past the wall the belief still puts beside the robot
-    tells (:mod:`autonomy.missing_walls`); without that test, nothing does while the
-    robot stands there (a kidnapped run's robot drove 23 m on such a belief)."""
+    plane, so the map tests have no evidence. The view check sees the wall's points fall
+    where the new view returns nothing above the floor it sees, and says lost on the
+    first frame. Counting only pixels where both frames returned it compares too few
+    points; then the floor seen past the wall the belief still puts beside the robot tells
+    (:mod:`autonomy.missing_walls`); without either, nothing does while the robot stands
+    there (a kidnapped run's robot drove 23 m on such a belief)."""
     scene = building[1]
-    hc = RecoveryConfig().health
-    if not missing_test:
+    rc = RecoveryConfig()
+    hc = rc.health
+    if tests != "view":
+        rc = replace(rc, view=replace(rc.view, count_empty=False))
+    if tests == "neither":
         hc = replace(hc, lost_missing=0.0)
-    stack = make_stack(building, pose=np.array([38.5, 16.0, -math.pi / 2]), recovery=RecoveryConfig(health=hc))
+    stack = make_stack(building, pose=np.array([38.5, 16.0, -math.pi / 2]), recovery=replace(rc, health=hc))
     t = settle(stack, scene, hc.min_history_s + 1.0)
     kidnap = t
     landing = render(scene, np.array([30.0, 12.0, -math.pi / 2]))
@@ -783,7 +787,9 @@ def test_a_landing_facing_open_floor_is_noticed_by_the_walls_seen_past(building,
         stack.perceive(landing)
         stack.localize(np.zeros(3), t)
     lost = [e for e in stack.events if e["event"] == "lost"]
-    if missing_test:
+    if tests == "view":
+        assert len(lost) == 1 and lost[0]["why"] == "view jumped" and lost[0]["t"] == pytest.approx(kidnap + 0.1), lost
+    elif tests == "missing walls":
         assert len(lost) == 1 and lost[0]["why"] == "walls missing", lost
         # The short-term average passes the threshold within one or two of its time
         # constants (from 0 beside the wall), then the test holds for hold_s.

@@ -20,6 +20,7 @@ from autonomy.stack import LOCALIZATION_GRID
 from autonomy.view_check import (
     ViewCheck,
     ViewCheckConfig,
+    lowest_returns,
     move_points,
     sample_points,
     view_agreement,
@@ -35,6 +36,10 @@ RC = CAM.mount.robot_from_camera()
 SHAPE = (CAM.intrinsics.height, CAM.intrinsics.width)
 #: A corridor spot by an office door (the recovery tests' start), facing along the corridor.
 START = np.array([38.31, 33.34, -2.56])
+#: In the atrium facing east, no wall within the camera's range: the view holds only floor.
+OPEN_HALL = np.array([28.0, 12.0, 0.0])
+#: In the west corridor beside the atrium's west door (a kidnapped run's landing).
+BY_THE_DOOR = np.array([20.34, 18.69, 0.80])
 
 
 @pytest.fixture(scope="module")
@@ -76,8 +81,9 @@ def test_sample_points_back_project_the_grid_and_drop_the_floor() -> None:
     np.testing.assert_allclose(pts, ref, atol=1e-9)
 
 
-def reference_agreement(pts, depth, intr, rc, zmin, zmax, tol_m, tol_q, win):
+def reference_agreement(pts, depth, intr, rc, zmin, zmax, tol_m, tol_q, win, empty_margin=None):
     """Pure-python view_agreement."""
+    valid = (depth > 0) & np.isfinite(depth)
     inv = np.linalg.inv(rc)
     n_cmp = n_ok = 0
     h, w = depth.shape
@@ -91,6 +97,10 @@ def reference_agreement(pts, depth, intr, rc, zmin, zmax, tol_m, tol_q, win):
         near = [float(depth[vv, uu]) for vv in range(v - win, v + win + 1) for uu in range(u - win, u + win + 1)
                 if 0 <= vv < h and 0 <= uu < w and depth[vv, uu] > 0 and math.isfinite(depth[vv, uu])]
         if not near:
+            # Nothing returned around it: it disagrees when well inside the range and
+            # something returned lower down in its column (nothing near blocked the view).
+            if empty_margin is not None and zmin + empty_margin <= z <= zmax - empty_margin and valid[v + win + 1 :, u].any():
+                n_cmp += 1
             continue
         n_cmp += 1
         n_ok += min(abs(d - z) for d in near) <= tol_m + tol_q * z * z
@@ -98,17 +108,27 @@ def reference_agreement(pts, depth, intr, rc, zmin, zmax, tol_m, tol_q, win):
 
 
 @settings(max_examples=25, deadline=None)
-@given(seed=st.integers(0, 10_000), win=st.integers(0, 3))
-def test_agreement_matches_a_brute_force_reference(seed: int, win: int) -> None:
+@given(seed=st.integers(0, 10_000), win=st.integers(0, 3), empty_margin=st.sampled_from([None, 0.0, 0.3]), holes=st.floats(0.3, 0.97))
+def test_agreement_matches_a_brute_force_reference(seed: int, win: int, empty_margin: float | None, holes: float) -> None:
     rng = np.random.default_rng(seed)
     intr = CameraIntrinsics().scaled(64, 48)
     depth = rng.uniform(0.3, 5.0, (48, 64)).astype(np.float32)
-    depth[rng.random(depth.shape) < 0.3] = 0.0
+    depth[rng.random(depth.shape) < holes] = 0.0
+    depth[:, rng.integers(0, 64, 5)] = 0.0  # columns that returned nothing
     # Points in front of the camera (some outside its view or range), robot frame.
     pts = np.column_stack([rng.uniform(-1.0, 6.0, 300), rng.uniform(-3.0, 3.0, 300), rng.uniform(-0.5, 2.0, 300)])
-    got = view_agreement(pts, depth, intr, RC, 0.8, 4.0, 0.05, 0.01, win)
-    ref = reference_agreement(pts, depth.astype(np.float64), intr, RC, 0.8, 4.0, 0.05, 0.01, win)
+    got = view_agreement(pts, depth, intr, RC, 0.8, 4.0, 0.05, 0.01, win, empty_margin)
+    ref = reference_agreement(pts, depth.astype(np.float64), intr, RC, 0.8, 4.0, 0.05, 0.01, win, empty_margin)
     assert got == ref
+
+
+def test_lowest_returns_find_each_columns_lowest_valid_pixel() -> None:
+    depth = np.zeros((6, 4), np.float32)
+    depth[1, 0] = 2.0
+    depth[4, 0] = np.nan
+    depth[[2, 5], 1] = 1.0
+    depth[0, 3] = np.inf
+    np.testing.assert_array_equal(lowest_returns(depth), [1, 5, -1, -1])
 
 
 @settings(max_examples=50, deadline=None)
@@ -216,6 +236,45 @@ def test_a_robot_carried_from_an_open_hall_to_walls_disagrees(scene) -> None:
     assert len(sample_points(floor_only(), CAM.intrinsics, RC, CFG.stride_px, CFG.floor_m)) == 0
 
 
+def test_a_robot_carried_from_walls_into_an_open_hall_disagrees(scene) -> None:
+    """This view holds nothing but floor; the last view's walls, seen in this image, fall
+    on floor farther away or where the camera returned nothing above the floor it saw."""
+    assert len(sample_points(_RENDER.render(scene, OPEN_HALL), CAM.intrinsics, RC, CFG.stride_px, CFG.floor_m)) == 0
+    for there in (START, BY_THE_DOOR):
+        assert agreement(scene, there, OPEN_HALL, np.zeros(3)) < VIEW_AGREE
+
+
+@pytest.mark.parametrize("hall_frames", [1, 2, 3, 4, 5])
+def test_a_landing_after_seconds_of_open_hall_is_caught_on_its_first_frame(scene, hall_frames: int) -> None:
+    """The robot drove across an open hall (each frame nothing but floor, so nothing to
+    compare) and was put down beside a door: whatever the number of hall frames, the
+    landing is judged against the last of them. Before, frames without evidence were not
+    kept, the reference was forgotten every few frames, and a landing that came on such a
+    frame became the next one's reference unjudged (a kidnapped run drove on its old belief
+    for 10 s)."""
+    check = ViewCheck(CFG, CAM.intrinsics, RC, CAM.min_range_m, CAM.max_range_m)
+    step = np.array([0.01, 0.0, 0.0])
+    odom = np.zeros(3)
+    for k in range(hall_frames):
+        check.update(k / 30, odom, _RENDER.render(scene, compose_pose(OPEN_HALL, odom)))
+        odom = compose_pose(odom, step)
+    assert check.update(hall_frames / 30, odom, _RENDER.render(scene, BY_THE_DOOR)) < VIEW_AGREE
+    # Across the hall itself there is nothing to judge.
+    assert math.isnan(check.update(0.0, np.zeros(3), np.zeros(SHAPE, np.float32)))
+
+
+def test_pixels_blocked_by_something_nearer_than_the_range_are_not_compared(scene) -> None:
+    """A person closer than 0.8 m returns nothing, like the open distance, but blocks the
+    floor in their columns too: those columns say nothing, in either frame."""
+    corridor = _RENDER.render(scene, START)
+    blocked = corridor.copy()
+    blocked[:, 200:480] = 0.0
+    check = ViewCheck(CFG, CAM.intrinsics, RC, CAM.min_range_m, CAM.max_range_m)
+    check.update(0.0, np.zeros(3), corridor)
+    assert check.update(1 / 30, np.zeros(3), blocked) > 0.95
+    assert check.update(2 / 30, np.zeros(3), corridor) > 0.95
+
+
 def floor_only() -> np.ndarray:
     """The floor alone in view (no wall within the camera's range)."""
     rays = pixel_rays(CAM.intrinsics) @ CAM.mount.rotation().T
@@ -244,7 +303,7 @@ def test_a_view_of_the_floor_alone_carries_no_evidence() -> None:
 
 @pytest.mark.parametrize(
     ("field", "value"),
-    [("stride_px", 0), ("window_px", -1), ("min_points", 0), ("max_gap_frames", -1), ("max_lag_s", 0.0), ("tol_m", -0.1), ("lag_s", -1.0), ("floor_m", math.nan)],
+    [("stride_px", 0), ("window_px", -1), ("min_points", 0), ("max_gap_frames", -1), ("max_lag_s", 0.0), ("tol_m", -0.1), ("lag_s", -1.0), ("floor_m", math.nan), ("empty_margin_m", -0.1)],
 )
 def test_bad_config_is_a_one_line_error_naming_the_field(field, value) -> None:
     with pytest.raises(InputError, match=rf"view\.{field}: expected"):

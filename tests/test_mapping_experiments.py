@@ -119,6 +119,48 @@ def test_wall_experiment_reduced(tmp_path) -> None:
         assert abs(m[f"{alg}_rho_bias_mm_106cm"]) < 3.0
 
 
+def _failing_detector(monkeypatch, after: int, exc: Exception) -> None:
+    """Make the detectors raise ``exc`` from their ``after``-th call on."""
+    import sim.experiments.mapping as mapping
+
+    real = mapping._detect
+    calls = {"n": 0}
+
+    def detect(*args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] > after:
+            raise exc
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(mapping, "_detect", detect)
+
+
+def test_a_run_stopped_by_an_error_keeps_what_it_measured(tmp_path, monkeypatch, capsys) -> None:
+    """The wall at 1.06 m is measured, then the detector fails at 1.56 m: the report keeps
+    the first distance's figures, names the error, and the traceback is beside it; the
+    CLI says so in one line and exits 1."""
+    _failing_detector(monkeypatch, 2, RuntimeError("detector exploded\nsecond line"))
+    out = tmp_path / "wall"
+    assert main(["run", str(SCENARIOS["mapping_wall"]), "--out", str(out), "--set", "frames=1", "--set", "detectors.stride=4"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "RuntimeError: detector exploded" in err and "crash.txt" in err
+    report = json.loads((out / "report.json").read_text())
+    assert report["interrupted"] is True
+    assert report["error"] == {"type": "RuntimeError", "message": "detector exploded", "traceback_file": "crash.txt"}
+    m = report["metrics"]
+    assert m["ransac_rho_std_mm_106cm"] > 0 and m["hough_rho_std_mm_106cm"] > 0
+    assert "ransac_rho_std_mm_156cm" not in m
+    assert "detector exploded" in (out / "crash.txt").read_text()
+
+
+def test_a_sweep_trial_stopped_by_an_error_raises_it(monkeypatch) -> None:
+    """A sweep records a failed trial from the error itself (not a Ctrl-C)."""
+    _failing_detector(monkeypatch, 0, ValueError("bad frame"))
+    _, cfg = load_experiment(SCENARIOS["mapping_wall"], ["frames=1", "detectors.stride=4"])
+    with pytest.raises(ValueError, match="bad frame"):
+        EXPERIMENTS["mapping_wall"].trial(cfg, {"id": "trial-0000", "seed": 3})
+
+
 def test_cuboid_experiment_reduced(tmp_path) -> None:
     _, cfg = load_experiment(SCENARIOS["mapping_cuboid"], ["frames_per_view=1", "detectors.stride=2"])
     EXPERIMENTS["mapping_cuboid"].run(cfg, tmp_path, rrd=tmp_path / "cuboid.rrd")

@@ -10,7 +10,9 @@
   plane, and the maps' sizes.
 
 Every run writes ``report.json`` with ``metrics`` (ours) and ``paper`` (PlaneMap's
-figures under the same names). A sweep trial is one seeded noise draw of the whole
+figures under the same names). A run stopped by Ctrl-C or by an error keeps the metrics
+of the frames it finished; an error adds an ``error`` block and the traceback in
+``crash.txt``, and the run raises :class:`sim.experiments.kinds.RunCrashed`. A sweep trial is one seeded noise draw of the whole
 experiment; the summary gives each metric's mean, std, min and max over trials.
 
 Point clouds are handed to the detectors in a sensor-centred frame with z up (the
@@ -27,6 +29,7 @@ import os
 import platform
 import sys
 import time
+import traceback
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -54,7 +57,7 @@ from autonomy.planes import (
     register_planes,
 )
 from sim.config import to_dict
-from sim.experiments.kinds import Experiment
+from sim.experiments.kinds import Experiment, RunCrashed
 from sim.scenes.corridor import CorridorScene
 from sim.scenes.cuboid import TABLE_I_VIEWS, ArmView, CuboidScene
 from sim.scenes.wall import WallScene
@@ -257,19 +260,33 @@ def _median(xs: list[float]) -> float:
     return float(np.median(xs)) if xs else float("nan")
 
 
-def _until_interrupted(work: Callable[[], None], bar, *close: Callable[[], None]) -> bool:
-    """Run ``work()``; whether Ctrl-C stopped it (what it measured so far is kept). The
-    ``close`` callables and the progress bar are closed either way."""
+@dataclass(frozen=True)
+class Stop:
+    """How a measurement's loop ended early: Ctrl-C, or the error that stopped it."""
+
+    interrupted: bool = False
+    error: Exception | None = None
+
+    @property
+    def early(self) -> bool:
+        return self.interrupted or self.error is not None
+
+
+def _until_stopped(work: Callable[[], None], bar, *close: Callable[[], None]) -> Stop:
+    """Run ``work()``; whether Ctrl-C or an error stopped it (what it measured so far is
+    kept either way). The ``close`` callables and the progress bar are closed either way."""
     try:
         work()
     except KeyboardInterrupt:
-        return True
+        return Stop(interrupted=True)
+    except Exception as exc:  # a bug in the loop: the frames before it are reported
+        return Stop(error=exc)
     finally:
         for c in close:
             c()
         if bar is not None:
             bar.close()
-    return False
+    return Stop()
 
 
 def _progress(progress: bool | None, total: int, desc: str):
@@ -426,8 +443,8 @@ def _cuboid_summary(cfg: CuboidExperiment, tally: _CuboidTally) -> tuple[dict, d
     return metrics, details
 
 
-def measure_cuboid(cfg: CuboidExperiment, seed: int, progress: bool | None = False, rec=None) -> tuple[dict, dict, bool]:
-    """Run Experiment I: (metrics, details, interrupted); ``rec`` (sim.viz.recording.Recorder) logs each frame's detections."""
+def measure_cuboid(cfg: CuboidExperiment, seed: int, progress: bool | None = False, rec=None) -> tuple[dict, dict, Stop]:
+    """Run Experiment I: (metrics, details, how it stopped); ``rec`` (sim.viz.recording.Recorder) logs each frame's detections."""
     seeds = _seeds(seed, 2 * cfg.frames_per_view * len(cfg.views))
     tally = _CuboidTally(len(cfg.views))
     bar = _progress(progress, cfg.frames_per_view * len(cfg.views), cfg.name)
@@ -437,8 +454,8 @@ def measure_cuboid(cfg: CuboidExperiment, seed: int, progress: bool | None = Fal
         for vi in range(len(cfg.views)):
             _cuboid_view(cfg, vi, seeds, acc, tally, rec, bar)
 
-    interrupted = _until_interrupted(work, bar)
-    return (*_cuboid_summary(cfg, tally), interrupted)
+    stop = _until_stopped(work, bar)
+    return (*_cuboid_summary(cfg, tally), stop)
 
 
 # -- Experiment II: wall distance ------------------------------------------------------------
@@ -520,8 +537,8 @@ def _wall_distance(
     return tally
 
 
-def measure_wall(cfg: WallExperiment, seed: int, progress: bool | None = False, rec=None) -> tuple[dict, dict, bool]:
-    """Run Experiment II: (metrics, details, interrupted); ``rec`` (sim.viz.recording.Recorder) logs each frame's detections."""
+def measure_wall(cfg: WallExperiment, seed: int, progress: bool | None = False, rec=None) -> tuple[dict, dict, Stop]:
+    """Run Experiment II: (metrics, details, how it stopped); ``rec`` (sim.viz.recording.Recorder) logs each frame's detections."""
     seeds = _seeds(seed, 2 * cfg.frames * len(cfg.distances_m))
     bar = _progress(progress, cfg.frames * len(cfg.distances_m), cfg.name)
     metrics: dict[str, float] = {}
@@ -534,8 +551,8 @@ def measure_wall(cfg: WallExperiment, seed: int, progress: bool | None = False, 
             for alg in ALGORITHMS:
                 tally[alg].summarize(alg, f"{round(dist * 100)}cm", dist, metrics, details)
 
-    interrupted = _until_interrupted(work, bar)
-    return metrics, details, interrupted
+    stop = _until_stopped(work, bar)
+    return metrics, details, stop
 
 
 # -- Experiment III: corridor mapping ------------------------------------------------------------
@@ -799,8 +816,8 @@ class _CorridorRun:
 
 def measure_corridor(
     cfg: CorridorExperiment, seed: int, progress: bool | None = False, out_dir: Path | None = None, rec=None
-) -> tuple[dict, dict, bool, list[str]]:
-    """Run Experiment III: (metrics, details, interrupted, files written).
+) -> tuple[dict, dict, Stop, list[str]]:
+    """Run Experiment III: (metrics, details, how it stopped, files written).
 
     ``rec`` (sim.viz.recording.Recorder) logs the corridor, the true and odometry paths, each mapped
     frame's detections and the growing plane maps (every ``rrd_every`` mapped frames).
@@ -809,18 +826,18 @@ def measure_corridor(
     bar = _progress(progress, run.max_frames, cfg.name)
     if rec is not None:
         rec.log_map(run.world.vectormap, None, run.world.config.wall_height_m)
-    interrupted = _until_interrupted(lambda: run.run(bar, rec), bar, run.cam.close)
+    stop = _until_stopped(lambda: run.run(bar, rec), bar, run.cam.close)
     if rec is not None:
         run.log_maps(rec)
     metrics, details = run.summary()
     files = run.export(out_dir) if out_dir is not None and cfg.export else []
-    return metrics, details, interrupted, files
+    return metrics, details, stop, files
 
 
 # -- run / sweep entry points ----------------------------------------------------------
 
 
-def _measure(kind: str, cfg: Any, seed: int, progress: bool | None, out: Path | None, rec=None) -> tuple[dict, dict, bool, list[str]]:
+def _measure(kind: str, cfg: Any, seed: int, progress: bool | None, out: Path | None, rec=None) -> tuple[dict, dict, Stop, list[str]]:
     if kind == "mapping_cuboid":
         return (*measure_cuboid(cfg, seed, progress, rec), [])
     if kind == "mapping_wall":
@@ -844,15 +861,26 @@ def _run(kind: str, cfg: Any, out_dir: str | Path, seed: int | None, rrd, spawn:
         every = max(1, round(rate_hz / getattr(cfg, "map_rate_hz", rate_hz)))
         rec = Recorder(rrd, spawn=spawn, every=every, recording_id=f"{cfg.name}-{seed}")
     try:
-        metrics, details, interrupted, files = _measure(kind, cfg, seed, progress, out, rec)
+        metrics, details, stop, files = _measure(kind, cfg, seed, progress, out, rec)
     finally:
         if rec is not None:
             rec.close()
     if rrd:
         rp = Path(rrd)
         files.append(rp.name if rp.parent.resolve() == out.resolve() else str(rp))
-    report = _report(kind, cfg, seed, metrics, details, interrupted, files, time.perf_counter() - t0)
+    report = _report(kind, cfg, seed, metrics, details, stop.early, files, time.perf_counter() - t0)
+    err = stop.error
+    if err is not None:
+        message = str(err).strip().splitlines()[0] if str(err).strip() else ""
+        report["error"] = {"type": type(err).__name__, "message": message, "traceback_file": "crash.txt"}
+        (out / "crash.txt").write_text("".join(traceback.format_exception(err)), encoding="utf-8")
     _write_report(out, report)
+    if err is not None:
+        if isinstance(err, InputError):
+            # A user's mistake found only on the way: the one-line error, with where the
+            # finished part was kept.
+            raise InputError(f"{message} (what it finished is in {out / 'report.json'})") from None
+        raise RunCrashed(f"the run stopped on an error: {type(err).__name__}: {message}", str(out / "report.json"))
     return report
 
 
@@ -880,8 +908,10 @@ def _trial(kind: str, cfg: Any, spec: dict) -> dict:
     s = int(spec["seed"])
     if kind == "mapping_corridor":
         cfg = dataclasses.replace(cfg, export=False)
-    metrics, _, interrupted, _ = _measure(kind, cfg, s, False, None)
-    if interrupted:
+    metrics, _, stop, _ = _measure(kind, cfg, s, False, None)
+    if stop.error is not None:
+        raise stop.error
+    if stop.interrupted:
         raise KeyboardInterrupt
     return {"seed": s, "metrics": {k: _finite(v) for k, v in metrics.items()}}
 

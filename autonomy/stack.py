@@ -32,6 +32,7 @@ from autonomy.avoidance import AvoidanceConfig, obstacle_points, open_path_lengt
 from autonomy.camera import DepthCamera, frame_checks
 from autonomy.cgr import CGRConfig, CGRLocalizer
 from autonomy.errors import InputError, require_non_negative, require_positive
+from autonomy.floor_rays import floor_rays
 from autonomy.freespace import FreeSpaceConfig, build_free_space
 from autonomy.fspf import FSPFConfig, FSPFResult, fspf
 from autonomy.geometry import (
@@ -287,7 +288,8 @@ class RobotStack:
         # The camera's rays start ahead of the robot's centre: from the centre, a ray
         # through a door close by its jamb crosses the wall.
         self._sensor_xy = (cam.mount.forward_m, cam.mount.lateral_m)
-        self.scan = Scan(rec.relocalization.scan_cell_m, rec.relocalization.max_scan_points, self._sensor_xy)
+        rl = rec.relocalization
+        self.scan = Scan(rl.scan_cell_m, rl.max_scan_points, self._sensor_xy, rl.floor_cell_m)
         self.modes: list[tuple[np.ndarray, float]] = []
         """Relocalization modes as (map-from-odometry transform, score), best first."""
         self.events: list[dict] = []
@@ -619,7 +621,11 @@ class RobotStack:
         rc = self.cfg.recovery.relocalization
         per = self.perception
         if self._fresh and per is not None:
-            self.scan.add(self.odom, per.points_2d, t)
+            floor = None
+            if rc.floor_weight > 0.0 and self._depth is not None:
+                cam = self.cfg.camera
+                floor = floor_rays(self._depth, cam.intrinsics, self.mount.robot_from_camera(), rc.floor_stride_px)
+            self.scan.add(self.odom, per.points_2d, t, floor)
             self._keep_near(per.near_lines, t)
         looked = self._swept() or self.scan.travelled_m >= rc.min_travel_m
         if not looked or t - self._last_search_t < rc.search_every_s or len(self.scan.points) < rc.min_scan_points:
@@ -630,18 +636,19 @@ class RobotStack:
         query = self.scene
         pts = self.scan.in_robot_frame(self.odom)
         origins = self.scan.origins_in_robot_frame(self.odom)
+        floor = self.scan.floor_in_robot_frame(self.odom)
         frame_pts = per.points_2d if (self._fresh and per is not None) else None
         prior = None if self._prior is None else compose_pose(self._prior, self.odom)
         full = not self.modes or self._searches % FULL_SEARCH_EVERY == 0 or self._search_whole_map
         self._search_whole_map = False
         times = self.scan.times
         if full:
-            res = gl.search(pts, frame_pts, lambda x, y: query.scene_lines(x, y)[0], prior, origins, times)
+            res = gl.search(pts, frame_pts, lambda x, y: query.scene_lines(x, y)[0], prior, origins, times, floor)
         else:
             poses = [compose_pose(T, self.odom) for T, _ in self.modes]
             if prior is not None:
                 poses.append(prior)
-            res = gl.rescore(np.array(poses), pts, frame_pts, lambda x, y: query.scene_lines(x, y)[0], origins, times)
+            res = gl.rescore(np.array(poses), pts, frame_pts, lambda x, y: query.scene_lines(x, y)[0], origins, times, floor)
         self._searches += 1
         inv = relative_pose(self.odom, np.zeros(3))
         self.modes = [(compose_pose(m.pose, inv), m.score) for m in res.modes]
@@ -652,7 +659,7 @@ class RobotStack:
         if prior is not None and res.modes and self._prior_trusted:
             # A false alarm ends where it began: the belief before the alarm, if it still
             # explains the scan about as well as the best mode.
-            kept = gl.rescore(prior[None, :], pts, origins=origins, times=times).modes
+            kept = gl.rescore(prior[None, :], pts, origins=origins, times=times, floor=floor).modes
             if kept and gl.keeps_prior(kept[0], res.modes, len(pts)):
                 self._accept(kept[0], t, f"the belief before the alarm explains the scan (score {kept[0].score:.3f})", len(res.modes))
                 return

@@ -1,0 +1,79 @@
+"""How far the camera saw the floor: sight lines that no wall crosses.
+
+FSPF keeps the planes the camera sees and leaves out the floor, so the relocalization's
+scan (:mod:`autonomy.relocalization`) holds walls, pillars and furniture, and says
+nothing about where the camera saw far into open space. Yet a floor point seen 4 m away
+says that no wall stands on the sight line to it: walls stand on the floor and reach
+above the camera, so a wall in between would have hidden it (low furniture does not
+matter here: the sight line passes over it). A place whose map puts a wall across such
+a sight line is not where the robot is. In an open hall with furniture the map lacks,
+the furniture's faces fit some office's walls elsewhere better than the hall's few
+walls fit the hall; the office's walls then stand across the sight lines into the hall
+(ours; the scan's sight through walls,
+:meth:`autonomy.relocalization.GlobalLocalizer.scan_through_at`, for the floor).
+
+Each frame, in every ``stride_u_px``-th image column, the farthest pixel (on every
+``stride_v_px``-th row) whose back-projected point lies on the floor (height within
+``tol_m + tol_per_m2 z^2`` of 0: the Kinect's noise grows with depth squared, and a
+camera tilted by a degree or two raises far floor by a few centimetres) gives one floor
+point, in the robot frame.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from autonomy.camera import CameraIntrinsics
+
+__all__ = ["floor_rays"]
+
+
+def floor_rays(
+    depth: np.ndarray, intr: CameraIntrinsics, robot_from_camera: np.ndarray, stride_u_px: int = 16, stride_v_px: int = 4,
+    tol_m: float = 0.05, tol_per_m2: float = 0.01,
+) -> np.ndarray:
+    """Robot-frame (x, y) of the farthest floor point in each ``stride_u_px``-th column of
+    ``depth`` (planar depth, 0 or non-finite = no return); columns that saw no floor give
+    none (module docstring)."""
+    rc = np.ascontiguousarray(robot_from_camera, dtype=np.float64)
+    d = np.ascontiguousarray(depth, dtype=np.float32)
+    return _floor_kernel(
+        d, int(stride_u_px), int(stride_v_px), float(intr.fx), float(intr.fy), float(intr.cx), float(intr.cy),
+        rc[:3, :3].copy(), rc[:3, 3].copy(), float(tol_m), float(tol_per_m2),
+    )
+
+
+@numba.njit(cache=True)
+def _floor_kernel(depth, su, sv, fx, fy, cx, cy, rot, trans, tol_m, tol_q):  # pragma: no cover - numba
+    """:func:`floor_rays`, column by column."""
+    h, w = depth.shape
+    out = np.empty(((w + su - 1) // su, 2))
+    n = 0
+    for u in range(0, w, su):
+        best = -1.0
+        bx = 0.0
+        by = 0.0
+        for v in range(0, h, sv):
+            z = depth[v, u]
+            if not (z > 0.0) or not math.isfinite(z):
+                continue
+            x = (u - cx) / fx * z
+            y = (v - cy) / fy * z
+            pz = rot[2, 0] * x + rot[2, 1] * y + rot[2, 2] * z + trans[2]
+            if abs(pz) > tol_m + tol_q * z * z:
+                continue
+            px = rot[0, 0] * x + rot[0, 1] * y + rot[0, 2] * z + trans[0]
+            py = rot[1, 0] * x + rot[1, 1] * y + rot[1, 2] * z + trans[1]
+            r = px * px + py * py
+            if r > best:
+                best = r
+                bx = px
+                by = py
+        if best >= 0.0:
+            out[n, 0] = bx
+            out[n, 1] = by
+            n += 1
+    return out[:n].copy()

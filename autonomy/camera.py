@@ -176,6 +176,19 @@ def backproject(depth: np.ndarray, intr: CameraIntrinsics) -> np.ndarray:
     return out
 
 
+@numba.njit(cache=True, inline="always")
+def pixel_point_nb(u, v, z, fx, fy, cx, cy, rot, trans):  # pragma: no cover - numba
+    """Pixel (u, v) at planar depth z, back-projected and moved through ``rot``,
+    ``trans`` (a camera-to-robot transform's parts): (x, y, z)."""
+    x = (u - cx) / fx * z
+    y = (v - cy) / fy * z
+    return (
+        rot[0, 0] * x + rot[0, 1] * y + rot[0, 2] * z + trans[0],
+        rot[1, 0] * x + rot[1, 1] * y + rot[1, 2] * z + trans[1],
+        rot[2, 0] * x + rot[2, 1] * y + rot[2, 2] * z + trans[2],
+    )
+
+
 @numba.njit(cache=True)
 def _frame_checks(flat, stride, last):  # pragma: no cover - numba
     valid = False

@@ -26,7 +26,7 @@ import math
 import numba
 import numpy as np
 
-from autonomy.camera import CameraIntrinsics
+from autonomy.camera import CameraIntrinsics, pixel_point_nb
 
 __all__ = ["floor_rays"]
 
@@ -60,13 +60,9 @@ def _floor_kernel(depth, su, sv, fx, fy, cx, cy, rot, trans, tol_m, tol_q):  # p
             z = depth[v, u]
             if not (z > 0.0) or not math.isfinite(z):
                 continue
-            x = (u - cx) / fx * z
-            y = (v - cy) / fy * z
-            pz = rot[2, 0] * x + rot[2, 1] * y + rot[2, 2] * z + trans[2]
+            px, py, pz = pixel_point_nb(u, v, z, fx, fy, cx, cy, rot, trans)
             if abs(pz) > tol_m + tol_q * z * z:
                 continue
-            px = rot[0, 0] * x + rot[0, 1] * y + rot[0, 2] * z + trans[0]
-            py = rot[1, 0] * x + rot[1, 1] * y + rot[1, 2] * z + trans[1]
             r = px * px + py * py
             if r > best:
                 best = r

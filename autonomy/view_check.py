@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from autonomy.camera import CameraIntrinsics
+from autonomy.camera import CameraIntrinsics, pixel_point_nb
 from autonomy.errors import InputError, require_int, require_non_negative, require_positive
 from autonomy.geometry import points_from_frame, relative_pose
 
@@ -130,13 +130,11 @@ def _sample_kernel(depth, stride, fx, fy, cx, cy, rot, trans, floor_m):  # pragm
             z = depth[v, u]
             if not (z > 0.0) or not math.isfinite(z):
                 continue
-            x = (u - cx) / fx * z
-            y = (v - cy) / fy * z
-            pz = rot[2, 0] * x + rot[2, 1] * y + rot[2, 2] * z + trans[2]
+            px, py, pz = pixel_point_nb(u, v, z, fx, fy, cx, cy, rot, trans)
             if pz <= floor_m:
                 continue
-            out[n, 0] = rot[0, 0] * x + rot[0, 1] * y + rot[0, 2] * z + trans[0]
-            out[n, 1] = rot[1, 0] * x + rot[1, 1] * y + rot[1, 2] * z + trans[1]
+            out[n, 0] = px
+            out[n, 1] = py
             out[n, 2] = pz
             n += 1
     return out[:n].copy()

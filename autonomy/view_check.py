@@ -20,7 +20,10 @@ into the current image, and compared with the depths within ``window_px`` of its
 one of them is within ``tol_m + tol_per_m2 z^2`` of its predicted depth z (the Kinect's
 axial noise and disparity steps grow with z squared). It **disagrees** too when none of
 them returned anything although z lies well inside the camera's range (``empty_margin_m``
-from either end): the camera would have seen the point there. The current frame's points
+from either end) and the image column returned the floor at a depth of z or more
+(:func:`autonomy.floor_rays.floor_reach`): the camera would have seen the point there.
+A Kinect pixel returns nothing closer than its minimum range too; the floor seen that
+far rules out a wall or a person that close in the column. The current frame's points
 are compared with the stored image the same way. Points projected outside the image or
 the camera's range, or onto pixels with no return near either end of the range, are not
 compared. A frame with no valid pixel on the grid (a blackout, a blocked lens) compares
@@ -46,9 +49,10 @@ import numpy as np
 
 from autonomy.camera import CameraIntrinsics, pixel_point_nb
 from autonomy.errors import InputError, require_int, require_non_negative, require_positive
+from autonomy.floor_rays import floor_reach
 from autonomy.geometry import points_from_frame, relative_pose
 
-__all__ = ["ViewCheckConfig", "ViewCheck", "sample_points", "lowest_returns", "view_agreement", "move_points"]
+__all__ = ["ViewCheckConfig", "ViewCheck", "sample_points", "view_agreement", "move_points"]
 
 
 @dataclass(frozen=True)
@@ -86,7 +90,10 @@ class ViewCheckConfig:
     """The current depths within this many pixels of the predicted pixel are tried."""
     count_empty: bool = True
     """A point predicted onto pixels that all returned nothing disagrees, when its depth
-    there lies ``empty_margin_m`` inside the camera's range. A view of an open hall holds
+    there lies ``empty_margin_m`` inside the camera's range and its image column returned
+    the floor at least that deep (counting any return lower in the column instead, a
+    robot turning to face a wall 0.8 m away, whose lower part the pitched camera still
+    sees, was lost for nothing on the demo). A view of an open hall holds
     nothing but floor within the camera's 4 m: compared only where both frames returned,
     a robot carried from such a view to a corridor, or the other way, compared too few
     points to be judged, and one put down beside a door drove on its old belief for 10 s
@@ -140,32 +147,13 @@ def _sample_kernel(depth, stride, fx, fy, cx, cy, rot, trans, floor_m):  # pragm
     return out[:n].copy()
 
 
-def lowest_returns(depth: np.ndarray) -> np.ndarray:
-    """Per image column, the lowest row (largest index) with a valid depth; -1 for a
-    column that returned nothing."""
-    return _lowest_kernel(np.ascontiguousarray(depth, dtype=np.float32))
-
-
 @numba.njit(cache=True)
-def _lowest_kernel(depth):  # pragma: no cover - numba
-    """:func:`lowest_returns`, each column scanned upwards from the bottom row."""
-    h, w = depth.shape
-    out = np.full(w, -1, np.int32)
-    for u in range(w):
-        for v in range(h - 1, -1, -1):
-            d = depth[v, u]
-            if d > 0.0 and math.isfinite(d):
-                out[u] = v
-                break
-    return out
-
-
-@numba.njit(cache=True)
-def _agreement_kernel(pts, rot, trans, depth, lowest, fx, fy, cx, cy, zmin, zmax, tol_m, tol_q, win, empty_lo, empty_hi):  # pragma: no cover - numba
+def _agreement_kernel(pts, rot, trans, depth, reach, fx, fy, cx, cy, zmin, zmax, tol_m, tol_q, win, empty_lo, empty_hi):  # pragma: no cover - numba
     """(compared, agreeing) of robot-frame ``pts`` against ``depth`` (module docstring);
-    ``rot``, ``trans``: robot_from_camera. A point at a depth in [``empty_lo``,
-    ``empty_hi``] whose window returned nothing, in a column with a return below the
-    window (``lowest``, :func:`lowest_returns`), is compared and disagrees."""
+    ``rot``, ``trans``: robot_from_camera. A point at a depth z in [``empty_lo``,
+    ``empty_hi``] whose window returned nothing, in a column that returned the floor at
+    a depth of z or more (``reach``, :func:`autonomy.floor_rays.floor_reach`), is
+    compared and disagrees."""
     h, w = depth.shape
     n_cmp = 0
     n_ok = 0
@@ -204,7 +192,7 @@ def _agreement_kernel(pts, rot, trans, depth, lowest, fx, fy, cx, cy, zmin, zmax
             if ok:
                 break
         if not seen:
-            if empty_lo <= z <= empty_hi and lowest[u] > v + win:
+            if empty_lo <= z <= empty_hi and reach[u] >= z:
                 n_cmp += 1
             continue
         n_cmp += 1
@@ -224,22 +212,23 @@ def view_agreement(
     tol_per_m2: float,
     window_px: int,
     empty_margin_m: float | None = None,
-    lowest: np.ndarray | None = None,
+    reach: np.ndarray | None = None,
 ) -> tuple[int, int]:
     """(compared, agreeing) points: robot-frame ``pts`` (n, 3) of an earlier frame, already
     moved into the current robot frame, against the current ``depth`` image. With
     ``empty_margin_m``, a point that far inside the range whose pixels returned nothing,
-    in a column of ``depth`` that returned something lower down, disagrees; without, it is
-    not compared. ``lowest``: :func:`lowest_returns` of ``depth`` if already known."""
+    in a column of ``depth`` that returned the floor at least as deep, disagrees; without,
+    it is not compared. ``reach``: :func:`autonomy.floor_rays.floor_reach` of ``depth``
+    (through ``robot_from_camera``) if already known."""
     p = np.ascontiguousarray(pts, dtype=np.float64).reshape(-1, 3)
     d = np.ascontiguousarray(depth, dtype=np.float32)
     if d.shape != (intr.height, intr.width):
         raise InputError(f"view check: depth image expected {intr.height}x{intr.width}, got shape {d.shape}")
     rc = np.ascontiguousarray(robot_from_camera, dtype=np.float64)
     empty_lo, empty_hi = (math.inf, -math.inf) if empty_margin_m is None else (min_range_m + empty_margin_m, max_range_m - empty_margin_m)
-    low = lowest_returns(d) if lowest is None else np.ascontiguousarray(lowest, dtype=np.int32)
+    far = floor_reach(d, intr, rc) if reach is None else np.ascontiguousarray(reach, dtype=np.float32)
     n_cmp, n_ok = _agreement_kernel(
-        p, rc[:3, :3].copy(), rc[:3, 3].copy(), d, low, float(intr.fx), float(intr.fy), float(intr.cx), float(intr.cy),
+        p, rc[:3, :3].copy(), rc[:3, 3].copy(), d, far, float(intr.fx), float(intr.fy), float(intr.cx), float(intr.cy),
         float(min_range_m), float(max_range_m), float(tol_m), float(tol_per_m2), int(window_px), float(empty_lo), float(empty_hi),
     )
     return int(n_cmp), int(n_ok)
@@ -275,28 +264,32 @@ class ViewCheck:
     def reset(self) -> None:
         """Forget the stored frames."""
         self._frames: deque[tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = deque()
-        """(time, odometry pose, sampled points, depth image, its lowest returns) each."""
+        """(time, odometry pose, sampled points, depth image, its floor reach) each."""
         self._gap = 0
         """Frames given to :meth:`update` since the last one stored."""
 
-    def _agreement(self, pts: np.ndarray, then: np.ndarray, now: np.ndarray, depth: np.ndarray, lowest: np.ndarray) -> tuple[int, int]:
+    def _agreement(self, pts: np.ndarray, then: np.ndarray, now: np.ndarray, depth: np.ndarray, reach: np.ndarray) -> tuple[int, int]:
         """(compared, agreeing) of ``pts`` seen at odometry pose ``then`` against ``depth``
-        (lowest returns ``lowest``) seen at ``now``."""
+        (floor reach ``reach``) seen at ``now``."""
         if not len(pts):
             return 0, 0
         cfg = self.cfg
         return view_agreement(
             move_points(pts, then, now), depth, self.intr, self.robot_from_camera, self.min_range_m, self.max_range_m,
-            cfg.tol_m, cfg.tol_per_m2, cfg.window_px, cfg.empty_margin_m if cfg.count_empty else None, lowest,
+            cfg.tol_m, cfg.tol_per_m2, cfg.window_px, cfg.empty_margin_m if cfg.count_empty else None, reach,
         )
 
-    def _keep(self, t: float, odom: np.ndarray, pts: np.ndarray, depth: np.ndarray, lowest: np.ndarray) -> bool:
+    def _returned(self, depth: np.ndarray) -> bool:
+        """Whether any pixel on the grid returned a depth (not a blackout or a blocked lens)."""
+        return bool(np.any(depth[:: self.cfg.stride_px, :: self.cfg.stride_px] > 0.0))
+
+    def _keep(self, t: float, odom: np.ndarray, pts: np.ndarray, depth: np.ndarray, reach: np.ndarray) -> bool:
         """Store this frame as a reference, unless the camera saw nothing on the grid
         (blocked): such a frame is no reference at all. Whether it was stored."""
-        if not len(pts) and not bool(np.any(lowest >= 0)):
+        if not len(pts) and not self._returned(depth):
             self._gap += 1
             return False
-        self._frames.append((float(t), np.asarray(odom, dtype=np.float64).copy(), pts, np.array(depth, dtype=np.float32), lowest))
+        self._frames.append((float(t), np.asarray(odom, dtype=np.float64).copy(), pts, np.array(depth, dtype=np.float32), reach))
         self._gap = 0
         return True
 
@@ -305,7 +298,7 @@ class ViewCheck:
         listening: the stack is relocalizing)."""
         pts = sample_points(depth, self.intr, self.robot_from_camera, self.cfg.stride_px, self.cfg.floor_m)
         self._frames.clear()
-        self._keep(t, odom, pts, depth, lowest_returns(depth))
+        self._keep(t, odom, pts, depth, floor_reach(depth, self.intr, self.robot_from_camera))
         self.last = math.nan
 
     def update(self, t: float, odom: np.ndarray, depth: np.ndarray) -> float:
@@ -331,12 +324,12 @@ class ViewCheck:
                 ref = frames[0]
                 break
         pts = sample_points(depth, self.intr, self.robot_from_camera, cfg.stride_px, cfg.floor_m)
-        lowest = lowest_returns(depth)
+        reach = floor_reach(depth, self.intr, self.robot_from_camera)
         frac = math.nan
-        if ref is not None and bool(np.any(lowest >= 0)):
-            _, odom0, pts0, depth0, lowest0 = ref
-            n1, ok1 = self._agreement(pts0, odom0, odom, depth, lowest)
-            n2, ok2 = self._agreement(pts, odom, odom0, depth0, lowest0)
+        if ref is not None and self._returned(depth):
+            _, odom0, pts0, depth0, reach0 = ref
+            n1, ok1 = self._agreement(pts0, odom0, odom, depth, reach)
+            n2, ok2 = self._agreement(pts, odom, odom0, depth0, reach0)
             if n1 + n2 >= cfg.min_points:
                 frac = (ok1 + ok2) / (n1 + n2)
         # A frame showing something that could not be checked against a stored one does
@@ -345,7 +338,7 @@ class ViewCheck:
         # frame. A view of nothing but floor is kept: in an open hall each frame is, and
         # the landing that comes after one is judged against it.
         if ref is None or not math.isnan(frac) or len(pts) < cfg.min_points:
-            self._keep(t, odom, pts, depth, lowest)
+            self._keep(t, odom, pts, depth, reach)
         else:
             self._gap += 1
         self.last = frac

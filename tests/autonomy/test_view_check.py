@@ -5,6 +5,7 @@ says agrees; a robot carried elsewhere, or pushed unseen, does not)."""
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,6 +14,7 @@ from hypothesis import strategies as st
 
 from autonomy.camera import CameraIntrinsics, DepthCamera, pixel_rays, transform_points
 from autonomy.errors import InputError
+from autonomy.floor_rays import floor_reach
 from autonomy.geometry import compose_pose, relative_pose
 from autonomy.health import HealthConfig
 from autonomy.raycast import SceneQuery, load_or_build
@@ -20,7 +22,6 @@ from autonomy.stack import LOCALIZATION_GRID
 from autonomy.view_check import (
     ViewCheck,
     ViewCheckConfig,
-    lowest_returns,
     move_points,
     sample_points,
     view_agreement,
@@ -81,9 +82,24 @@ def test_sample_points_back_project_the_grid_and_drop_the_floor() -> None:
     np.testing.assert_allclose(pts, ref, atol=1e-9)
 
 
+def reference_reach(depth, intr, rc, sv: int = 4, tol_m: float = 0.05, tol_q: float = 0.01) -> np.ndarray:
+    """Pure-python floor_reach: per column, the deepest floor return on every sv-th row
+    counted from the bottom."""
+    h, w = depth.shape
+    with np.errstate(invalid="ignore"):
+        pts = transform_points(rc, pixel_rays(intr) * np.asarray(depth, dtype=np.float64)[..., None])
+    out = np.zeros(w)
+    for u in range(w):
+        for v in range(h - 1, -1, -sv):
+            z = float(depth[v, u])
+            if z > 0 and math.isfinite(z) and abs(pts[v, u, 2]) <= tol_m + tol_q * z * z:
+                out[u] = max(out[u], z)
+    return out
+
+
 def reference_agreement(pts, depth, intr, rc, zmin, zmax, tol_m, tol_q, win, empty_margin=None):
     """Pure-python view_agreement."""
-    valid = (depth > 0) & np.isfinite(depth)
+    reach = reference_reach(depth, intr, rc)
     inv = np.linalg.inv(rc)
     n_cmp = n_ok = 0
     h, w = depth.shape
@@ -99,7 +115,7 @@ def reference_agreement(pts, depth, intr, rc, zmin, zmax, tol_m, tol_q, win, emp
         if not near:
             # Nothing returned around it: it disagrees when well inside the range and
             # something returned lower down in its column (nothing near blocked the view).
-            if empty_margin is not None and zmin + empty_margin <= z <= zmax - empty_margin and valid[v + win + 1 :, u].any():
+            if empty_margin is not None and zmin + empty_margin <= z <= zmax - empty_margin and reach[u] >= z:
                 n_cmp += 1
             continue
         n_cmp += 1
@@ -122,13 +138,21 @@ def test_agreement_matches_a_brute_force_reference(seed: int, win: int, empty_ma
     assert got == ref
 
 
-def test_lowest_returns_find_each_columns_lowest_valid_pixel() -> None:
-    depth = np.zeros((6, 4), np.float32)
-    depth[1, 0] = 2.0
-    depth[4, 0] = np.nan
-    depth[[2, 5], 1] = 1.0
-    depth[0, 3] = np.inf
-    np.testing.assert_array_equal(lowest_returns(depth), [1, 5, -1, -1])
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 10_000))
+def test_floor_reach_matches_a_brute_force_reference(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    intr = CameraIntrinsics().scaled(64, 48)
+    rays = pixel_rays(intr) @ CAM.mount.rotation().T
+    with np.errstate(divide="ignore"):
+        floor = np.where(rays[..., 2] < 0, -CAM.mount.height_m / rays[..., 2], 0.0)
+    depth = np.where(rng.random(floor.shape) < 0.6, floor, rng.uniform(0.5, 5.0, floor.shape)).astype(np.float32)
+    depth[rng.random(depth.shape) < 0.2] = 0.0
+    depth[:, rng.integers(0, 64, 5)] = 0.0
+    depth[1, 1] = np.nan
+    got = floor_reach(depth, intr, RC)
+    np.testing.assert_allclose(got, reference_reach(depth.astype(np.float64), intr, RC), atol=1e-5)
+    assert (got > 0).any()
 
 
 @settings(max_examples=50, deadline=None)
@@ -273,6 +297,25 @@ def test_pixels_blocked_by_something_nearer_than_the_range_are_not_compared(scen
     check.update(0.0, np.zeros(3), corridor)
     assert check.update(1 / 30, np.zeros(3), blocked) > 0.95
     assert check.update(2 / 30, np.zeros(3), corridor) > 0.95
+
+
+#: Two consecutive frames of the demo (seed 7, 259.00 and 259.03 s) with their odometry:
+#: the robot turning to face a wall about 0.8 m away; depth as float16 (2 mm at 4 m).
+DEMO_WALL_TURN = Path(__file__).resolve().parents[1] / "data" / "demo_wall_turn_frames.npz"
+
+
+def test_a_wall_too_close_whose_foot_the_camera_still_sees_is_not_open_space() -> None:
+    """The pitched camera still sees the wall's lower part (deeper than the minimum
+    range) but not its upper part, where what the last frame saw beside it falls now.
+    Those columns returned no floor beyond the wall's foot, so the points are not
+    compared. Counting any return lower in the column as open space, the frame agreed on
+    0.27 and the robot was lost for nothing."""
+    with np.load(DEMO_WALL_TURN) as z:
+        depth, odom, t = z["depth"].astype(np.float32), z["odom"], z["t"]
+    check = ViewCheck(CFG, CAM.intrinsics, RC, CAM.min_range_m, CAM.max_range_m)
+    check.update(float(t[0]), odom[0], depth[0])
+    a = check.update(float(t[1]), odom[1], depth[1])
+    assert math.isnan(a) or a > VIEW_AGREE, a
 
 
 def floor_only() -> np.ndarray:

@@ -28,7 +28,7 @@ import numpy as np
 
 from autonomy.camera import CameraIntrinsics, pixel_point_nb
 
-__all__ = ["floor_rays", "floor_reach"]
+__all__ = ["REACH_STRIDE_PX", "floor_rays", "floor_reach"]
 
 
 def floor_rays(
@@ -75,33 +75,40 @@ def _floor_kernel(depth, su, sv, fx, fy, cx, cy, rot, trans, tol_m, tol_q):  # p
     return out[:n].copy()
 
 
+#: :func:`floor_reach` looks at every this-many-th column; column u's reach is entry
+#: ``u // REACH_STRIDE_PX`` (the floor a few pixels aside is seen past the same things).
+REACH_STRIDE_PX = 4
+
+
 def floor_reach(
     depth: np.ndarray, intr: CameraIntrinsics, robot_from_camera: np.ndarray, stride_v_px: int = 4, tol_m: float = 0.05,
     tol_per_m2: float = 0.01,
 ) -> np.ndarray:
-    """Per image column, the largest planar depth at which it returned the floor (every
-    ``stride_v_px``-th row; 0: no floor in that column). Nothing stands in the column's
-    view of the floor nearer than that: a wall 0.8 m ahead, whose upper part the camera
-    sees too close to return, keeps it below 1 m."""
+    """Per ``REACH_STRIDE_PX``-th image column, the largest planar depth at which it
+    returned the floor (every ``stride_v_px``-th row from the bottom; 0: no floor in
+    that column). Nothing stands in the column's view of the floor nearer than that: a
+    wall 0.8 m ahead, whose upper part the camera sees too close to return, keeps it
+    below 1 m."""
     rc = np.ascontiguousarray(robot_from_camera, dtype=np.float64)
     d = np.ascontiguousarray(depth, dtype=np.float32)
     return _reach_kernel(
-        d, int(stride_v_px), float(intr.fx), float(intr.fy), float(intr.cx), float(intr.cy), rc[:3, :3].copy(),
-        rc[:3, 3].copy(), float(tol_m), float(tol_per_m2),
+        d, REACH_STRIDE_PX, int(stride_v_px), float(intr.fx), float(intr.fy), float(intr.cx), float(intr.cy),
+        rc[:3, :3].copy(), rc[:3, 3].copy(), float(tol_m), float(tol_per_m2),
     )
 
 
 @numba.njit(cache=True)
-def _reach_kernel(depth, sv, fx, fy, cx, cy, rot, trans, tol_m, tol_q):  # pragma: no cover - numba
+def _reach_kernel(depth, su, sv, fx, fy, cx, cy, rot, trans, tol_m, tol_q):  # pragma: no cover - numba
     """:func:`floor_reach`, column by column."""
     h, w = depth.shape
-    out = np.zeros(w, np.float32)
-    for u in range(w):
+    out = np.zeros((w + su - 1) // su, np.float32)
+    for k in range(out.shape[0]):
+        u = k * su
         for v in range(h - 1, -1, -sv):
             z = depth[v, u]
-            if not (z > 0.0) or not math.isfinite(z) or z <= out[u]:
+            if not (z > 0.0) or not math.isfinite(z) or z <= out[k]:
                 continue
             _, _, pz = pixel_point_nb(u, v, z, fx, fy, cx, cy, rot, trans)
             if abs(pz) <= tol_m + tol_q * z * z:
-                out[u] = z
+                out[k] = z
     return out

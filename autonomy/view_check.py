@@ -49,7 +49,7 @@ import numpy as np
 
 from autonomy.camera import CameraIntrinsics, pixel_point_nb
 from autonomy.errors import InputError, require_int, require_non_negative, require_positive
-from autonomy.floor_rays import floor_reach
+from autonomy.floor_rays import REACH_STRIDE_PX, floor_reach
 from autonomy.geometry import points_from_frame, relative_pose
 
 __all__ = ["ViewCheckConfig", "ViewCheck", "sample_points", "view_agreement", "move_points"]
@@ -148,12 +148,12 @@ def _sample_kernel(depth, stride, fx, fy, cx, cy, rot, trans, floor_m):  # pragm
 
 
 @numba.njit(cache=True)
-def _agreement_kernel(pts, rot, trans, depth, reach, fx, fy, cx, cy, zmin, zmax, tol_m, tol_q, win, empty_lo, empty_hi):  # pragma: no cover - numba
+def _agreement_kernel(pts, rot, trans, depth, reach, reach_su, fx, fy, cx, cy, zmin, zmax, tol_m, tol_q, win, empty_lo, empty_hi):  # pragma: no cover - numba
     """(compared, agreeing) of robot-frame ``pts`` against ``depth`` (module docstring);
     ``rot``, ``trans``: robot_from_camera. A point at a depth z in [``empty_lo``,
     ``empty_hi``] whose window returned nothing, in a column that returned the floor at
-    a depth of z or more (``reach``, :func:`autonomy.floor_rays.floor_reach`), is
-    compared and disagrees."""
+    a depth of z or more (``reach``, :func:`autonomy.floor_rays.floor_reach`, one entry
+    per ``reach_su`` columns), is compared and disagrees."""
     h, w = depth.shape
     n_cmp = 0
     n_ok = 0
@@ -192,7 +192,7 @@ def _agreement_kernel(pts, rot, trans, depth, reach, fx, fy, cx, cy, zmin, zmax,
             if ok:
                 break
         if not seen:
-            if empty_lo <= z <= empty_hi and reach[u] >= z:
+            if empty_lo <= z <= empty_hi and reach[u // reach_su] >= z:
                 n_cmp += 1
             continue
         n_cmp += 1
@@ -228,7 +228,7 @@ def view_agreement(
     empty_lo, empty_hi = (math.inf, -math.inf) if empty_margin_m is None else (min_range_m + empty_margin_m, max_range_m - empty_margin_m)
     far = floor_reach(d, intr, rc) if reach is None else np.ascontiguousarray(reach, dtype=np.float32)
     n_cmp, n_ok = _agreement_kernel(
-        p, rc[:3, :3].copy(), rc[:3, 3].copy(), d, far, float(intr.fx), float(intr.fy), float(intr.cx), float(intr.cy),
+        p, rc[:3, :3].copy(), rc[:3, 3].copy(), d, far, REACH_STRIDE_PX, float(intr.fx), float(intr.fy), float(intr.cx), float(intr.cy),
         float(min_range_m), float(max_range_m), float(tol_m), float(tol_per_m2), int(window_px), float(empty_lo), float(empty_hi),
     )
     return int(n_cmp), int(n_ok)

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 from autonomy.camera import CameraIntrinsics, DepthCamera, pixel_rays, transform_points
 from autonomy.errors import InputError
-from autonomy.floor_rays import floor_reach
+from autonomy.floor_rays import REACH_STRIDE_PX, floor_reach
 from autonomy.geometry import compose_pose, relative_pose
 from autonomy.health import HealthConfig
 from autonomy.raycast import SceneQuery, load_or_build
@@ -83,17 +83,18 @@ def test_sample_points_back_project_the_grid_and_drop_the_floor() -> None:
 
 
 def reference_reach(depth, intr, rc, sv: int = 4, tol_m: float = 0.05, tol_q: float = 0.01) -> np.ndarray:
-    """Pure-python floor_reach: per column, the deepest floor return on every sv-th row
-    counted from the bottom."""
+    """Pure-python floor_reach: per REACH_STRIDE_PX-th column, the deepest floor return
+    on every sv-th row counted from the bottom."""
     h, w = depth.shape
     with np.errstate(invalid="ignore"):
         pts = transform_points(rc, pixel_rays(intr) * np.asarray(depth, dtype=np.float64)[..., None])
-    out = np.zeros(w)
-    for u in range(w):
+    cols = range(0, w, REACH_STRIDE_PX)
+    out = np.zeros(len(cols))
+    for k, u in enumerate(cols):
         for v in range(h - 1, -1, -sv):
             z = float(depth[v, u])
             if z > 0 and math.isfinite(z) and abs(pts[v, u, 2]) <= tol_m + tol_q * z * z:
-                out[u] = max(out[u], z)
+                out[k] = max(out[k], z)
     return out
 
 
@@ -115,7 +116,7 @@ def reference_agreement(pts, depth, intr, rc, zmin, zmax, tol_m, tol_q, win, emp
         if not near:
             # Nothing returned around it: it disagrees when well inside the range and
             # something returned lower down in its column (nothing near blocked the view).
-            if empty_margin is not None and zmin + empty_margin <= z <= zmax - empty_margin and reach[u] >= z:
+            if empty_margin is not None and zmin + empty_margin <= z <= zmax - empty_margin and reach[u // REACH_STRIDE_PX] >= z:
                 n_cmp += 1
             continue
         n_cmp += 1

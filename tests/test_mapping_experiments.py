@@ -153,6 +153,24 @@ def test_a_run_stopped_by_an_error_keeps_what_it_measured(tmp_path, monkeypatch,
     assert "detector exploded" in (out / "crash.txt").read_text()
 
 
+def test_a_run_whose_summary_fails_still_writes_a_report(tmp_path, monkeypatch) -> None:
+    """The summary of what the loop left can fail too: the report says so rather than
+    nothing being written."""
+    import sim.experiments.mapping as mapping
+    from sim.experiments.kinds import RunCrashed
+
+    def broken(*args, **kwargs):
+        raise ZeroDivisionError("no frames")
+
+    monkeypatch.setattr(mapping, "_measure", broken)
+    _, cfg = load_experiment(SCENARIOS["mapping_wall"], ["frames=1"])
+    with pytest.raises(RunCrashed, match="ZeroDivisionError: no frames"):
+        EXPERIMENTS["mapping_wall"].run(cfg, tmp_path)
+    report = json.loads((tmp_path / "report.json").read_text())
+    assert report["interrupted"] is True and report["metrics"] == {} and report["error"]["type"] == "ZeroDivisionError"
+    assert "no frames" in (tmp_path / "crash.txt").read_text()
+
+
 def test_a_sweep_trial_stopped_by_an_error_raises_it(monkeypatch) -> None:
     """A sweep records a failed trial from the error itself (not a Ctrl-C)."""
     _failing_detector(monkeypatch, 0, ValueError("bad frame"))

@@ -14,6 +14,7 @@ what that kind needs.
 from __future__ import annotations
 
 import importlib
+import traceback
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -42,8 +43,34 @@ class RunCrashed(RuntimeError):
         self.what, self.report_path = what, report_path
 
     def __str__(self) -> str:
-        traceback_path = Path(self.report_path).with_name("crash.txt")
+        traceback_path = Path(self.report_path).with_name(CRASH_FILE)
         return f"{self.what}; what it finished is in {self.report_path}, the traceback in {traceback_path}"
+
+
+#: Where a run stopped by an error writes the traceback, beside its report.
+CRASH_FILE = "crash.txt"
+
+
+def crash_block(exc: BaseException) -> dict:
+    """The report's ``error`` block for ``exc``: its type, the first line of its
+    message and where the traceback is."""
+    text = str(exc).strip()
+    return {"type": type(exc).__name__, "message": text.splitlines()[0] if text else "", "traceback_file": CRASH_FILE}
+
+
+def write_crash(out_dir: Path, exc: BaseException) -> None:
+    """Write ``exc``'s traceback to ``CRASH_FILE`` in ``out_dir``."""
+    (Path(out_dir) / CRASH_FILE).write_text("".join(traceback.format_exception(exc)), encoding="utf-8")
+
+
+def stopped(exc: BaseException, where: str, report_path: Path) -> Exception:
+    """What a run stopped by ``exc`` raises once its report is written: a user's mistake
+    found only on the way stays the one-line :class:`InputError` (exit 2), with where
+    the finished part was kept; anything else is :class:`RunCrashed` (exit 1)."""
+    msg = crash_block(exc)["message"]
+    if isinstance(exc, InputError):
+        return InputError(f"{msg} ({where}; what it finished is in {report_path})")
+    return RunCrashed(f"{where} on an error: {type(exc).__name__}: {msg}", str(report_path))
 
 
 @dataclass(frozen=True)

@@ -12,8 +12,8 @@
 Every run writes ``report.json`` with ``metrics`` (ours) and ``paper`` (PlaneMap's
 figures under the same names). A run stopped by Ctrl-C or by an error keeps the metrics
 of the frames it finished; an error adds an ``error`` block and the traceback in
-``crash.txt``, and the run raises :class:`sim.experiments.kinds.RunCrashed`. A sweep trial is one seeded noise draw of the whole
-experiment; the summary gives each metric's mean, std, min and max over trials.
+``crash.txt``, and the run raises :class:`sim.experiments.kinds.RunCrashed`. A sweep
+trial is one seeded noise draw of the whole experiment; the summary gives each metric's mean, std, min and max over trials.
 
 Point clouds are handed to the detectors in a sensor-centred frame with z up (the
 camera's rotation to the world applied, its position not), so rho is the distance from
@@ -29,7 +29,6 @@ import os
 import platform
 import sys
 import time
-import traceback
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -57,7 +56,7 @@ from autonomy.planes import (
     register_planes,
 )
 from sim.config import to_dict
-from sim.experiments.kinds import Experiment, RunCrashed
+from sim.experiments.kinds import Experiment, crash_block, stopped, write_crash
 from sim.scenes.corridor import CorridorScene
 from sim.scenes.cuboid import TABLE_I_VIEWS, ArmView, CuboidScene
 from sim.scenes.wall import WallScene
@@ -862,6 +861,8 @@ def _run(kind: str, cfg: Any, out_dir: str | Path, seed: int | None, rrd, spawn:
         rec = Recorder(rrd, spawn=spawn, every=every, recording_id=f"{cfg.name}-{seed}")
     try:
         metrics, details, stop, files = _measure(kind, cfg, seed, progress, out, rec)
+    except Exception as exc:  # the summary of what the loop left failed: the error is kept
+        metrics, details, stop, files = {}, {}, Stop(error=exc), []
     finally:
         if rec is not None:
             rec.close()
@@ -871,16 +872,11 @@ def _run(kind: str, cfg: Any, out_dir: str | Path, seed: int | None, rrd, spawn:
     report = _report(kind, cfg, seed, metrics, details, stop.early, files, time.perf_counter() - t0)
     err = stop.error
     if err is not None:
-        message = str(err).strip().splitlines()[0] if str(err).strip() else ""
-        report["error"] = {"type": type(err).__name__, "message": message, "traceback_file": "crash.txt"}
-        (out / "crash.txt").write_text("".join(traceback.format_exception(err)), encoding="utf-8")
+        report["error"] = crash_block(err)
+        write_crash(out, err)
     _write_report(out, report)
     if err is not None:
-        if isinstance(err, InputError):
-            # A user's mistake found only on the way: the one-line error, with where the
-            # finished part was kept.
-            raise InputError(f"{message} (what it finished is in {out / 'report.json'})") from None
-        raise RunCrashed(f"the run stopped on an error: {type(err).__name__}: {message}", str(out / "report.json"))
+        raise stopped(err, "the run stopped", out / "report.json") from None
     return report
 
 

@@ -17,13 +17,11 @@ import math
 import os
 import sys
 import time
-import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from autonomy.errors import InputError
 from autonomy.geometry import wrap_angle
 from autonomy.navigator import NavCommand, in_camera_view
 from autonomy.planner import path_points
@@ -37,7 +35,7 @@ from sim.experiments.blackbox import (
     starts_incident,
 )
 from sim.experiments.columns import Column
-from sim.experiments.kinds import RunCrashed
+from sim.experiments.kinds import crash_block, stopped, write_crash
 from sim.experiments.memory import release_free_memory, resident_mb
 from sim.experiments.waypoints import Mission, close_leg, leg_timeout, plan_mission
 from sim.scenario import Scenario
@@ -268,12 +266,10 @@ def run_scenario(
     (out / "report.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
     if run.crash is not None:
         c = run.crash
-        where = f"the run stopped at t = {c['t']:.2f} s (frame {c['frame']}, {c['distance_m']:.0f} m)"
-        if isinstance(run.crash_exc, InputError):
-            # A user's mistake found only on the way (a waypoint the user's map has no
-            # path to): the one-line error, with where the finished part was kept.
-            raise InputError(f"{c['message']} ({where}; what it finished is in {out / 'report.json'})") from None
-        raise RunCrashed(f"{where} on an error: {c['type']}: {c['message']}", str(out / "report.json"))
+        # A user's mistake found only on the way (a waypoint the user's map has no path
+        # to) stays the one-line error, with where the finished part was kept.
+        assert run.crash_exc is not None
+        raise stopped(run.crash_exc, f"the run stopped at t = {c['t']:.2f} s (frame {c['frame']}, {c['distance_m']:.0f} m)", out / "report.json") from None
     return report
 
 
@@ -292,7 +288,7 @@ def crash_report(run: Run, out: Path, recorder, rrd: str | Path | None, wall: fl
     the full report cannot be made from what is left, a short one with the loop's counts
     is written instead of nothing."""
     assert run.crash is not None and run.crash_exc is not None
-    (out / run.crash["traceback_file"]).write_text("".join(traceback.format_exception(run.crash_exc)), encoding="utf-8")
+    write_crash(out, run.crash_exc)
     try:
         report = finish_report(run, out, recorder, rrd, wall, True)
     except Exception as exc:  # the state the error left may not be reportable; the counts are
@@ -311,9 +307,8 @@ def note_crash(run: Run, exc: Exception) -> None:
     """Keep where and how the loop stopped, and end every per-frame record on the last
     whole frame (the failed one may have written some of its rows)."""
     run.crash = {
-        "type": type(exc).__name__, "message": str(exc).strip().splitlines()[0] if str(exc).strip() else "",
+        **crash_block(exc),
         "t": round(float(run.world.data.time), 4), "frame": run.frames, "distance_m": round(run.distance_m, 3),
-        "traceback_file": "crash.txt",
     }
     run.crash_exc = exc
     for col in (run.times, run.truth, run.estimates):

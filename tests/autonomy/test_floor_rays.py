@@ -21,20 +21,18 @@ RC = CAM.mount.robot_from_camera()
 
 
 def reference(depth: np.ndarray, intr: CameraIntrinsics, su: int, sv: int, tol_m: float, tol_q: float) -> np.ndarray:
-    """Every pixel's point through the mount; per column on the grid the farthest whose
-    height is within the tolerance."""
+    """Every pixel's point through the mount; per column on the grid (rows counted from
+    the bottom) the deepest whose height is within the tolerance."""
     with np.errstate(invalid="ignore"):
         pts = transform_points(RC, pixel_rays(intr) * depth[..., None].astype(np.float64))
     out = []
     for u in range(0, depth.shape[1], su):
-        col = pts[::sv, u]
-        d = depth[::sv, u]
+        col = pts[::-1][::sv, u]
+        d = depth[::-1][::sv, u].astype(np.float64)
         ok = (d > 0) & np.isfinite(d)
-        ok[ok] &= np.abs(col[ok, 2]) <= tol_m + tol_q * d[ok].astype(np.float64) ** 2
+        ok[ok] &= np.abs(col[ok, 2]) <= tol_m + tol_q * d[ok] ** 2
         if ok.any():
-            r = np.hypot(col[:, 0], col[:, 1])
-            r[~ok] = -1.0
-            out.append(col[int(np.argmax(r)), :2])
+            out.append(col[int(np.argmax(np.where(ok, d, -1.0))), :2])
     return np.array(out).reshape(-1, 2)
 
 

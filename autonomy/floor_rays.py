@@ -12,8 +12,8 @@ walls fit the hall; the office's walls then stand across the sight lines into th
 (ours; the scan's sight through walls,
 :meth:`autonomy.relocalization.GlobalLocalizer.scan_through_at`, for the floor).
 
-Each frame, in every ``stride_u_px``-th image column, the farthest pixel (on every
-``stride_v_px``-th row) whose back-projected point lies on the floor (height within
+Each frame, in every ``stride_u_px``-th image column, the deepest pixel (on every
+``stride_v_px``-th row from the bottom) whose back-projected point lies on the floor (height within
 ``tol_m + tol_per_m2 z^2`` of 0: the Kinect's noise grows with depth squared, and a
 camera tilted by a degree or two raises far floor by a few centimetres) gives one floor
 point, in the robot frame.
@@ -38,41 +38,8 @@ def floor_rays(
     """Robot-frame (x, y) of the farthest floor point in each ``stride_u_px``-th column of
     ``depth`` (planar depth, 0 or non-finite = no return); columns that saw no floor give
     none (module docstring)."""
-    rc = np.ascontiguousarray(robot_from_camera, dtype=np.float64)
-    d = np.ascontiguousarray(depth, dtype=np.float32)
-    return _floor_kernel(
-        d, int(stride_u_px), int(stride_v_px), float(intr.fx), float(intr.fy), float(intr.cx), float(intr.cy),
-        rc[:3, :3].copy(), rc[:3, 3].copy(), float(tol_m), float(tol_per_m2),
-    )
-
-
-@numba.njit(cache=True)
-def _floor_kernel(depth, su, sv, fx, fy, cx, cy, rot, trans, tol_m, tol_q):  # pragma: no cover - numba
-    """:func:`floor_rays`, column by column."""
-    h, w = depth.shape
-    out = np.empty(((w + su - 1) // su, 2))
-    n = 0
-    for u in range(0, w, su):
-        best = -1.0
-        bx = 0.0
-        by = 0.0
-        for v in range(0, h, sv):
-            z = depth[v, u]
-            if not (z > 0.0) or not math.isfinite(z):
-                continue
-            px, py, pz = pixel_point_nb(u, v, z, fx, fy, cx, cy, rot, trans)
-            if abs(pz) > tol_m + tol_q * z * z:
-                continue
-            r = px * px + py * py
-            if r > best:
-                best = r
-                bx = px
-                by = py
-        if best >= 0.0:
-            out[n, 0] = bx
-            out[n, 1] = by
-            n += 1
-    return out[:n].copy()
+    far = _farthest_floor(depth, intr, robot_from_camera, stride_u_px, stride_v_px, tol_m, tol_per_m2)
+    return far[far[:, 0] > 0.0, 1:].copy()
 
 
 #: :func:`floor_reach` looks at every this-many-th column; column u's reach is entry
@@ -85,30 +52,40 @@ def floor_reach(
     tol_per_m2: float = 0.01,
 ) -> np.ndarray:
     """Per ``REACH_STRIDE_PX``-th image column, the largest planar depth at which it
-    returned the floor (every ``stride_v_px``-th row from the bottom; 0: no floor in
-    that column). Nothing stands in the column's view of the floor nearer than that: a
-    wall 0.8 m ahead, whose upper part the camera sees too close to return, keeps it
-    below 1 m."""
+    returned the floor (0: no floor in that column). Nothing stands in the column's view
+    of the floor nearer than that: a wall 0.8 m ahead, whose upper part the camera sees
+    too close to return, keeps it below 1 m."""
+    return _farthest_floor(depth, intr, robot_from_camera, REACH_STRIDE_PX, stride_v_px, tol_m, tol_per_m2)[:, 0].copy()
+
+
+def _farthest_floor(
+    depth: np.ndarray, intr: CameraIntrinsics, robot_from_camera: np.ndarray, su: int, sv: int, tol_m: float, tol_q: float
+) -> np.ndarray:
+    """(planar depth, robot-frame x, y) of the deepest floor return in each ``su``-th
+    column, on every ``sv``-th row from the bottom (depth 0: none)."""
     rc = np.ascontiguousarray(robot_from_camera, dtype=np.float64)
     d = np.ascontiguousarray(depth, dtype=np.float32)
-    return _reach_kernel(
-        d, REACH_STRIDE_PX, int(stride_v_px), float(intr.fx), float(intr.fy), float(intr.cx), float(intr.cy),
-        rc[:3, :3].copy(), rc[:3, 3].copy(), float(tol_m), float(tol_per_m2),
+    return _floor_kernel(
+        d, int(su), int(sv), float(intr.fx), float(intr.fy), float(intr.cx), float(intr.cy), rc[:3, :3].copy(),
+        rc[:3, 3].copy(), float(tol_m), float(tol_q),
     )
 
 
 @numba.njit(cache=True)
-def _reach_kernel(depth, su, sv, fx, fy, cx, cy, rot, trans, tol_m, tol_q):  # pragma: no cover - numba
-    """:func:`floor_reach`, column by column."""
+def _floor_kernel(depth, su, sv, fx, fy, cx, cy, rot, trans, tol_m, tol_q):  # pragma: no cover - numba
+    """:func:`_farthest_floor`, column by column. In one column the floor's planar depth
+    grows with its distance, so the deepest floor return is the farthest."""
     h, w = depth.shape
-    out = np.zeros((w + su - 1) // su, np.float32)
+    out = np.zeros(((w + su - 1) // su, 3))
     for k in range(out.shape[0]):
         u = k * su
         for v in range(h - 1, -1, -sv):
             z = depth[v, u]
-            if not (z > 0.0) or not math.isfinite(z) or z <= out[k]:
+            if not (z > 0.0) or not math.isfinite(z) or z <= out[k, 0]:
                 continue
-            _, _, pz = pixel_point_nb(u, v, z, fx, fy, cx, cy, rot, trans)
+            px, py, pz = pixel_point_nb(u, v, z, fx, fy, cx, cy, rot, trans)
             if abs(pz) <= tol_m + tol_q * z * z:
-                out[k] = z
+                out[k, 0] = z
+                out[k, 1] = px
+                out[k, 2] = py
     return out

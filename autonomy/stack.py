@@ -64,7 +64,8 @@ LOCALIZATION_GRID = VisibilityGridConfig(cell_m=0.5, max_range_m=6.0)
 FSPF_SEED_MODULUS = 2**31
 #: Stale frames are told by comparing every this-many-th pixel with the last frame's.
 STALE_SAMPLE_STRIDE = 7
-#: ... while the odometry says the robot moved more than this (a still scene may repeat).
+#: ... while the odometry says the robot moved more than this since those pixels first
+#: came (a still scene may repeat; a stuck driver's old frame stays old when it stops).
 STALE_MOTION_M = 1e-3
 STALE_MOTION_RAD = 1e-3
 #: While relocalizing the modes are re-scored each search, and the whole map searched
@@ -317,6 +318,9 @@ class RobotStack:
         self._goal: int | None = None
         self._last_depth_key: np.ndarray | None = None
         self._maybe_stale = False
+        self._new_pixels = False
+        self._pixels_odom: np.ndarray | None = None
+        """The odometry when the last frame's pixels first came (the stale test's origin)."""
         self._fresh = False
         self._t = 0.0
         self._cgr_lines: np.ndarray | None = None
@@ -332,6 +336,7 @@ class RobotStack:
         self.perception = None
         self.events = []
         self._last_depth_key = None
+        self._pixels_odom = None
         self.odom = np.zeros(3) if pose is None else np.asarray(pose, dtype=np.float64).copy()
         if pose is None:
             if self.health is None:
@@ -380,6 +385,7 @@ class RobotStack:
         self.frame += 1
         self.frame_fault = ""
         self._maybe_stale = False
+        self._new_pixels = False
         self._fresh = False
         if depth is None:
             return self._reject("dropped")
@@ -398,6 +404,7 @@ class RobotStack:
             self.frame_fault = "invalid"
             self.frames_rejected["invalid"] += 1
         self._maybe_stale = valid and repeats
+        self._new_pixels = valid and not repeats
         self._last_depth_key = depth.ravel()[::STALE_SAMPLE_STRIDE].copy() if valid else None
         t0 = time.perf_counter()
         planes = fspf(depth, cam.intrinsics, cfg.fspf, seed=s, mount=self.mount)
@@ -478,6 +485,12 @@ class RobotStack:
             if np.all(np.isfinite(inc)):
                 self.odom = compose_pose(self.odom, inc)
                 moved = math.hypot(inc[0], inc[1]) > STALE_MOTION_M or abs(inc[2]) > STALE_MOTION_RAD
+            if self._maybe_stale and self._pixels_odom is not None:
+                # Measured from where these pixels first came, not from the last frame: a
+                # robot that stopped (blind for the refused frames) would otherwise take a
+                # stuck driver's old view for its own and pull its belief back to it.
+                since = relative_pose(self._pixels_odom, self.odom)
+                moved = math.hypot(since[0], since[1]) > STALE_MOTION_M or abs(since[2]) > STALE_MOTION_RAD
             if self._maybe_stale and moved:
                 # The wheels turned but the camera gave the same pixels: a stale frame.
                 self._fresh = False
@@ -503,6 +516,9 @@ class RobotStack:
                 self._read_estimate()
                 # How far the update moved the belief beyond the odometry (the jump test).
                 self._correction = (float(self.pose[0] - predicted[0]), float(self.pose[1] - predicted[1]))
+        if self._new_pixels:
+            self._pixels_odom = self.odom.copy()
+            self._new_pixels = False
         if t is not None and self.view_check is not None and self._fresh and self._depth is not None:
             if self.relocalizing:  # the health monitor does not listen while relocalizing
                 self.view_check.store(float(t), self.odom, self._depth)

@@ -138,7 +138,7 @@ def test_a_frame_without_a_valid_pixel_is_used_as_blocked_ahead(building, frame)
     assert stack.frame_fault == ""
 
 
-def test_the_same_pixels_while_the_wheels_turn_are_stale_and_while_still_are_not(building, monkeypatch) -> None:
+def test_the_same_pixels_are_stale_once_the_wheels_turned_since_they_came(building, monkeypatch) -> None:
     stack = make_stack(building)
     updates = count_updates(stack, monkeypatch)
     depth = wall()
@@ -153,19 +153,29 @@ def test_the_same_pixels_while_the_wheels_turn_are_stale_and_while_still_are_not
         stack.perceive(depth.copy())
         stack.localize(inc, (2 + k) / FPS)
         assert stack.frame_fault == "stale" and stack.frames_rejected["stale"] == k + 1 and updates[0] == 2
-    # Below the motion threshold it is still: used.
+    # Stopped now, the stuck driver's pixels are still those of where the robot stood
+    # before it moved: stale, though this frame's wheels did not turn.
     stack.perceive(depth)
-    stack.localize(np.array([0.5e-3, 0.0, 0.5e-3]), 4 / FPS)
-    assert stack.frame_fault == "" and updates[0] == 3
+    stack.localize(np.zeros(3), 4 / FPS)
+    assert stack.frame_fault == "stale" and stack.frames_rejected["stale"] == 3 and updates[0] == 2
     # One sampled pixel different: a new frame.
     other = depth.copy()
     other.ravel()[7 * 1000] += 0.01
     stack.perceive(other)
     stack.localize(np.array([0.02, 0.0, 0.0]), 5 / FPS)
-    assert stack.frame_fault == "" and updates[0] == 4
+    assert stack.frame_fault == "" and updates[0] == 3
+    # Repeated while the robot creeps less than the threshold in all since it came: used;
+    # once the creep adds up past it: stale.
+    for k in range(2):
+        stack.perceive(other.copy())
+        stack.localize(np.array([0.4e-3, 0.0, 0.4e-3]), (6 + k) / FPS)
+        assert stack.frame_fault == "" and updates[0] == 4 + k
+    stack.perceive(other.copy())
+    stack.localize(np.array([0.4e-3, 0.0, 0.4e-3]), 8 / FPS)
+    assert stack.frame_fault == "stale" and stack.frames_rejected["stale"] == 4 and updates[0] == 5
     # The odometry is dead-reckoned through stale frames too.
     want = START
-    for inc in ([0.01, 0.0, 0.0], [0.0, 0.0, math.radians(1.0)], [0.5e-3, 0.0, 0.5e-3], [0.02, 0.0, 0.0]):
+    for inc in ([0.01, 0.0, 0.0], [0.0, 0.0, math.radians(1.0)], [0.0, 0.0, 0.0], [0.02, 0.0, 0.0]) + ([0.4e-3, 0.0, 0.4e-3],) * 3:
         want = compose_pose(want, np.array(inc))
     np.testing.assert_allclose(stack.odom, want, atol=1e-12)
 

@@ -172,6 +172,17 @@ def test_bad_frames_are_not_used(tmp_path, kind, counter):
     assert f["error_after_m"] is not None and f["error_after_m"] < OK_M
 
 
+def test_a_stuck_drivers_old_view_is_not_taken_for_the_stopped_robots(tmp_path):
+    # Seed 3: the robot stops for the refused frames about 0.3 m from where the repeated
+    # view was seen; taking that view for its own there, CGR pulled the belief back to it
+    # and the first fresh frame after the burst disagreed with it (a false lost alarm).
+    rep = run(tmp_path, 'kind = "stale"\nat_s = 3.0\nburst_s = 3.0', 9.0, 3)
+    f, m = the_fault(rep, "stale"), rep["metrics"]
+    assert m["frames_stale"] == 90  # every frame of the burst, 3 s at 30 frames a second
+    assert m["lost_alarms"] == 0
+    assert f["error_after_m"] is not None and f["error_after_m"] < 0.1
+
+
 # --------------------------------------------------------------------------- odometry, mount
 
 def test_slip_is_recovered_without_truth(tmp_path):

@@ -541,6 +541,12 @@ class RobotStack:
         return "ok" if self.health is None else self.health.state
 
     @property
+    def correction(self) -> tuple[float, float] | None:
+        """How far this frame's localizer update moved the belief beyond the odometry's
+        prediction (world x, y; None: no update this frame)."""
+        return self._correction
+
+    @property
     def health_sample(self) -> HealthSample | None:
         """The health monitor's last sample (None without recovery)."""
         return None if self.health is None else self.health.last

@@ -154,12 +154,18 @@ class ReportConfig:
     incident_seconds: float = 8.0
     """The flight recorder keeps this many seconds before each collision incident
     (``incidents.json``, ``incidents.png``)."""
+    trace_s: tuple[float, ...] = ()
+    """[from, to] seconds: write ``trace.jsonl``, one record per frame in that window
+    (truth, belief, health, navigation: :mod:`sim.experiments.trace`); empty: none."""
 
     def __post_init__(self) -> None:
         if self.rrd_every < 1 or self.rrd_depth_downsample < 1:
             raise InputError("report: rrd_every and rrd_depth_downsample must be >= 1")
         if not (isinstance(self.incident_seconds, (int, float)) and math.isfinite(self.incident_seconds) and self.incident_seconds > 0):
             raise InputError(f"report.incident_seconds: expected a positive number of seconds, got {self.incident_seconds!r}")
+        w = self.trace_s
+        if w and not (len(w) == 2 and all(math.isfinite(v) for v in w) and 0.0 <= w[0] < w[1]):
+            raise InputError(f"report.trace_s: expected [from, to] seconds with 0 <= from < to, got {list(w)!r}")
 
 
 @dataclass(frozen=True)

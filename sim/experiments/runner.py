@@ -37,6 +37,7 @@ from sim.experiments.blackbox import (
 from sim.experiments.columns import Column
 from sim.experiments.kinds import crash_block, stopped, write_crash
 from sim.experiments.memory import release_free_memory, resident_mb
+from sim.experiments.trace import TRACE_FILE, in_window, trace_record, write_trace
 from sim.experiments.waypoints import Mission, close_leg, leg_timeout, plan_mission
 from sim.scenario import Scenario
 from sim.simulator import blueprints
@@ -179,6 +180,8 @@ class Run:
     crash_exc: Exception | None = None
     """That error."""
     rejected: list[tuple[float, str]] = field(default_factory=list)
+    trace: list[dict] = field(default_factory=list)
+    """Per-frame records of the ``report.trace_s`` window (:mod:`sim.experiments.trace`)."""
     """(time, why) of each frame the stack did not use (dropped, invalid, stale)."""
 
     @property
@@ -399,6 +402,8 @@ def tick(run: Run, recorder) -> bool:
     if stack.frame_fault:
         run.rejected.append((frame.t, stack.frame_fault))
     check_localization(run, frame)
+    if in_window(run.scn.report.trace_s, frame.t):
+        run.trace.append(trace_record(frame.t, frame.pose, stack, nav))
     run.distance_m += float(np.hypot(*(frame.pose[:2] - pose[:2])))
     run.truth.append(frame.pose)
     run.times.append(frame.t)
@@ -861,6 +866,9 @@ def write_outputs(run: Run, out: Path, metrics: dict, rrd: str | Path | None) ->
             title=f"{scn.name} (seed {run.seed}): {run.distance_m:.0f} m, {failures_title(run.failures)}, {run.collisions} contacts in {metrics['collision_incidents']} incidents",
         )
         files["trajectory_figure"] = "trajectory.png"
+    if scn.report.trace_s:
+        files["trace"] = TRACE_FILE
+        write_trace(out / TRACE_FILE, run.trace)
     assert run.blackbox is not None
     if run.blackbox.incidents:
         files["incidents"] = "incidents.json"

@@ -303,3 +303,33 @@ def test_the_trajectory_figure_keeps_fault_failures_apart_from_the_papers_resets
     np.testing.assert_array_equal(failure_markers([searching])["unknown start"], [[7.0, 8.0]])
     assert failures_title(failures + [searching]) == "1 resets (and 2 failures from faults, 1 unknown start)"
     assert failures_title([]) == "0 resets"
+
+
+def test_the_trace_window_writes_each_of_its_frames_as_the_run_saw_it(tmp_path: Path) -> None:
+    rep = run_scenario(_short_demo(["mission.max_duration_s=3.0", "report.trace_s=[1.01, 2.01]", "report.figures=false"]), tmp_path, seed=3, progress=False)
+    assert rep["files"]["trace"] == "trace.jsonl"
+    rows = [json.loads(line) for line in (tmp_path / "trace.jsonl").read_text().splitlines()]
+    truth = np.loadtxt(tmp_path / "trajectory_truth.tum")
+    est = np.loadtxt(tmp_path / "trajectory_estimate.tum")
+    inside = (truth[:, 0] >= 1.01) & (truth[:, 0] <= 2.01)
+    # One record per frame of the window (30 frames a second), in order.
+    assert len(rows) == int(inside.sum()) and 29 <= len(rows) <= 31
+    np.testing.assert_allclose([r["t"] for r in rows], truth[inside, 0], atol=1e-4)
+    # Its poses are the trajectory files' (TUM: x y z, quaternion; yaw from qz, qw).
+    np.testing.assert_allclose([r["truth"][:2] for r in rows], truth[inside, 1:3], atol=1e-3)
+    np.testing.assert_allclose([r["estimate"][:2] for r in rows], est[inside, 1:3], atol=1e-3)
+    yaw = 2.0 * np.arctan2(est[inside, 6], est[inside, 7])
+    np.testing.assert_allclose(np.cos([r["estimate"][2] for r in rows]), np.cos(yaw), atol=1e-3)
+    for r in rows:
+        assert abs(r["error_m"] - float(np.hypot(r["estimate"][0] - r["truth"][0], r["estimate"][1] - r["truth"][1]))) < 1e-3
+        assert r["health"] in ("ok", "blind", "lost", "relocalizing") and r["nav_state"] and len(r["command"]) == 3
+        assert r["points_2d"] >= 0 and "explained_fast" in r["monitor"]
+    assert any(r["points_2d"] > 0 for r in rows)
+
+
+@pytest.mark.parametrize("window", ["[2.0, 1.0]", "[1.0]", "[-1.0, 2.0]", "[1.0, nan]"])
+def test_a_bad_trace_window_is_a_one_line_error(window: str) -> None:
+    from autonomy.errors import InputError
+
+    with pytest.raises(InputError, match=r"report\.trace_s(\[1\])?.* expected"):
+        _short_demo([f"report.trace_s={window}"])

@@ -180,9 +180,10 @@ class Run:
     crash_exc: Exception | None = None
     """That error."""
     rejected: list[tuple[float, str]] = field(default_factory=list)
-    trace: list[dict] = field(default_factory=list)
-    """Per-frame records of the ``report.trace_s`` window (:mod:`sim.experiments.trace`)."""
     """(time, why) of each frame the stack did not use (dropped, invalid, stale)."""
+    trace: list[str] = field(default_factory=list)
+    """JSON lines of the ``report.trace_s`` window (:mod:`sim.experiments.trace`), kept
+    as text: a window the length of a 4 km run is then a few hundred bytes a frame."""
 
     @property
     def resets(self) -> int:

@@ -19,6 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
+from autonomy.geometry import wrap_angle
+
 __all__ = ["TRACE_FILE", "in_window", "trace_record", "write_trace"]
 
 TRACE_FILE = "trace.jsonl"
@@ -39,8 +41,8 @@ def _vec(a, nd: int = 4) -> list[float | None]:
     return [_num(v, nd) for v in np.asarray(a, dtype=np.float64).ravel()]
 
 
-def trace_record(t: float, truth: np.ndarray, stack, nav) -> dict:
-    """One frame's record: ``truth`` the true pose after the frame, ``stack`` the
+def trace_record(t: float, truth: np.ndarray, stack, nav) -> str:
+    """One frame's record as a JSON line: ``truth`` the true pose after the frame, ``stack`` the
     :class:`autonomy.stack.RobotStack` after it perceived and localized, ``nav`` the
     :class:`autonomy.navigator.NavCommand` it was driven by."""
     est = np.asarray(stack.pose, dtype=np.float64)
@@ -50,7 +52,7 @@ def trace_record(t: float, truth: np.ndarray, stack, nav) -> dict:
         "estimate": _vec(est),
         "odometry": _vec(stack.odom),
         "error_m": _num(math.hypot(est[0] - truth[0], est[1] - truth[1])),
-        "heading_error_deg": _num(math.degrees(math.atan2(math.sin(est[2] - truth[2]), math.cos(est[2] - truth[2]))), 3),
+        "heading_error_deg": _num(math.degrees(wrap_angle(est[2] - truth[2])), 3),
         "spread": _vec(stack.spread),
         "correction": None if stack.correction is None else _vec(stack.correction),
         "health": stack.health_state,
@@ -74,11 +76,11 @@ def trace_record(t: float, truth: np.ndarray, stack, nav) -> dict:
             "view_agree": _num(h.view_agree),
             "missing_fast": _num(h.missing_fast),
         }
-    return rec
+    return json.dumps(rec)
 
 
-def write_trace(path: Path, records: list[dict]) -> None:
-    """The records as JSON lines."""
+def write_trace(path: Path, lines: list[str]) -> None:
+    """The records, one JSON line each."""
     with open(path, "w", encoding="utf-8") as f:
-        for r in records:
-            f.write(json.dumps(r) + "\n")
+        for line in lines:
+            f.write(line + "\n")

@@ -252,6 +252,22 @@ class NavigatorConfig:
     near_wall_tol_m: float = 0.1
     """A near-field sight line passing this close to a map wall (through the pose
     estimate) is taken as that wall, not an unmapped obstacle (``command``)."""
+    memory_beside_s: float = 10.0
+    """Remembered points out of the camera's view within ``memory_beside_m`` of the robot
+    count this long for the avoidance, past ``memory_s``: a robot rounding furniture
+    drives beside what it saw of it for several seconds (an unmapped chair, out of view
+    for 5 s as the robot turned round its end, was forgotten, and the robot's side met
+    it). People who walk on leave their points behind this long at most, and only while
+    the robot stays near them. 0 = off (``memory_s`` alone)."""
+    memory_beside_m: float = 1.0
+    """... this far from the robot's centre at most."""
+    shadow_m: float = 0.6
+    """Each sensed point within ``memory_radius_m`` also marks the space behind it, seen
+    from the camera, this deep as occupied until the camera looks there
+    (:mod:`autonomy.obstacle_memory`): the camera sees only an obstacle's near faces, and
+    a robot rounding it meets the far ones (an unmapped chair's far corner, never seen,
+    met the robot's side as it turned round the chair). 0.6 m covers the far side of the
+    building's chairs and boxes and most of its tables; 0 = off."""
     memory_cell_m: float = 0.05
     """Remembered points are kept on a grid of this size (one point per cell)."""
     memory_radius_m: float = 2.0
@@ -270,6 +286,7 @@ class NavigatorConfig:
             "trail_s", "trail_tolerance_m", "look_back_m", "blocked_edge_s", "blocked_wait_s", "blocked_check_m",
             "long_detour_m", "long_detour_wait_s",
             "narrow_lookahead_m", "narrow_slack_m", "narrow_before_m", "narrow_horizon_m",
+            "memory_beside_s", "memory_beside_m", "shadow_m",
         )
         if self.narrow_lookahead_m > self.lookahead_m:
             raise InputError(
@@ -644,8 +661,9 @@ class Navigator:
 
         Remembered points in the region the camera sees now are replaced by the current
         observation (people move on); points right in front of the robot but closer than
-        the camera's minimum range persist until that place is seen again; the others
-        persist for ``memory_s``. Points stay remembered for ``backoff_memory_s`` for
+        the camera's minimum range persist until that place is seen again; those near the
+        robot for ``memory_beside_s``; the others for ``memory_s``. Each sensed point's
+        shadow (``shadow_m``) is remembered with it. Points stay remembered for ``backoff_memory_s`` for
         the back-off's check of the way back only (:meth:`_backoff_velocity`).
         """
         cfg, cam = self.cfg, self.camera
@@ -662,7 +680,7 @@ class Navigator:
             float(pose[2]),
             float(t),
             cfg.memory_cell_m,
-            max(cfg.memory_s, cfg.backoff_memory_s),
+            max(cfg.memory_s, cfg.backoff_memory_s, cfg.memory_beside_s),
             cfg.memory_s,
             cfg.memory_radius_m + _MEMORY_KEEP_MARGIN_M,
             cfg.memory_radius_m,
@@ -673,6 +691,9 @@ class Navigator:
             cam.max_range_m - 0.2,
             cam.min_range_m + 0.1,
             self.avoid.radius_m + 0.2,
+            cfg.memory_beside_s,
+            cfg.memory_beside_m,
+            cfg.shadow_m,
         )
         self._mem_all = out
         return out[recent]

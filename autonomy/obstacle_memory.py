@@ -6,9 +6,14 @@ cell with the latest time it was sensed. Each frame (:meth:`Navigator.remember`)
 1. remembered points the camera sees now are dropped (the current frame replaces them),
    and so are those older than ``keep_s`` unless they lie right in front of the robot,
    closer than the camera can see, and those farther than ``keep_radius`` from it;
-2. this frame's points within ``sense_radius`` join, a new cell taking the current time;
+2. this frame's points within ``sense_radius`` join, a new cell taking the current time,
+   and so does each one's shadow: the cells every ``cell`` behind it along the camera's
+   sight line, up to ``shadow_depth`` beyond it. The camera sees only an obstacle's near
+   faces; what stands behind them is unknown, and is taken as occupied until the camera
+   looks there (then step 1 replaces it with what it sees);
 3. the memory is returned in the robot frame, with the mask of what the avoidance uses
-   (seen within ``memory_s``, or in the blind zone ahead).
+   (seen within ``memory_s``; seen within ``beside_s`` and no farther than
+   ``beside_radius`` from the robot; or in the blind zone ahead).
 
 Everything kept lies within ``keep_radius`` of the robot, so the cells are merged on a
 dense local grid around it rather than by sorting a frame's few thousand sensed points;
@@ -67,6 +72,9 @@ def update_memory(
     view_r_max: float,
     blind_range: float,
     blind_half_width: float,
+    beside_s: float,
+    beside_radius: float,
+    shadow_depth: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - numba
     """One frame of the memory (steps 1-3 above).
 
@@ -74,7 +82,9 @@ def update_memory(
     this frame's obstacles in the robot frame. ``view_*`` describe the region whose
     remembered points are replaced (camera-relative, robot axes); ``blind_*`` the blind
     zone ahead. Returns the new ``mem``, ``mem_t``, all of it in the robot frame, and
-    the avoidance's mask. ``sense_radius`` must not exceed ``keep_radius``.
+    the avoidance's mask. ``sense_radius`` must not exceed ``keep_radius``, nor
+    ``beside_s`` ``keep_s``. The camera's sight lines start at (``forward``, 0), robot
+    frame; ``shadow_depth`` 0 casts no shadows.
     """
     c, s = math.cos(yaw), math.sin(yaw)
     # The local grid: every cell within keep_radius of the robot's own cell.
@@ -113,6 +123,22 @@ def update_memory(
         if when[k] == -np.inf:
             n += 1
         when[k] = t
+        # The shadow: cells every `cell` behind the point along the camera's sight line.
+        dx, dy = ox - forward, oy
+        r = math.hypot(dx, dy)
+        if shadow_depth <= 0.0 or r <= 0.0:
+            continue
+        ux, uy = dx / r, dy / r
+        for j in range(1, int(math.floor(shadow_depth / cell + 1e-9)) + 1):
+            sx, sy = ox + j * cell * ux, oy + j * cell * uy
+            if not math.hypot(sx, sy) <= keep_radius:
+                break
+            k = _grid_index(c * sx - s * sy + x, s * sx + c * sy + y, cell, cx0, cy0, side)
+            if k < 0:
+                break
+            if when[k] == -np.inf:
+                n += 1
+            when[k] = t
     new_mem = np.empty((n, 2))
     new_t = np.empty(n)
     rel = np.empty((n, 2))
@@ -127,6 +153,11 @@ def update_memory(
         rx, ry = wx - x, wy - y
         ux, uy = c * rx + s * ry, -s * rx + c * ry
         rel[m, 0], rel[m, 1] = ux, uy
-        recent[m] = t - when[k] <= memory_s or _blind_ahead(ux - forward, uy, forward, blind_range, blind_half_width)
+        age = t - when[k]
+        recent[m] = (
+            age <= memory_s
+            or (age <= beside_s and math.hypot(ux, uy) <= beside_radius)
+            or _blind_ahead(ux - forward, uy, forward, blind_range, blind_half_width)
+        )
         m += 1
     return new_mem, new_t, rel, recent

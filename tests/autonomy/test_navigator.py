@@ -62,14 +62,15 @@ def test_turns_in_place_when_the_goal_is_behind() -> None:
 
 
 def test_steers_around_an_obstacle_and_stops_for_a_wall() -> None:
-    nav = Navigator(line_graph())
+    # The box's face alone (no shadow behind it), so that the carrot stays on the plan.
+    nav = Navigator(line_graph(), NavigatorConfig(shadow_m=0.0))
     nav.set_goal(5, np.zeros(3))
     # A box 1.2 m ahead, straddling the path: steer off the straight line.
     # The way round lies just outside the camera's view: turn towards it first.
     box = np.array([[1.2, y] for y in np.linspace(-0.3, 0.3, 13)])
     cmd = nav.command(np.zeros(3), box, 0.0)
     assert cmd.state == "turning" and abs(cmd.theta_star_rad) > math.radians(29.0)
-    nav = Navigator(line_graph(), NavigatorConfig(look_first=False))
+    nav = Navigator(line_graph(), NavigatorConfig(look_first=False, shadow_m=0.0))
     nav.set_goal(5, np.zeros(3))
     cmd = nav.command(np.zeros(3), box, 0.0)
     assert cmd.state == "driving" and abs(cmd.theta_star_rad) > 0.2
@@ -153,7 +154,7 @@ def test_bad_config() -> None:
 
 
 def test_obstacle_memory_keeps_points_out_of_view_and_refreshes_points_in_view() -> None:
-    nav = Navigator(line_graph(), NavigatorConfig(memory_s=2.0))
+    nav = Navigator(line_graph(), NavigatorConfig(memory_s=2.0, memory_beside_s=0.0, shadow_m=0.0))
     nav.set_goal(5, np.zeros(3))
     person = np.array([[2.0, 0.0]])  # 2 m ahead: in view
     assert len(nav.remember(np.zeros(3), person, 0.0)) == 1
@@ -166,10 +167,46 @@ def test_obstacle_memory_keeps_points_out_of_view_and_refreshes_points_in_view()
     assert len(nav.remember(np.array([0.5, 0.0, 0.0]), np.zeros((0, 2)), 2.5)) == 0
 
 
+def test_obstacle_memory_keeps_what_stands_beside_the_robot_while_it_is_near() -> None:
+    nav = Navigator(line_graph(), NavigatorConfig(memory_s=2.0, memory_beside_s=10.0, memory_beside_m=1.0, shadow_m=0.0))
+    nav.set_goal(5, np.zeros(3))
+    nav.remember(np.zeros(3), np.array([[0.0, 0.6]]), 0.0)
+    # 0.78 m from the robot, out of view: kept past memory_s, until memory_beside_s.
+    kept = nav.remember(np.array([0.5, 0.0, 0.0]), np.zeros((0, 2)), 9.9)
+    np.testing.assert_allclose(kept, [[-0.5, 0.6]], atol=0.03)
+    assert len(nav.remember(np.array([0.5, 0.0, 0.0]), np.zeros((0, 2)), 10.1)) == 0
+    # Once the robot has moved away from it, memory_s alone holds.
+    nav.remember(np.zeros(3), np.array([[0.0, 0.6]]), 20.0)
+    assert len(nav.remember(np.array([0.9, 0.0, 0.0]), np.zeros((0, 2)), 23.0)) == 0
+    assert len(nav.remember(np.array([0.5, 0.0, 0.0]), np.zeros((0, 2)), 23.1)) == 1  # near again
+
+
+def test_obstacle_memory_takes_what_hides_behind_a_seen_face_as_occupied() -> None:
+    """A sensed point's shadow: cells every memory_cell_m behind it along the camera's
+    sight line, up to shadow_m; the camera looking there again replaces them."""
+    cfg = NavigatorConfig(memory_s=2.0, shadow_m=0.3, memory_cell_m=0.05)
+    nav = Navigator(line_graph(), cfg)
+    cam_x = nav.camera.forward_m
+    got = nav.remember(np.zeros(3), np.array([[1.5, 0.0]]), 0.0)
+    want = np.array([[1.5 + 0.05 * j, 0.0] for j in range(7)])
+    np.testing.assert_allclose(got[np.argsort(got[:, 0])], want, atol=1e-9)
+    # Off the camera's axis the shadow runs along the sight line from the camera.
+    nav = Navigator(line_graph(), cfg)
+    p = np.array([1.4, 0.4])  # 19 degrees off the camera's axis: in the replaced region
+    got = nav.remember(np.zeros(3), p[None], 0.0)
+    u = (p - [cam_x, 0.0]) / np.hypot(p[0] - cam_x, p[1])
+    ideal = p + np.outer(0.05 * np.arange(7), u)
+    # On the 5 cm grid: every ideal point has its cell remembered.
+    cells = {(round(x / 0.05), round(y / 0.05)) for x, y in got}
+    assert cells == {(round(x / 0.05), round(y / 0.05)) for x, y in ideal}
+    # The camera looks at that place again and sees it clear: the shadow is gone.
+    assert len(nav.remember(np.zeros(3), np.zeros((0, 2)), 0.1)) == 0
+
+
 def test_obstacle_memory_keeps_one_point_per_cell_with_its_latest_time() -> None:
     """Against a dict of cells: every sensed cell once, stamped with the last time seen."""
     rng = np.random.default_rng(3)
-    nav = Navigator(line_graph(), NavigatorConfig(memory_s=100.0))
+    nav = Navigator(line_graph(), NavigatorConfig(memory_s=100.0, shadow_m=0.0))
     cell = nav.cfg.memory_cell_m
     seen: dict[tuple[int, int], float] = {}
     pose = np.array([-1.0, 0.5, 0.0])
@@ -459,7 +496,7 @@ def test_backs_off_clear_of_furniture_seen_long_before() -> None:
     box = np.array([[0.6, y] for y in np.linspace(-0.2, 0.2, 9)])
     for backoff_memory_s, straight in ((30.0, False), (2.0, True)):
         # The memory's check alone (no trail: trail_s = 0; it would not back off there either).
-        nav = Navigator(line_graph(), NavigatorConfig(backoff_memory_s=backoff_memory_s, trail_s=0.0))
+        nav = Navigator(line_graph(), NavigatorConfig(backoff_memory_s=backoff_memory_s, trail_s=0.0, memory_beside_s=0.0))
         nav.set_goal(5, np.zeros(3))
         nav.remember(np.zeros(3), box, 0.0)
         turned = np.array([0.0, 0.0, math.pi])

@@ -43,10 +43,19 @@ class ReferenceMemory:
             by = -s * rel[:, 0] + c * rel[:, 1]
             in_view = in_camera_view(bx, by, self.camera, fov_fraction=0.9, near_pad_m=0.1, far_pad_m=0.2)
             near = np.hypot(rel[:, 0], rel[:, 1]) <= cfg.memory_radius_m + 0.5
-            young = t - self.mem_t <= max(cfg.memory_s, cfg.backoff_memory_s)
+            young = t - self.mem_t <= max(cfg.memory_s, cfg.backoff_memory_s, cfg.memory_beside_s)
             keep = (young | self._blind(bx, by)) & ~in_view & near
             self.mem, self.mem_t = self.mem[keep], self.mem_t[keep]
         new = obs[np.hypot(obs[:, 0], obs[:, 1]) <= cfg.memory_radius_m]
+        # Each point's shadow: every cell behind it along the camera's sight line, up to
+        # shadow_m beyond it and within the memory's keeping radius.
+        ray = new - np.array([self.camera.forward_m, 0.0])
+        unit = ray / np.maximum(np.hypot(ray[:, 0], ray[:, 1]), 1e-300)[:, None]
+        shadows = []
+        for j in range(1, int(math.floor(cfg.shadow_m / cfg.memory_cell_m + 1e-9)) + 1):
+            q = new + j * cfg.memory_cell_m * unit
+            shadows.append(q[np.hypot(q[:, 0], q[:, 1]) <= cfg.memory_radius_m + 0.5])
+        new = np.vstack([new, *shadows]) if cfg.shadow_m > 0 else new
         # A dict of cells: old ones first, then this frame's overwrite with the time now.
         cells: dict[tuple[int, int], float] = {}
         for (x, y), tt in zip(self.mem, self.mem_t, strict=True):
@@ -59,7 +68,9 @@ class ReferenceMemory:
         self.mem_t = np.array([cells[k] for k in keys])
         rel = self.mem - xy
         out = np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]]).reshape(-1, 2)
-        recent = (t - self.mem_t <= cfg.memory_s) | self._blind(out[:, 0] - self.camera.forward_m, out[:, 1])
+        age = t - self.mem_t
+        beside = (age <= cfg.memory_beside_s) & (np.hypot(out[:, 0], out[:, 1]) <= cfg.memory_beside_m)
+        recent = (age <= cfg.memory_s) | beside | self._blind(out[:, 0] - self.camera.forward_m, out[:, 1])
         return out, out[recent]
 
 
@@ -79,9 +90,11 @@ frame = st.tuples(
     st.sampled_from([0.5, 2.0]),
     st.sampled_from([0.0, 30.0]),
     st.sampled_from([0.05, 0.03, 0.2]),
+    st.sampled_from([0.0, 0.6, 0.33]),
+    st.sampled_from([0.0, 10.0]),
 )
-def test_memory_kernel_matches_the_reference(frames, memory_s: float, backoff_s: float, cell: float) -> None:
-    cfg = NavigatorConfig(memory_s=memory_s, backoff_memory_s=backoff_s, memory_cell_m=cell)
+def test_memory_kernel_matches_the_reference(frames, memory_s: float, backoff_s: float, cell: float, shadow_m: float, beside_s: float) -> None:
+    cfg = NavigatorConfig(memory_s=memory_s, backoff_memory_s=backoff_s, memory_cell_m=cell, shadow_m=shadow_m, memory_beside_s=beside_s)
     nav = Navigator(_graph(), cfg)
     ref = ReferenceMemory(cfg, nav.avoid.radius_m)
     pose, t = np.array([0.3, -0.2, 0.4]), 0.0
@@ -110,7 +123,7 @@ def test_memory_off_returns_the_frame() -> None:
 def test_non_finite_points_are_not_remembered() -> None:
     """A NaN or infinite point fails the sensing radius, as in the numpy code (a NaN
     cast to a grid cell would be an arbitrary cell)."""
-    nav = Navigator(_graph(), NavigatorConfig(memory_s=2.0))
+    nav = Navigator(_graph(), NavigatorConfig(memory_s=2.0, shadow_m=0.0))
     obs = np.array([[np.nan, 0.5], [0.0, np.inf], [-0.5, 0.6]])
     got = nav.remember(np.zeros(3), obs, 0.0)
     np.testing.assert_allclose(got, [[-0.5, 0.6]], atol=0.03)

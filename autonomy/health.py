@@ -30,7 +30,12 @@ or at once when
    times the long-term one: the belief had stopped explaining the view and then jumped
    to fit it. CGR's corrections on a tracked belief stay far smaller, so the belief
    before the jump was wrong, and a belief that wrong may have settled on the wrong one
-   of two places the map repeats (a robot carried along a corridor), or
+   of two places the map repeats (a robot carried along a corridor). Without
+   ``min_history_s`` behind the long-term average (just after a relocalization, which
+   resets it) the jump alone says lost: CGR restarted around an accepted pose corrects
+   it by a restart spread or two, and a jump of ``jump_m`` moves the belief off the
+   place the search chose to one that fits a few frames better (unmapped furniture
+   filling the view at the accepted, right, place), or
 5. the camera's view disagreed with the odometry's prediction of it from the last
    frame (:mod:`autonomy.view_check`: agreement below ``view_agree``) on
    ``view_frames`` frames in a row: the robot was carried or pushed, and its belief
@@ -108,7 +113,8 @@ class HealthConfig:
     """... within this long (net, so frame-to-frame jitter cancels) ..."""
     jump_ratio: float = 0.5
     """... while the short-term explained fraction was below this fraction of the
-    long-term one (with ``min_history_s`` behind it) in that time (0 turns the test off)."""
+    long-term one in that time, or there was not ``min_history_s`` behind the long-term
+    one yet (0 turns the test off)."""
     view_agree: float = 0.3
     """Lost at once when the view agreed with the odometry's prediction of it
     (:mod:`autonomy.view_check`) less than this ... (0 turns the test off)"""
@@ -298,7 +304,9 @@ class HealthMonitor:
         """The net correction over the last ``jump_s`` (running sums over a window)."""
         if correction is not None and math.isfinite(correction[0]) and math.isfinite(correction[1]):
             cx, cy = float(correction[0]), float(correction[1])
-            self._moves.append((t, cx, cy, self._ratio()))
+            # No long-term level yet (a relocalization reset it): the jump alone counts.
+            r = -math.inf if self.history_s < self.cfg.min_history_s else self._ratio()
+            self._moves.append((t, cx, cy, r))
             self._move_x += cx
             self._move_y += cy
         while self._moves and self._moves[0][0] <= t - self.cfg.jump_s:
@@ -311,7 +319,7 @@ class HealthMonitor:
 
     def _jumped(self) -> bool:
         cfg = self.cfg
-        if self.jump_m <= cfg.jump_m:
+        if cfg.jump_ratio <= 0.0 or self.jump_m <= cfg.jump_m:
             return False
         return any(r < cfg.jump_ratio for _, _, _, r in self._moves)
 

@@ -447,6 +447,32 @@ def test_the_same_jump_while_the_view_still_fits_is_no_alarm() -> None:
     assert max(s.jump_m for s in samples) > CFG.jump_m
 
 
+def test_a_jump_right_after_a_relocalization_is_lost_at_once() -> None:
+    """An accepted pose, right, facing furniture the map lacks: nothing in view is
+    explained, and CGR moves the belief 0.75 m and then 0.25 m in two frames to where
+    the points fit walls. The reset left no long-term level to compare with; the jump
+    alone says lost. CGR settling by a restart spread or two raises nothing."""
+    mon = HealthMonitor()
+    feed(mon, 0.0, 20.0, lambda t: 0.8, lambda t: (0.0, 0.0))
+    mon.reset(20.0)
+    _, _, samples = feed(mon, 20.0, 0.7, lambda t: 0.0, lambda t: (0.01, 0.0))
+    assert {s.state for s in samples} == {"ok"}
+    moves = iter([(0.75, 0.0), (0.25, 0.0)])
+    _, _, samples = feed(mon, 20.7, 0.3, lambda t: 0.75, lambda t: next(moves, (0.0, 0.0)))
+    assert samples[0].state == "lost" and samples[0].reason == "belief jumped"
+    # CGR converging after the restart: 0.3 m in a second.
+    mon = HealthMonitor()
+    mon.reset(0.0)
+    _, _, samples = feed(mon, 0.0, 1.0, lambda t: 0.3, lambda t: (0.3 / FPS, 0.0))
+    assert {s.state for s in samples} == {"ok"}
+    # With the test off (jump_ratio 0), not even that jump.
+    mon = HealthMonitor(HealthConfig(jump_ratio=0.0))
+    mon.reset(0.0)
+    moves = iter([(0.75, 0.0), (0.25, 0.0)])
+    _, _, samples = feed(mon, 0.0, 0.3, lambda t: 0.0, lambda t: next(moves, (0.0, 0.0)))
+    assert all(s.reason != "belief jumped" for s in samples)
+
+
 @settings(max_examples=30, deadline=None)
 @given(rate=st.floats(0.0, 0.95), sigma=st.floats(0.0, 0.05), angle=st.floats(0.0, 2 * math.pi))
 def test_jitter_and_slow_corrections_never_jump(rate, sigma, angle) -> None:

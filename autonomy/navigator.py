@@ -663,8 +663,9 @@ class Navigator:
         observation (people move on); points right in front of the robot but closer than
         the camera's minimum range persist until that place is seen again; those near the
         robot for ``memory_beside_s``; the others for ``memory_s``. Each sensed point's
-        shadow (``shadow_m``) is remembered with it. Points stay remembered for ``backoff_memory_s`` for
-        the back-off's check of the way back only (:meth:`_backoff_velocity`).
+        shadow (``shadow_m``) is remembered with it. Points stay remembered for
+        ``backoff_memory_s`` for the back-off's check of the way back only
+        (:meth:`_backoff_velocity`).
         """
         cfg, cam = self.cfg, self.camera
         obs = np.asarray(obstacles, dtype=np.float64).reshape(-1, 2)

@@ -695,9 +695,18 @@ class Navigator:
             cfg.memory_beside_s,
             cfg.memory_beside_m,
             cfg.shadow_m,
+            self._shadow_walls(pose),
+            max(1, math.ceil(WALL_STEP_M / cfg.memory_cell_m - 1e-9)),
         )
         self._mem_all = out
         return out[recent]
+
+    def _shadow_walls(self, pose: np.ndarray) -> np.ndarray:
+        """The map's wall points (world frame) where the memory's shadows end: those within
+        the memory's reach of the pose (``WALL_STEP_M`` apart, closer than a cell)."""
+        if self.cfg.shadow_m <= 0 or self._wall_pts is None:
+            return np.zeros((0, 2))
+        return self._near_walls(pose, self.cfg.memory_radius_m + _MEMORY_KEEP_MARGIN_M) + np.asarray(pose[:2], dtype=np.float64)
 
     def _blind_blocked(self, obstacles: np.ndarray) -> bool:
         """Whether an obstacle point lies in the path ahead closer than the camera sees."""

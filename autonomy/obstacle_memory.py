@@ -10,7 +10,10 @@ cell with the latest time it was sensed. Each frame (:meth:`Navigator.remember`)
    and so does each one's shadow: the cells every ``cell`` behind it along the camera's
    sight line, up to ``shadow_depth`` beyond it. The camera sees only an obstacle's near
    faces; what stands behind them is unknown, and is taken as occupied until the camera
-   looks there (then step 1 replaces it with what it sees);
+   looks there (then step 1 replaces it with what it sees). A shadow ends at the map's
+   walls (``walls``: points along them, on the grid with the cells round each): behind
+   a wall the camera sees at a grazing angle lies the room beyond, whose door the robot
+   may be about to pass, and a wall's own points cast none;
 3. the memory is returned in the robot frame, with the mask of what the avoidance uses
    (seen within ``memory_s``; seen within ``beside_s`` and no farther than
    ``beside_radius`` from the robot; or in the blind zone ahead).
@@ -75,6 +78,8 @@ def update_memory(
     beside_s: float,
     beside_radius: float,
     shadow_depth: float,
+    walls: np.ndarray,
+    wall_reach: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - numba
     """One frame of the memory (steps 1-3 above).
 
@@ -84,7 +89,9 @@ def update_memory(
     zone ahead. Returns the new ``mem``, ``mem_t``, all of it in the robot frame, and
     the avoidance's mask. ``sense_radius`` must not exceed ``keep_radius``, nor
     ``beside_s`` ``keep_s``. The camera's sight lines start at (``forward``, 0), robot
-    frame; ``shadow_depth`` 0 casts no shadows.
+    frame; ``shadow_depth`` 0 casts no shadows; ``walls`` (k, 2) are world points along
+    the map's walls, each marking the cells within ``wall_reach`` cells of its own (at
+    least the points' spacing, so that the marks join up).
     """
     c, s = math.cos(yaw), math.sin(yaw)
     # The local grid: every cell within keep_radius of the robot's own cell.
@@ -93,6 +100,16 @@ def update_memory(
     cx0 = np.int64(np.rint(x / cell)) - half
     cy0 = np.int64(np.rint(y / cell)) - half
     when = np.full(side * side, -np.inf)  # -inf: empty
+    # Where shadows end: the cells round each wall point, at least a cell either side, so
+    # that a sight line stepping a cell at a time cannot slip between two of them.
+    wall = np.zeros(side * side, dtype=np.bool_)
+    if shadow_depth > 0.0:
+        for i in range(walls.shape[0]):
+            ix = np.int64(np.rint(walls[i, 0] / cell)) - cx0
+            iy = np.int64(np.rint(walls[i, 1] / cell)) - cy0
+            for jx in range(max(ix - wall_reach, 0), min(ix + wall_reach + 1, side)):
+                for jy in range(max(iy - wall_reach, 0), min(iy + wall_reach + 1, side)):
+                    wall[jx * side + jy] = True
     n = 0
     for i in range(mem.shape[0]):
         rx, ry = mem[i, 0] - x, mem[i, 1] - y
@@ -134,7 +151,7 @@ def update_memory(
             if not math.hypot(sx, sy) <= keep_radius:
                 break
             k = _grid_index(c * sx - s * sy + x, s * sx + c * sy + y, cell, cx0, cy0, side)
-            if k < 0:
+            if k < 0 or wall[k]:
                 break
             if when[k] == -np.inf:
                 n += 1

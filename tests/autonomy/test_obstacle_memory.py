@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from autonomy.camera import DepthCamera
 from autonomy.errors import InputError
-from autonomy.navigator import Navigator, NavigatorConfig, in_camera_view
+from autonomy.navigator import WALL_STEP_M, Navigator, NavigatorConfig, in_camera_view, wall_points
 from autonomy.vectormap import NavEdge, NavGraph, NavNode
 
 
@@ -25,9 +25,20 @@ def _graph() -> NavGraph:
 class ReferenceMemory:
     """Step 1-3 of autonomy/obstacle_memory.py with numpy set operations."""
 
-    def __init__(self, cfg: NavigatorConfig, radius_m: float) -> None:
+    def __init__(self, cfg: NavigatorConfig, radius_m: float, walls: np.ndarray | None = None) -> None:
         self.cfg, self.radius_m, self.camera = cfg, radius_m, DepthCamera()
         self.mem, self.mem_t = np.zeros((0, 2)), np.zeros(0)
+        self.wall_pts = np.zeros((0, 2)) if walls is None else wall_points(walls, WALL_STEP_M)
+
+    def _wall_cells(self) -> set[tuple[int, int]]:
+        """The cells where shadows end: those within reach of a wall point's cell."""
+        cell = self.cfg.memory_cell_m
+        reach = max(1, math.ceil(WALL_STEP_M / cell - 1e-9))
+        cells = set()
+        for x, y in self.wall_pts:
+            i, j = round(x / cell), round(y / cell)
+            cells.update((i + a, j + b) for a in range(-reach, reach + 1) for b in range(-reach, reach + 1))
+        return cells
 
     def _blind(self, bx: np.ndarray, by: np.ndarray) -> np.ndarray:
         cam = self.camera
@@ -48,14 +59,19 @@ class ReferenceMemory:
             self.mem, self.mem_t = self.mem[keep], self.mem_t[keep]
         new = obs[np.hypot(obs[:, 0], obs[:, 1]) <= cfg.memory_radius_m]
         # Each point's shadow: every cell behind it along the camera's sight line, up to
-        # shadow_m beyond it and within the memory's keeping radius.
+        # shadow_m beyond it, within the memory's keeping radius and short of the walls.
         ray = new - np.array([self.camera.forward_m, 0.0])
         unit = ray / np.maximum(np.hypot(ray[:, 0], ray[:, 1]), 1e-300)[:, None]
+        walls = self._wall_cells()
         shadows = []
-        for j in range(1, int(math.floor(cfg.shadow_m / cfg.memory_cell_m + 1e-9)) + 1):
-            q = new + j * cfg.memory_cell_m * unit
-            shadows.append(q[np.hypot(q[:, 0], q[:, 1]) <= cfg.memory_radius_m + 0.5])
-        new = np.vstack([new, *shadows]) if cfg.shadow_m > 0 else new
+        for p, u in zip(new, unit, strict=True):
+            for j in range(1, int(math.floor(cfg.shadow_m / cfg.memory_cell_m + 1e-9)) + 1):
+                q = p + j * cfg.memory_cell_m * u
+                w = (c * q[0] - s * q[1] + pose[0], s * q[0] + c * q[1] + pose[1])
+                if not np.hypot(q[0], q[1]) <= cfg.memory_radius_m + 0.5 or (round(w[0] / cfg.memory_cell_m), round(w[1] / cfg.memory_cell_m)) in walls:
+                    break
+                shadows.append(q)
+        new = np.vstack([new, np.reshape(shadows, (-1, 2))])
         # A dict of cells: old ones first, then this frame's overwrite with the time now.
         cells: dict[tuple[int, int], float] = {}
         for (x, y), tt in zip(self.mem, self.mem_t, strict=True):
@@ -73,6 +89,9 @@ class ReferenceMemory:
         recent = (age <= cfg.memory_s) | beside | self._blind(out[:, 0] - self.camera.forward_m, out[:, 1])
         return out, out[recent]
 
+
+WALLS = np.array([[-1.0, 1.2, 3.0, 1.2], [1.5, -2.0, 1.5, 0.4], [-0.3, -1.0, 0.8, -0.2]])
+"""Map walls round the robot's frames, for the shadows to end at."""
 
 frame = st.tuples(
     st.floats(-0.4, 0.4),  # dx
@@ -92,11 +111,12 @@ frame = st.tuples(
     st.sampled_from([0.05, 0.03, 0.2]),
     st.sampled_from([0.0, 0.6, 0.33]),
     st.sampled_from([0.0, 10.0]),
+    st.sampled_from([None, WALLS]),
 )
-def test_memory_kernel_matches_the_reference(frames, memory_s: float, backoff_s: float, cell: float, shadow_m: float, beside_s: float) -> None:
+def test_memory_kernel_matches_the_reference(frames, memory_s: float, backoff_s: float, cell: float, shadow_m: float, beside_s: float, walls) -> None:
     cfg = NavigatorConfig(memory_s=memory_s, backoff_memory_s=backoff_s, memory_cell_m=cell, shadow_m=shadow_m, memory_beside_s=beside_s)
-    nav = Navigator(_graph(), cfg)
-    ref = ReferenceMemory(cfg, nav.avoid.radius_m)
+    nav = Navigator(_graph(), cfg, walls=walls)
+    ref = ReferenceMemory(cfg, nav.avoid.radius_m, walls)
     pose, t = np.array([0.3, -0.2, 0.4]), 0.0
     for dx, dy, dyaw, dt, n, seed in frames:
         pose = pose + np.array([dx, dy, dyaw])

@@ -12,6 +12,7 @@ import pytest
 from autonomy.camera import DepthCamera
 from autonomy.errors import InputError
 from autonomy.geometry import compose_pose
+from autonomy.navigator import NavigatorConfig
 from autonomy.stack import LocalizationConfig, RobotStack, StackConfig
 from autonomy.vectormap import NavEdge, NavGraph, NavNode, VectorMap
 from tests.helpers import one_wall_depth
@@ -91,11 +92,20 @@ def test_decides_towards_the_goal_and_stops_short_of_the_wall() -> None:
     out = stack.step(wall_depth(), None, 0.0)
     assert out.command is not None and out.command.state == "driving"
     assert out.velocity[0] > 0.1
-    # A goal past the wall's reach is still planned, but the wall 0.5 m ahead blocks.
-    near = make_stack()
+    # A goal past the wall's reach is still planned, but the wall 0.5 m ahead blocks:
+    # taking the wall's face alone, the robot turns towards a lane round it.
+    near = make_stack(navigator=NavigatorConfig(shadow_m=0.0))
     near.set_goal(1, 0.0)
     cmd = near.step(wall_depth(0.9), None, 0.0).command
     assert cmd is not None and cmd.velocity[0] < 0.3
+    # With the memory's shadow behind the face, no lane within reach is clear: it drives
+    # on towards the wall, no faster than it can stop within the open length.
+    near = make_stack()
+    near.set_goal(1, 0.0)
+    cmd = near.step(wall_depth(0.9), None, 0.0).command
+    avoid = near.cfg.avoidance
+    assert cmd is not None and cmd.open_length_m < 1.0
+    assert cmd.velocity[0] ** 2 / (2.0 * avoid.max_decel_mps2) <= cmd.open_length_m - avoid.stop_distance_m
 
 
 def test_relocalize_puts_the_belief_at_the_given_pose() -> None:

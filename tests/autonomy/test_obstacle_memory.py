@@ -160,3 +160,10 @@ def test_memory_grid_settings_are_checked() -> None:
     with pytest.raises(InputError, match=r"^navigator\.memory_cell_m: expected at least .* = 0\.01 m, got 0\.001$"):
         NavigatorConfig(memory_cell_m=0.001)
     NavigatorConfig(memory_cell_m=0.01)
+
+
+@pytest.mark.parametrize("field", ["shadow_m", "memory_beside_s", "memory_beside_m"])
+def test_shadow_and_beside_settings_are_checked(field: str) -> None:
+    for bad in (-0.1, float("nan")):
+        with pytest.raises(InputError, match=rf"^navigator\.{field}: expected a number >= 0"):
+            NavigatorConfig(**{field: bad})

@@ -672,6 +672,8 @@ class Navigator:
         if cfg.memory_s <= 0:
             self._mem_all = np.zeros((0, 2))
             return obs
+        # Wall marks reach at least the wall points' spacing, so that they join up.
+        reach = max(1, math.ceil(WALL_STEP_M / cfg.memory_cell_m - 1e-9))
         self._mem, self._mem_t, out, recent = update_memory(
             self._mem,
             self._mem_t,
@@ -695,18 +697,21 @@ class Navigator:
             cfg.memory_beside_s,
             cfg.memory_beside_m,
             cfg.shadow_m,
-            self._shadow_walls(pose),
-            max(1, math.ceil(WALL_STEP_M / cfg.memory_cell_m - 1e-9)),
+            self._shadow_walls(pose, reach),
+            reach,
         )
         self._mem_all = out
         return out[recent]
 
-    def _shadow_walls(self, pose: np.ndarray) -> np.ndarray:
-        """The map's wall points (world frame) where the memory's shadows end: those within
-        the memory's reach of the pose (``WALL_STEP_M`` apart, closer than a cell)."""
+    def _shadow_walls(self, pose: np.ndarray, reach: int) -> np.ndarray:
+        """The map's wall points (world frame, exactly as stored, so that each lands on
+        the same cell every frame) where the memory's shadows end: those whose marks,
+        ``reach`` cells round each, can touch a cell within the memory's reach of the
+        pose (``WALL_STEP_M`` apart, closer than a cell)."""
         if self.cfg.shadow_m <= 0 or self._wall_pts is None:
             return np.zeros((0, 2))
-        return self._near_walls(pose, self.cfg.memory_radius_m + _MEMORY_KEEP_MARGIN_M) + np.asarray(pose[:2], dtype=np.float64)
+        radius = self.cfg.memory_radius_m + _MEMORY_KEEP_MARGIN_M + (reach + 1) * self.cfg.memory_cell_m * math.sqrt(2.0)
+        return self._local_walls(pose, radius)
 
     def _blind_blocked(self, obstacles: np.ndarray) -> bool:
         """Whether an obstacle point lies in the path ahead closer than the camera sees."""
@@ -736,6 +741,10 @@ class Navigator:
 
     def _near_walls(self, pose: np.ndarray, radius_m: float) -> np.ndarray:
         """:meth:`map_points` relative to the robot's position, in world axes."""
+        return self._local_walls(pose, radius_m) - np.asarray(pose[:2], dtype=np.float64)
+
+    def _local_walls(self, pose: np.ndarray, radius_m: float) -> np.ndarray:
+        """The map's wall points (world frame) closer than ``radius_m`` to the robot."""
         if self._wall_pts is None or not len(self._wall_pts):
             return np.zeros((0, 2))
         xy = np.asarray(pose[:2], dtype=np.float64)
@@ -746,7 +755,7 @@ class Navigator:
             self._local = w[np.hypot(w[:, 0] - xy[0], w[:, 1] - xy[1]) < r0]
             self._local_centre, self._local_radius = xy.copy(), r0
         rel = self._local - xy
-        return rel[rel[:, 0] * rel[:, 0] + rel[:, 1] * rel[:, 1] < radius_m * radius_m]
+        return self._local[rel[:, 0] * rel[:, 0] + rel[:, 1] * rel[:, 1] < radius_m * radius_m]
 
     def _backoff_velocity(self, pose: np.ndarray, obstacles: np.ndarray) -> np.ndarray:
         """Recovery motion: back off the way the robot came, where nothing is in the way.

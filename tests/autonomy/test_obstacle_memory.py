@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from autonomy.camera import DepthCamera
@@ -113,6 +113,9 @@ frame = st.tuples(
     st.sampled_from([0.0, 10.0]),
     st.sampled_from([None, WALLS]),
 )
+# Wall points where a cell boundary falls (1.5 m on a 0.2 m grid): they must land on the
+# same cell as in the reference, whatever the robot's position.
+@example([(0.0, 0.0, 0.0, 1.0, 0, 0)] * 4 + [(0.25, 0.0, 0.0, 1.0, 0, 0), (0.0, 0.0, 0.0, 1.0, 33, 422)], 0.5, 0.0, 0.2, 0.6, 0.0, WALLS)
 def test_memory_kernel_matches_the_reference(frames, memory_s: float, backoff_s: float, cell: float, shadow_m: float, beside_s: float, walls) -> None:
     cfg = NavigatorConfig(memory_s=memory_s, backoff_memory_s=backoff_s, memory_cell_m=cell, shadow_m=shadow_m, memory_beside_s=beside_s)
     nav = Navigator(_graph(), cfg, walls=walls)

@@ -157,8 +157,15 @@ class ReportConfig:
     trace_s: tuple[float, ...] = ()
     """[from, to] seconds: write ``trace.jsonl``, one record per frame in that window
     (truth, belief, health, navigation: :mod:`sim.experiments.trace`); empty: none."""
+    checkpoint_s: float = 60.0
+    """Every this many simulated seconds, write report.json of what has finished so far
+    (marked ``"interrupted": true`` with a ``checkpoint`` block), so that a run killed
+    without warning (SIGKILL, a machine going down) keeps its metrics and events up to
+    the last checkpoint; the final report replaces it. 0: no checkpoints."""
 
     def __post_init__(self) -> None:
+        if not (isinstance(self.checkpoint_s, (int, float)) and math.isfinite(self.checkpoint_s) and self.checkpoint_s >= 0):
+            raise InputError(f"report.checkpoint_s: expected a number of seconds >= 0 (0: no checkpoints), got {self.checkpoint_s!r}")
         if self.rrd_every < 1 or self.rrd_depth_downsample < 1:
             raise InputError("report: rrd_every and rrd_depth_downsample must be >= 1")
         if not (isinstance(self.incident_seconds, (int, float)) and math.isfinite(self.incident_seconds) and self.incident_seconds > 0):

@@ -17,6 +17,7 @@ import math
 import os
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -258,7 +259,7 @@ def run_scenario(
     run = build_run(scn, seed)
     recorder = open_recording(run, rrd, spawn) if (rrd or spawn) else None
     wall_start = time.perf_counter()
-    interrupted = drive(run, recorder, progress)
+    interrupted = drive(run, recorder, progress, lambda: write_checkpoint(run, out, time.perf_counter() - wall_start))
     wall = time.perf_counter() - wall_start
     try:
         if run.crash is None:
@@ -267,7 +268,7 @@ def run_scenario(
             report = crash_report(run, out, recorder, rrd, wall)
     finally:
         run.camera.close()
-    (out / "report.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    write_report(out / "report.json", report)
     if run.crash is not None:
         c = run.crash
         # A user's mistake found only on the way (a waypoint the user's map has no path
@@ -275,6 +276,22 @@ def run_scenario(
         assert run.crash_exc is not None
         raise stopped(run.crash_exc, f"the run stopped at t = {c['t']:.2f} s (frame {c['frame']}, {c['distance_m']:.0f} m)", out / "report.json") from None
     return report
+
+
+def write_report(path: Path, report: dict) -> None:
+    """Write report.json whole or not at all (a kill mid-write leaves the one before)."""
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    os.replace(tmp, path)
+
+
+def write_checkpoint(run: Run, out: Path, wall: float) -> None:
+    """report.json of what has finished so far (``report.checkpoint_s``): the metrics,
+    events and recovery records to this frame, marked interrupted, with where it was
+    written; no figures or trajectories (the final report writes them)."""
+    report = build_report(run, run_metrics(run, wall), {"report": "report.json"}, True)
+    report["checkpoint"] = {"t": round(float(run.world.data.time), 4), "frame": run.frames, "distance_m": round(run.distance_m, 3)}
+    write_report(out / "report.json", report)
 
 
 def finish_report(run: Run, out: Path, recorder, rrd: str | Path | None, wall: float, interrupted: bool) -> dict:
@@ -333,9 +350,12 @@ def depth_backend_line(name: str, process: bool = True) -> str:
             "install Mesa's EGL with `make gl`)")
 
 
-def drive(run: Run, recorder, progress: bool | None) -> bool:
-    """The closed loop until the mission is done or its time is up; True if interrupted."""
+def drive(run: Run, recorder, progress: bool | None, checkpoint: Callable[[], None] | None = None) -> bool:
+    """The closed loop until the mission is done or its time is up; True if interrupted.
+    ``checkpoint`` is called every ``report.checkpoint_s`` simulated seconds."""
     scn, mission = run.scn, run.mission
+    every = scn.report.checkpoint_s if checkpoint is not None else 0.0
+    next_checkpoint = every
     max_frames = int(math.ceil(scn.mission.max_duration_s / run.sim.frame_dt))
     show = progress if progress is not None else (scn.report.progress and sys.stderr.isatty())
     bar = None
@@ -357,6 +377,10 @@ def drive(run: Run, recorder, progress: bool | None) -> bool:
         while run.frames < max_frames and not mission.done:
             if not tick(run, recorder):
                 break
+            if every > 0 and run.world.data.time >= next_checkpoint:
+                assert checkpoint is not None
+                checkpoint()
+                next_checkpoint = run.world.data.time + every
             if bar is not None:
                 bar.update(1)
                 if run.frames % 30 == 0:

@@ -183,6 +183,38 @@ def test_background_run_stops_on_a_signal_and_keeps_its_report(tmp_path: Path, s
     assert rep["interrupted"] is True and rep["metrics"]["frames"] > 0
 
 
+def test_a_killed_run_keeps_its_last_checkpoint(tmp_path: Path) -> None:
+    """SIGKILL cannot be caught: what a run killed that way keeps is the report of its
+    last checkpoint, whole (never a half-written file), with the metrics and events to
+    then, marked interrupted."""
+    root = Path(__file__).resolve().parents[2]
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "sim.cli", "run", str(SCENARIOS_DIR / "demo.toml"), "--out", str(out),
+           "--set", 'map.name="small_floor"', "--set", "report.checkpoint_s=0.5", "--set", "report.progress=false"]
+    proc = subprocess.Popen(cmd, cwd=root, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+
+    def two_checkpoints() -> bool:
+        try:
+            return json.loads((out / "report.json").read_text())["checkpoint"]["t"] >= 1.0
+        except (OSError, ValueError, KeyError):
+            return False
+
+    interrupt(proc, signal.SIGKILL, two_checkpoints)
+    assert proc.returncode == -signal.SIGKILL
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["interrupted"] is True and rep["scenario"] == "demo"
+    c, m = rep["checkpoint"], rep["metrics"]
+    assert c["t"] >= 1.0 and m["frames"] == c["frame"] > 0 and m["duration_s"] == pytest.approx(c["t"], abs=1e-3)
+    assert m["distance_m"] == pytest.approx(c["distance_m"], abs=1e-3) and rep["resources"]["rss_peak_mb"] > 0
+
+
+def test_the_final_report_replaces_the_checkpoints(tmp_path: Path) -> None:
+    rep = run_scenario(_short_demo(["mission.max_duration_s=1.5", "report.checkpoint_s=0.5"]), tmp_path, seed=1, progress=False)
+    on_disk = json.loads((tmp_path / "report.json").read_text())
+    assert "checkpoint" not in rep and "checkpoint" not in on_disk and on_disk["interrupted"] is False
+    assert on_disk["metrics"]["frames"] == rep["metrics"]["frames"] > 0 and not (tmp_path / "report.json.tmp").exists()
+
+
 @pytest.mark.slow
 def test_demo_scenario_end_to_end_via_cli(tmp_path: Path) -> None:
     """The README's demo (the long run shortened to 300 m), headless through the CLI with

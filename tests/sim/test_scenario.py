@@ -74,6 +74,7 @@ def test_defaults_are_the_papers_and_design_values(tmp_path: Path) -> None:
         (BASE + "seed = 3\n", r"unknown key 'map\.seed'"),
         ("name = \n", r"s\.toml: invalid TOML"),
         (BASE + "[avoidance.near_field]\nmin_invalid_fraction = 1.5\n", r"s\.toml: avoidance\.near_field\.min_invalid_fraction: expected a number in"),
+        (BASE + "[report]\ncheckpoint_s = -1.0\n", r"s\.toml: report\.checkpoint_s: expected a number of seconds >= 0"),
         (BASE + "[avoidance.near_field]\nband_max_depth_m = 0.5\n", r"s\.toml: avoidance\.near_field: no image row sees the floor"),
     ],
 )

@@ -215,6 +215,18 @@ def test_the_final_report_replaces_the_checkpoints(tmp_path: Path) -> None:
     assert on_disk["metrics"]["frames"] == rep["metrics"]["frames"] > 0 and not (tmp_path / "report.json.tmp").exists()
 
 
+
+def test_checkpoints_do_not_change_the_run(tmp_path: Path) -> None:
+    reps = {}
+    for every in (0.0, 0.2):
+        out = tmp_path / str(every)
+        reps[every] = run_scenario(_short_demo(["mission.max_duration_s=2.0", f"report.checkpoint_s={every}"]), out, seed=4, progress=False)
+        reps[every]["truth"] = (out / "trajectory_truth.tum").read_text()
+    keep = ("frames", "distance_m", "loc_error_mean_m", "loc_error_max_m", "collisions")
+    assert {k: reps[0.0]["metrics"][k] for k in keep} == {k: reps[0.2]["metrics"][k] for k in keep}
+    assert reps[0.0]["truth"] == reps[0.2]["truth"] and reps[0.0]["recovery"] == reps[0.2]["recovery"]
+
+
 @pytest.mark.slow
 def test_demo_scenario_end_to_end_via_cli(tmp_path: Path) -> None:
     """The README's demo (the long run shortened to 300 m), headless through the CLI with

@@ -379,7 +379,12 @@ def drive(run: Run, recorder, progress: bool | None, checkpoint: Callable[[], No
                 break
             if every > 0 and run.world.data.time >= next_checkpoint:
                 assert checkpoint is not None
-                checkpoint()
+                try:
+                    checkpoint()
+                except OSError as exc:
+                    # A full disk should not end a long run: the final report is tried anyway.
+                    print(f"{scn.name}: could not write the checkpoint report.json ({exc}); the run goes on without checkpoints", file=sys.stderr)
+                    every = 0.0
                 next_checkpoint = run.world.data.time + every
             if bar is not None:
                 bar.update(1)

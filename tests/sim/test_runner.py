@@ -215,6 +215,23 @@ def test_the_final_report_replaces_the_checkpoints(tmp_path: Path) -> None:
     assert on_disk["metrics"]["frames"] == rep["metrics"]["frames"] > 0 and not (tmp_path / "report.json.tmp").exists()
 
 
+def test_a_checkpoint_that_cannot_be_written_does_not_stop_the_run(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import sim.experiments.runner as runner
+
+    calls = []
+
+    def full_disk(*args) -> None:
+        calls.append(args)
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(runner, "write_checkpoint", full_disk)
+    rep = run_scenario(_short_demo(["mission.max_duration_s=1.5", "report.checkpoint_s=0.5"]), tmp_path, seed=1, progress=False)
+    assert len(calls) == 1 and rep["interrupted"] is False and rep["metrics"]["duration_s"] >= 1.4
+    err = [ln for ln in capsys.readouterr().err.splitlines() if "checkpoint" in ln]
+    assert err == ["demo: could not write the checkpoint report.json ([Errno 28] No space left on device); the run goes on without checkpoints"]
+
 
 def test_checkpoints_do_not_change_the_run(tmp_path: Path) -> None:
     reps = {}

@@ -392,6 +392,12 @@ def drive(run: Run, recorder, progress: bool | None, checkpoint: Callable[[], No
                     bar.set_postfix(dist=f"{run.distance_m:.0f}m", wp=f"{mission.reached}/{len(mission.waypoints)}", coll=run.collisions, resets=run.resets)
     except KeyboardInterrupt:
         return True
+    except SystemError as exc:
+        # Ctrl-C (or SIGTERM) landing inside a numba kernel comes out as a SystemError
+        # caused by the KeyboardInterrupt: an interruption, not a bug.
+        if not isinstance(exc.__cause__, KeyboardInterrupt):
+            note_crash(run, exc)
+        return True
     except Exception as exc:  # a bug in the loop: report what finished (run_scenario raises after)
         note_crash(run, exc)
         return True

@@ -394,3 +394,19 @@ def test_a_bad_trace_window_is_a_one_line_error(window: str) -> None:
 
     with pytest.raises(InputError, match=r"report\.trace_s(\[1\])?.* expected"):
         _short_demo([f"report.trace_s={window}"])
+
+
+def test_an_interrupt_inside_a_numba_kernel_is_an_interruption(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A signal handled while a numba kernel runs surfaces as a SystemError caused by the
+    KeyboardInterrupt: the run is interrupted (report kept), not crashed."""
+    import sim.experiments.runner as runner
+
+    def interrupted_kernel(run, recorder) -> bool:
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as k:
+            raise SystemError("CPUDispatcher(update_memory) returned a result with an exception set") from k
+
+    monkeypatch.setattr(runner, "tick", interrupted_kernel)
+    rep = run_scenario(_short_demo(["mission.max_duration_s=1.0"]), tmp_path, seed=1, progress=False)
+    assert rep["interrupted"] is True and rep["error"] is None and not (tmp_path / "crash.txt").exists()

@@ -350,6 +350,18 @@ def depth_backend_line(name: str, process: bool = True) -> str:
             "install Mesa's EGL with `make gl`)")
 
 
+def _caused_by_interrupt(exc: BaseException) -> bool:
+    """Whether a KeyboardInterrupt lies anywhere down ``exc``'s chain of causes."""
+    seen: set[int] = set()
+    cur: BaseException | None = exc
+    while cur is not None and id(cur) not in seen:
+        if isinstance(cur, KeyboardInterrupt):
+            return True
+        seen.add(id(cur))
+        cur = cur.__cause__ if cur.__cause__ is not None else cur.__context__
+    return False
+
+
 def drive(run: Run, recorder, progress: bool | None, checkpoint: Callable[[], None] | None = None) -> bool:
     """The closed loop until the mission is done or its time is up; True if interrupted.
     ``checkpoint`` is called every ``report.checkpoint_s`` simulated seconds."""
@@ -394,8 +406,9 @@ def drive(run: Run, recorder, progress: bool | None, checkpoint: Callable[[], No
         return True
     except SystemError as exc:
         # Ctrl-C (or SIGTERM) landing inside a numba kernel comes out as a SystemError
-        # caused by the KeyboardInterrupt: an interruption, not a bug.
-        if not isinstance(exc.__cause__, KeyboardInterrupt):
+        # caused by the KeyboardInterrupt, one or several levels down (numba's own
+        # helpers wrap it again): an interruption, not a bug.
+        if not _caused_by_interrupt(exc):
             note_crash(run, exc)
         return True
     except Exception as exc:  # a bug in the loop: report what finished (run_scenario raises after)

@@ -402,11 +402,34 @@ def test_an_interrupt_inside_a_numba_kernel_is_an_interruption(tmp_path: Path, m
     import sim.experiments.runner as runner
 
     def interrupted_kernel(run, recorder) -> bool:
+        # As numba raises it: the interrupt wrapped in SystemErrors three levels deep.
         try:
-            raise KeyboardInterrupt
-        except KeyboardInterrupt as k:
-            raise SystemError("CPUDispatcher(update_memory) returned a result with an exception set") from k
+            try:
+                try:
+                    raise KeyboardInterrupt
+                except KeyboardInterrupt as k:
+                    raise SystemError("_numba_unpickle returned a result with an exception set") from k
+            except SystemError as e1:
+                raise SystemError("_numba_unpickle returned a result with an exception set") from e1
+        except SystemError as e2:
+            raise SystemError("CPUDispatcher(update_memory) returned a result with an exception set") from e2
 
     monkeypatch.setattr(runner, "tick", interrupted_kernel)
     rep = run_scenario(_short_demo(["mission.max_duration_s=1.0"]), tmp_path, seed=1, progress=False)
     assert rep["interrupted"] is True and rep["error"] is None and not (tmp_path / "crash.txt").exists()
+
+
+def test_a_system_error_without_an_interrupt_is_a_crash(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A SystemError with no KeyboardInterrupt down its chain is a bug: crash report written."""
+    import sim.experiments.runner as runner
+
+    def broken_kernel(run, recorder) -> bool:
+        try:
+            raise ValueError("bad array")
+        except ValueError as v:
+            raise SystemError("CPUDispatcher(update_memory) returned a result with an exception set") from v
+
+    monkeypatch.setattr(runner, "tick", broken_kernel)
+    with pytest.raises(Exception):
+        run_scenario(_short_demo(["mission.max_duration_s=1.0"]), tmp_path, seed=1, progress=False)
+    assert (tmp_path / "crash.txt").exists()

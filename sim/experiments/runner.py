@@ -404,15 +404,12 @@ def drive(run: Run, recorder, progress: bool | None, checkpoint: Callable[[], No
                     bar.set_postfix(dist=f"{run.distance_m:.0f}m", wp=f"{mission.reached}/{len(mission.waypoints)}", coll=run.collisions, resets=run.resets)
     except KeyboardInterrupt:
         return True
-    except SystemError as exc:
-        # Ctrl-C (or SIGTERM) landing inside a numba kernel comes out as a SystemError
-        # caused by the KeyboardInterrupt, one or several levels down (numba's own
-        # helpers wrap it again): an interruption, not a bug.
+    except Exception as exc:
+        # A bug in the loop: report what finished (run_scenario raises after). But Ctrl-C
+        # (or SIGTERM) landing inside a numba kernel comes out as a SystemError caused by
+        # the KeyboardInterrupt, one or several levels down: an interruption, not a bug.
         if not _caused_by_interrupt(exc):
             note_crash(run, exc)
-        return True
-    except Exception as exc:  # a bug in the loop: report what finished (run_scenario raises after)
-        note_crash(run, exc)
         return True
     finally:
         if bar is not None:

@@ -422,6 +422,7 @@ def test_an_interrupt_inside_a_numba_kernel_is_an_interruption(tmp_path: Path, m
 def test_a_system_error_without_an_interrupt_is_a_crash(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A SystemError with no KeyboardInterrupt down its chain is a bug: crash report written."""
     import sim.experiments.runner as runner
+    from sim.experiments.kinds import RunCrashed
 
     def broken_kernel(run, recorder) -> bool:
         try:
@@ -430,6 +431,6 @@ def test_a_system_error_without_an_interrupt_is_a_crash(tmp_path: Path, monkeypa
             raise SystemError("CPUDispatcher(update_memory) returned a result with an exception set") from v
 
     monkeypatch.setattr(runner, "tick", broken_kernel)
-    with pytest.raises(Exception):
+    with pytest.raises(RunCrashed, match="SystemError"):
         run_scenario(_short_demo(["mission.max_duration_s=1.0"]), tmp_path, seed=1, progress=False)
-    assert (tmp_path / "crash.txt").exists()
+    assert "ValueError: bad array" in (tmp_path / "crash.txt").read_text()

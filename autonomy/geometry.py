@@ -161,6 +161,34 @@ def segments_cross_nb(ax: float, ay: float, bx: float, by: float, cx: float, cy:
     return d3 * d4 < 0.0
 
 
+def segments_near_points(segments: np.ndarray, points: np.ndarray, tol_m: float) -> np.ndarray:
+    """Per segment (K, 4): whether any of ``points`` (M, 2) lies closer than ``tol_m`` to it.
+
+    Each point's distance is ``hypot(r - s d)`` with ``r`` the point less the segment's
+    start, ``d`` the segment, and ``s = clip(r . d / max(d . d, 1e-12), 0, 1)``, in that
+    order; a segment stops at its first point that is near."""
+    seg = np.ascontiguousarray(segments, dtype=np.float64).reshape(-1, 4)
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
+    out = np.zeros(len(seg), dtype=np.bool_)
+    if len(seg) and len(pts):
+        _segments_near_points_nb(seg, pts, float(tol_m), out)
+    return out
+
+
+@numba.njit(cache=True)
+def _segments_near_points_nb(seg: np.ndarray, pts: np.ndarray, tol: float, out: np.ndarray) -> None:  # pragma: no cover - numba
+    for k in range(seg.shape[0]):
+        ax, ay = seg[k, 0], seg[k, 1]
+        dx, dy = seg[k, 2] - ax, seg[k, 3] - ay
+        dd = max(dx * dx + dy * dy, 1e-12)
+        for m in range(pts.shape[0]):
+            rx, ry = pts[m, 0] - ax, pts[m, 1] - ay
+            s = min(max((rx * dx + ry * dy) / dd, 0.0), 1.0)
+            if math.hypot(rx - s * dx, ry - s * dy) < tol:
+                out[k] = True
+                break
+
+
 # --------------------------------------------------------------------------- segment distances
 
 

@@ -45,6 +45,7 @@ from autonomy.geometry import (
     crosses_any,
     point_segment_distance,
     point_segment_projection,
+    segments_near_points,
     wrap_angle,
     wrap_angles,
 )
@@ -1219,15 +1220,7 @@ class Navigator:
         if not len(lines):
             return np.zeros(0, dtype=bool)
         reach = float(np.max(np.hypot(lines[:, 2], lines[:, 3]))) + self.cfg.near_wall_tol_m
-        w = self.map_points(pose, reach, with_seen)
-        if not len(w):
-            return np.zeros(len(lines), dtype=bool)
-        a, d = lines[None, :, :2], lines[None, :, 2:] - lines[None, :, :2]
-        rel = w[:, None, :] - a
-        dd = np.maximum(np.einsum("mkj,mkj->mk", d, d), 1e-12)
-        s = np.clip(np.einsum("mkj,mkj->mk", rel, d) / dd, 0.0, 1.0)
-        gap = np.hypot(rel[..., 0] - s * d[..., 0], rel[..., 1] - s * d[..., 1])
-        return (gap < self.cfg.near_wall_tol_m).any(axis=0)
+        return segments_near_points(lines, self.map_points(pose, reach, with_seen), self.cfg.near_wall_tol_m)
 
     def command(
         self, pose: np.ndarray, obstacles: np.ndarray, t: float, near_lines: np.ndarray | None = None, seen: np.ndarray | None = None

@@ -19,6 +19,7 @@ from autonomy.geometry import (
     polyline_clear,
     relative_pose,
     segments_cross_nb,
+    segments_near_points,
     sensor_view,
     wrap_angle,
     wrap_angle_nb,
@@ -137,3 +138,38 @@ def test_polyline_clear_without_points_or_path_is_clear() -> None:
     # A point beyond the length checked does not count.
     assert polyline_clear(np.array([[0.0, 0.0], [10.0, 0.0]]), np.array([[5.0, 0.0]]), 3.0, 0.3)
     assert not polyline_clear(np.array([[0.0, 0.0], [10.0, 0.0]]), np.array([[2.9, 0.1]]), 3.0, 0.3)
+
+
+@settings(max_examples=200)
+@given(
+    st.lists(st.tuples(*[st.floats(-5, 5)] * 4), min_size=1, max_size=12),
+    st.lists(st.tuples(st.floats(-6, 6), st.floats(-6, 6)), min_size=0, max_size=30),
+    st.floats(0.01, 2.0),
+)
+def test_segments_near_points_against_brute_distance(segs, pts, tol) -> None:
+    """Per segment, any point closer than ``tol``: against each point's distance to the
+    segment sampled densely (zero-length segments included)."""
+    segs, pts = np.array(segs).reshape(-1, 4), np.array(pts).reshape(-1, 2)
+    got = segments_near_points(segs, pts, tol)
+    assert got.shape == (len(segs),) and got.dtype == bool
+    for k, seg in enumerate(segs):
+        d = min((_brute_distance(p, seg) for p in pts), default=math.inf)
+        if abs(d - tol) > 2e-3:  # the sampling's resolution
+            assert bool(got[k]) == (d < tol)
+
+
+def test_segments_near_points_computes_its_documented_expression_bit_for_bit() -> None:
+    """The kernel's distances are the docstring's expression in numpy, to the last bit:
+    with ``tol`` set to one of those distances exactly, ``<`` decides the same way."""
+    rng = np.random.default_rng(3)
+    for _ in range(300):
+        segs, pts = rng.uniform(-3, 3, (int(rng.integers(1, 40)), 4)), rng.uniform(-4, 4, (int(rng.integers(1, 80)), 2))
+        segs[: len(segs) // 3, 2:] = segs[: len(segs) // 3, :2]
+        a, d = segs[None, :, :2], segs[None, :, 2:] - segs[None, :, :2]
+        r = pts[:, None, :] - a
+        s = np.clip(np.einsum("mkj,mkj->mk", r, d) / np.maximum(np.einsum("mkj,mkj->mk", d, d), 1e-12), 0.0, 1.0)
+        gap = np.hypot(r[..., 0] - s * d[..., 0], r[..., 1] - s * d[..., 1])
+        tol = float(gap.ravel()[rng.integers(gap.size)])
+        assert np.array_equal(segments_near_points(segs, pts, tol), (gap < tol).any(axis=0))
+    assert not segments_near_points(np.zeros((2, 4)), np.zeros((0, 2)), 1.0).any()
+    assert segments_near_points(np.zeros((0, 4)), np.zeros((3, 2)), 1.0).shape == (0,)

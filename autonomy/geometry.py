@@ -166,7 +166,10 @@ def segments_near_points(segments: np.ndarray, points: np.ndarray, tol_m: float)
 
     Each point's distance is ``hypot(r - s d)`` with ``r`` the point less the segment's
     start, ``d`` the segment, and ``s = clip(r . d / max(d . d, 1e-12), 0, 1)``, in that
-    order; a segment stops at its first point that is near."""
+    order; a segment stops at its first point that is near. This is the navigator's near
+    field test's own expression (a zero-length segment through the 1e-12 floor, not
+    :func:`_point_segment_nb`'s branch), kept so its sight lines stay bit-for-bit what the
+    earlier numpy code gave."""
     seg = np.ascontiguousarray(segments, dtype=np.float64).reshape(-1, 4)
     pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
     out = np.zeros(len(seg), dtype=np.bool_)

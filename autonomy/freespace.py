@@ -15,12 +15,25 @@ buildings): then a cell on that border-connected space still counts as inside wh
 stop nearly all of ``enclosure_rays`` rays cast from it (a point outside a building sees
 open space over at least a quarter turn, except in a courtyard). Regions smaller than
 ``min_region_area_m2`` (gaps in double walls, pillar interiors) are voids, not regions.
+
+Open maps (a parking lot, a campus of building faces): walls that close no inside. There
+the free space is every cell within the convex hull of the walls' end points where the
+robot fits. A map is taken as open when ``open_map`` says so, or (``open_map`` None) when
+its walls are sparse (under ``open_wall_density`` metres of wall per square metre of the
+hull; the real building floors we measured have 0.2 to 1.2, a parking lot and a campus
+under 0.03) or the inside found is under ``open_fraction`` of the hull's area.
+
+Large maps: when the extent needs more than ``max_cells`` cells of ``cell_m``, the grid
+is made coarser (the smallest whole centimetre that fits, at most half the robot's
+radius). Every clearance threshold subtracts the coarser grid's error bound, so the free
+space only shrinks (narrow doors may close); it never admits a place nearer a wall than
+the robot's radius.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numba
 import numpy as np
@@ -29,9 +42,13 @@ from autonomy.constants import ROBOT_RADIUS_M
 from autonomy.errors import InputError, require_int, require_positive
 from autonomy.vectormap import VectorMap
 
-__all__ = ["FreeSpaceConfig", "FreeSpace", "build_free_space", "rasterise", "grid_distance", "label_components", "MAX_GRID_CELLS"]
+__all__ = [
+    "FreeSpaceConfig", "FreeSpace", "build_free_space", "rasterise", "grid_distance", "label_components", "MAX_GRID_CELLS",
+    "grid_cell_m", "convex_hull", "hull_mask", "polygon_area",
+]
 
-#: The largest grid :func:`build_free_space` makes (a 250 x 250 m floor at 5 cm cells).
+#: The largest grid :func:`build_free_space` makes by default (a 250 x 250 m floor at 5 cm
+#: cells; larger maps get coarser cells).
 MAX_GRID_CELLS = 25_000_000
 _FAR = 1e20
 _RASTER_STEP = 1.0 / 8.0  # rasteriser sample step, in cells
@@ -53,11 +70,25 @@ class FreeSpaceConfig:
     """A border-connected cell is inside when at most this many of its rays leave the map."""
     min_region_area_m2: float = 1.0
     """Smaller connected free areas are voids (no region, no graph nodes)."""
+    open_map: bool | None = None
+    """True: the walls close no inside, all free space within their convex hull counts.
+    False: only what the walls enclose. None: open when the enclosed free area is under
+    ``open_fraction`` of the hull's area."""
+    open_fraction: float = 0.05
+    """Open-map detection: an enclosed free area under this share of the hull (real floors: 16 % or more)."""
+    open_wall_density: float = 0.08
+    """Open-map detection: fewer metres of wall per square metre of the hull than this."""
+    max_cells: int = MAX_GRID_CELLS
+    """Largest grid: a larger extent gets coarser cells (at most half the robot radius)."""
 
     def __post_init__(self) -> None:
-        require_positive(self, "free_space.", "cell_m", "robot_radius_m", "padding_m", "min_region_area_m2")
+        require_positive(self, "free_space.", "cell_m", "robot_radius_m", "padding_m", "min_region_area_m2", "open_fraction",
+                         "open_wall_density")
         require_int(self, "free_space.", "enclosure_rays", minimum=4)
         require_int(self, "free_space.", "enclosure_max_escapes", minimum=0)
+        require_int(self, "free_space.", "max_cells", minimum=10_000)
+        if self.open_map not in (None, True, False):
+            raise InputError(f"free_space.open_map: expected true, false or none, got {self.open_map!r}")
         if self.padding_m < self.robot_radius_m + 2 * self.cell_m:
             raise InputError(
                 f"free_space.padding_m: expected at least robot_radius_m + 2 cells "
@@ -179,12 +210,15 @@ def label_components(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # prag
 
 
 @numba.njit(cache=True)
-def _ray_escapes(coarse: np.ndarray, cy: float, cx: float, n_rays: int) -> int:  # pragma: no cover - numba
+def _ray_escapes(coarse: np.ndarray, cy: float, cx: float, n_rays: int, stop: int) -> int:  # pragma: no cover - numba
     """How many of ``n_rays`` rays from (cy, cx) (coarse-cell units) leave the grid
-    without meeting a wall cell."""
+    without meeting a wall cell (counting stops at ``stop``: in open space nearly every
+    ray escapes, and each is long)."""
     ny, nx = coarse.shape
     esc = 0
     for r in range(n_rays):
+        if esc >= stop:
+            break
         a = 2.0 * math.pi * r / n_rays
         dy, dx = 0.5 * math.sin(a), 0.5 * math.cos(a)
         y, x = cy, cx
@@ -221,7 +255,7 @@ def _enclosed(
                         any_open = True
             if not any_open:
                 continue
-            if _ray_escapes(coarse, by / k + 0.5, bx / k + 0.5, n_rays) > max_escapes:
+            if _ray_escapes(coarse, by / k + 0.5, bx / k + 0.5, n_rays, max_escapes + 1) > max_escapes:
                 continue
             for y in range(by, min(by + k, ny)):
                 for x in range(bx, min(bx + k, nx)):
@@ -234,6 +268,100 @@ def _enclosed(
 def grid_distance(cells: np.ndarray, cell_m: float) -> np.ndarray:
     """(ny, nx) float32 distance in metres from each cell centre to the nearest True cell."""
     return (np.sqrt(_edt(cells)) * cell_m).astype(np.float32)
+
+
+@numba.njit(cache=True)
+def _fill_rows(lo: np.ndarray, hi: np.ndarray, x0: float, cell: float, nx: int) -> np.ndarray:  # pragma: no cover - numba
+    """(ny, nx) mask of the cells whose centre x lies in [lo[row], hi[row]]."""
+    ny = lo.shape[0]
+    out = np.zeros((ny, nx), dtype=np.bool_)
+    for y in range(ny):
+        if not lo[y] <= hi[y]:
+            continue
+        a = max(0, int(math.ceil((lo[y] - x0) / cell - 0.5)))
+        b = min(nx - 1, int(math.floor((hi[y] - x0) / cell - 0.5)))
+        for x in range(a, b + 1):
+            out[y, x] = True
+    return out
+
+
+def convex_hull(points: np.ndarray) -> np.ndarray:
+    """(H, 2) counter-clockwise convex hull of (N, 2) points (Andrew's monotone chain)."""
+    p = np.unique(np.asarray(points, dtype=np.float64).reshape(-1, 2), axis=0)
+    if len(p) < 3:
+        return p
+
+    def half(pts: np.ndarray) -> list:
+        h: list = []
+        for q in pts:
+            while len(h) >= 2 and (h[-1][0] - h[-2][0]) * (q[1] - h[-2][1]) - (h[-1][1] - h[-2][1]) * (q[0] - h[-2][0]) <= 0:
+                h.pop()
+            h.append(q)
+        return h
+
+    lower, upper = half(p), half(p[::-1])
+    return np.array(lower[:-1] + upper[:-1])
+
+
+def polygon_area(poly: np.ndarray) -> float:
+    """Area of a simple polygon (shoelace)."""
+    if len(poly) < 3:
+        return 0.0
+    x, y = poly[:, 0], poly[:, 1]
+    return float(0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+
+
+def hull_mask(hull: np.ndarray, origin: tuple[float, float], cell: float, shape: tuple[int, int]) -> np.ndarray:
+    """(ny, nx) cells whose centre lies in the convex polygon ``hull``."""
+    ny, nx = shape
+    yc = origin[1] + (np.arange(ny) + 0.5) * cell
+    lo, hi = np.full(ny, np.inf), np.full(ny, -np.inf)
+    if len(hull) >= 3:
+        a, b = hull, np.roll(hull, -1, axis=0)
+        for (ax, ay), (bx, by) in zip(a, b, strict=True):
+            ylo, yhi = min(ay, by), max(ay, by)
+            on = (yc >= ylo) & (yc <= yhi)
+            if not on.any():
+                continue
+            if ay == by:
+                x = np.array([min(ax, bx), max(ax, bx)])
+                lo[on] = np.minimum(lo[on], x[0])
+                hi[on] = np.maximum(hi[on], x[1])
+            else:
+                x = ax + (yc[on] - ay) * (bx - ax) / (by - ay)
+                lo[on] = np.minimum(lo[on], x)
+                hi[on] = np.maximum(hi[on], x)
+    return _fill_rows(lo, hi, origin[0], cell, nx)
+
+
+def grid_cell_m(extent: tuple[float, float, float, float], cfg: FreeSpaceConfig) -> tuple[float, float, int, int]:
+    """(cell size, padding, nx, ny) of the grid for a map of ``extent``: ``cfg.cell_m``,
+    or the smallest whole centimetre above it that keeps the grid within ``cfg.max_cells``.
+    None of it fits (a map in millimetres, or larger than the coarsest grid allows): a
+    one-line :class:`InputError`."""
+    xmin, ymin, xmax, ymax = extent
+    w, h = xmax - xmin, ymax - ymin
+
+    def size(c: float) -> tuple[float, int, int]:
+        pad = max(cfg.padding_m, cfg.robot_radius_m + 2 * c)
+        return pad, int(math.ceil((w + 2 * pad) / c)), int(math.ceil((h + 2 * pad) / c))
+
+    c = cfg.cell_m
+    pad, nx, ny = size(c)
+    if nx * ny <= cfg.max_cells:
+        return c, pad, nx, ny
+    coarsest = max(c, cfg.robot_radius_m / 2)
+    c = max(c, math.ceil(100 * math.sqrt(nx * ny / cfg.max_cells) * cfg.cell_m - 1e-9) / 100)
+    while c <= coarsest + 1e-12:
+        pad, nx, ny = size(c)
+        if nx * ny <= cfg.max_cells:
+            return c, pad, nx, ny
+        c = round(c + 0.01, 2)
+    _, nx, ny = size(cfg.cell_m)
+    raise InputError(
+        f"a {w:.0f} x {h:.0f} m map needs {nx * ny:,} cells of {cfg.cell_m} m, more than {cfg.max_cells:,} "
+        f"even at {coarsest:.3f} m cells (half the robot radius); is it in millimetres?"
+    )
 
 
 def _coarsen(wall: np.ndarray, k: int) -> np.ndarray:
@@ -267,6 +395,10 @@ class FreeSpace:
     """Free area (robot-sized) outside the building, within the padded extent."""
     n_voids: int
     """Inside free components smaller than ``min_region_area_m2``."""
+    is_open: bool = False
+    """The map was taken as open: its regions are all free space within the walls' convex hull."""
+    hull_area_m2: float = 0.0
+    """Area of the convex hull of the walls' end points."""
     _cells: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
@@ -347,34 +479,37 @@ class FreeSpace:
 
 def build_free_space(vm: VectorMap, cfg: FreeSpaceConfig = FreeSpaceConfig()) -> FreeSpace:  # noqa: B008
     """Rasterise ``vm``, take its distance transform and find the inside regions where a
-    robot of ``cfg.robot_radius_m`` fits. One-line :class:`InputError` when there are none."""
+    robot of ``cfg.robot_radius_m`` fits (on an open map: all free space within the walls'
+    convex hull). The returned ``config`` holds the cell size used (coarser than
+    ``cfg.cell_m`` on a large map). One-line :class:`InputError` when there is no region."""
     name = vm.name or "the map"
     seg = np.ascontiguousarray(vm.segments, dtype=np.float64)
     xmin, ymin, xmax, ymax = vm.extent()
-    c, pad = cfg.cell_m, cfg.padding_m
+    try:
+        c, pad, nx, ny = grid_cell_m((xmin, ymin, xmax, ymax), cfg)
+    except InputError as e:
+        raise InputError(f"{name}: {e}") from None
+    if c != cfg.cell_m or pad != cfg.padding_m:
+        cfg = replace(cfg, cell_m=c, padding_m=pad)
     x0, y0 = xmin - pad, ymin - pad
-    nx = int(math.ceil((xmax - xmin + 2 * pad) / c))
-    ny = int(math.ceil((ymax - ymin + 2 * pad) / c))
-    if nx * ny > MAX_GRID_CELLS:
-        raise InputError(
-            f"{name}: a {xmax - xmin:.0f} x {ymax - ymin:.0f} m map needs {nx * ny:,} cells of {c} m "
-            f"(limit {MAX_GRID_CELLS:,}); is it in millimetres, or give a larger free_space.cell_m"
-        )
     wall = rasterise(seg, x0, y0, c, ny, nx)
     dist = grid_distance(wall, c)
     robot_ok = dist - np.float32(cfg.error_m) >= cfg.robot_radius_m
-    lab, sizes = label_components(robot_ok)
-    border = np.unique(np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]]))
-    border = border[border >= 0].astype(np.int64)
-    inside = robot_ok.copy()
-    outside_cells = 0
-    if border.size:
-        k = max(1, int(round(0.25 / c)))
-        enclosed = _enclosed(lab, border, _coarsen(wall, k), k, cfg.enclosure_rays, cfg.enclosure_max_escapes)
-        on_border = np.isin(lab, border)
-        inside &= ~on_border | enclosed
-        outside_cells = int(np.count_nonzero(on_border & ~enclosed))
+    hull = convex_hull(seg.reshape(-1, 2))
+    hull_area = polygon_area(hull)
+    is_open = bool(cfg.open_map) or (cfg.open_map is None and vm.total_length_m < cfg.open_wall_density * hull_area)
+    inside = None
+    if not is_open:
+        inside = _enclosed_free(robot_ok, wall, cfg)
+        if cfg.open_map is None and hull_area > 0:
+            is_open = np.count_nonzero(inside) * c * c < cfg.open_fraction * hull_area
+    if is_open:
+        inside = robot_ok & hull_mask(hull, (x0, y0), c, (ny, nx))
+    assert inside is not None
+    outside_cells = int(np.count_nonzero(robot_ok & ~inside))
+    del robot_ok
     reg, rsizes = label_components(inside)
+    del inside
     area = rsizes * c * c
     keep = np.flatnonzero(area >= cfg.min_region_area_m2)
     order = keep[np.argsort(-area[keep], kind="stable")]
@@ -382,10 +517,11 @@ def build_free_space(vm: VectorMap, cfg: FreeSpaceConfig = FreeSpaceConfig()) ->
     remap[order] = np.arange(order.size, dtype=np.int32)
     region = remap[reg]  # reg == -1 maps to remap[-1] == -1
     if order.size == 0:
-        if outside_cells:
+        if outside_cells and cfg.open_map is not True:
             raise InputError(
                 f"{name}: no space inside the walls fits a robot of radius {cfg.robot_radius_m:.2f} m; "
-                "only the outside of the building is free (the walls enclose no room for it)"
+                "only the outside of the building is free (the walls enclose no room for it; "
+                "an open site such as a parking lot: --open)"
             )
         raise InputError(f"{name}: no free space fits a robot of radius {cfg.robot_radius_m:.2f} m")
     return FreeSpace(
@@ -397,4 +533,22 @@ def build_free_space(vm: VectorMap, cfg: FreeSpaceConfig = FreeSpaceConfig()) ->
         region_area_m2=area[order].astype(np.float64),
         outside_area_m2=float(outside_cells * c * c),
         n_voids=int(rsizes.size - order.size),
+        is_open=is_open,
+        hull_area_m2=hull_area,
     )
+
+
+def _enclosed_free(robot_ok: np.ndarray, wall: np.ndarray, cfg: FreeSpaceConfig) -> np.ndarray:
+    """The cells of ``robot_ok`` inside the building: not connected to the grid's border,
+    or connected but enclosed by walls (the ray test of the module docstring)."""
+    lab, _ = label_components(robot_ok)
+    border = np.unique(np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]]))
+    border = border[border >= 0].astype(np.int64)
+    inside = robot_ok.copy()
+    if border.size:
+        # rays from blocks of about 0.25 m, fewer on a large grid (the cost grows as the
+        # cube of the number of blocks per side)
+        k = max(1, int(round(0.25 / cfg.cell_m)), int(math.ceil(math.sqrt(robot_ok.size / 4e6))))
+        enclosed = _enclosed(lab, border, _coarsen(wall, k), k, cfg.enclosure_rays, cfg.enclosure_max_escapes)
+        inside &= ~np.isin(lab, border) | enclosed
+    return inside

@@ -45,7 +45,20 @@ def _graph_config(args: argparse.Namespace):
 
     if not (math.isfinite(args.robot_radius) and args.robot_radius > 0):
         raise InputError(f"--robot-radius: expected a positive number of metres, got {args.robot_radius!r}")
-    return GraphBuildConfig(free_space=FreeSpaceConfig(robot_radius_m=args.robot_radius))
+    open_map = True if args.open else False if args.closed else None
+    return GraphBuildConfig(free_space=FreeSpaceConfig(robot_radius_m=args.robot_radius, open_map=open_map))
+
+
+def _free_space_lines(fs, how: str) -> list[str]:
+    """What ``map check`` says about the grid and an open map."""
+    lines = []
+    if fs.cell_m != 0.05:
+        lines.append(f"  grid: {fs.cell_m:.2f} m cells ({fs.shape[1]} x {fs.shape[0]}), coarser than 0.05 m to fit the "
+                     f"extent; clearances are within {fs.error_m:.3f} m, on the safe side")
+    if fs.is_open:
+        lines.append(f"  open map ({how}): free space is everything within the walls' convex hull "
+                     f"({fs.hull_area_m2:.0f} m2) where the robot fits")
+    return lines
 
 
 def cmd_map_check(args: argparse.Namespace) -> int:
@@ -70,7 +83,10 @@ def cmd_map_check(args: argparse.Namespace) -> int:
     areas = ", ".join(f"{a:.1f}" for a in fs.region_area_m2[1:6]) + (", ..." if fs.n_regions > 6 else "")
     print(f"  free space for a robot of radius {cfg.free_space.robot_radius_m:.2f} m: {fs.region_area_m2.sum():.1f} m2 "
           f"in {fs.n_regions} region(s); largest {fs.region_area_m2[0]:.1f} m2" + (f"; others {areas} m2" if fs.n_regions > 1 else ""))
-    print(f"  outside the building: {fs.outside_area_m2:.1f} m2 (no nodes); voids: {fs.n_voids}")
+    for line in _free_space_lines(fs, "--open" if args.open else "detected: few walls or no inside; --closed to refuse"):
+        print(line)
+    where = "outside the walls' convex hull" if fs.is_open else "outside the building"
+    print(f"  {where}: {fs.outside_area_m2:.1f} m2 (no nodes); voids: {fs.n_voids}")
     main = int(np.count_nonzero(gb.component == 0))
     print(f"  navigation graph: {gb.graph.n_nodes} nodes, {gb.graph.n_edges} edges, {gb.n_components} component(s); "
           f"the largest has {main} nodes")
@@ -108,6 +124,8 @@ def cmd_map_graph(args: argparse.Namespace) -> int:
     dt = time.perf_counter() - t0
     out.write_text(with_key(format_navgraph_json(gb.graph), graph_key(vm, cfg)), encoding="utf-8")
     print(f"wrote {out}: {gb.summary()} in {dt:.2f} s")
+    for line in _free_space_lines(gb.free_space, "--open" if args.open else "detected; --closed to refuse"):
+        print(line)
     if gb.n_components > 1:
         sizes = np.bincount(gb.component)
         print(f"  components by size: {', '.join(str(int(n)) for n in sizes[:8])}{', ...' if sizes.size > 8 else ''} nodes "
@@ -479,18 +497,28 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _add_open_flags(c) -> None:
+    g = c.add_mutually_exclusive_group()
+    g.add_argument("--open", action="store_true",
+                   help="the walls close no inside (a parking lot, a campus): free space is all of their convex hull")
+    g.add_argument("--closed", action="store_true",
+                   help="only what the walls enclose is free (default: open when the walls are sparse or enclose almost nothing)")
+
+
 def _add_map_commands(sub) -> None:
     pm = sub.add_parser("map", help="inspect, convert and draw vector maps")
     msub = pm.add_subparsers(dest="map_command", required=True, parser_class=_Parser)
     c = msub.add_parser("check", help="validate a map; print segments, extent, free space, regions and graph size")
     c.add_argument("file", help="a vector map file or a building name in sim/assets")
     c.add_argument("--robot-radius", type=float, default=0.3, help="robot footprint radius in metres (default 0.3)")
+    _add_open_flags(c)
     c.set_defaults(func=cmd_map_check)
     c = msub.add_parser("graph", help="make a navigation graph (navigation.json) from the walls alone")
     c.add_argument("file", help="a vector map file or a building name in sim/assets")
     c.add_argument("--out", help="output *.navigation.json (default: beside the map)")
     c.add_argument("--force", action="store_true", help="overwrite the default output if it exists")
     c.add_argument("--robot-radius", type=float, default=0.3, help="robot footprint radius in metres (default 0.3)")
+    _add_open_flags(c)
     c.add_argument("--quality", action="store_true", help="also print coverage, clearance and path stretch")
     c.add_argument("--compare", help="also measure this (e.g. hand-made) *.navigation.json the same way")
     c.add_argument("--png", help="also draw the map and the graph to this PNG")

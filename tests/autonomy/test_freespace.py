@@ -10,7 +10,16 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from autonomy.errors import InputError
-from autonomy.freespace import FreeSpaceConfig, _edt, build_free_space, label_components
+from autonomy.freespace import (
+    FreeSpaceConfig,
+    _edt,
+    build_free_space,
+    convex_hull,
+    grid_cell_m,
+    hull_mask,
+    label_components,
+    polygon_area,
+)
 from autonomy.geometry import point_segment_distance
 from sim.simulator import blueprints
 from tests.helpers import box_segments, segments_map
@@ -128,3 +137,100 @@ def test_a_rectangle_room_has_the_area_a_robot_centre_can_reach(w, h, x0, y0):
     lo = (w - 2 * R - 2 * fs.error_m - 2 * fs.cell_m) * (h - 2 * R - 2 * fs.error_m - 2 * fs.cell_m)
     assert fs.n_regions == 1
     assert lo - 1e-9 <= fs.region_area_m2[0] <= expected + 1e-9
+
+
+# --------------------------------------------------------------------------- open and large maps
+
+
+def _open_site() -> list:
+    """Four L-shaped wall pieces at the corners of a 40 x 30 m lot: they close nothing."""
+    return [(0, 0, 8, 0), (0, 0, 0, 6), (40, 0, 32, 0), (40, 0, 40, 6),
+            (40, 30, 32, 30), (40, 30, 40, 24), (0, 30, 8, 30), (0, 30, 0, 24)]
+
+
+def test_an_open_site_is_detected_and_its_free_space_is_the_walls_hull():
+    vm = segments_map(_open_site())
+    with pytest.raises(InputError, match="--open"):
+        build_free_space(vm, FreeSpaceConfig(open_map=False))
+    fs = build_free_space(vm)
+    assert fs.is_open and fs.n_regions == 1
+    assert fs.hull_area_m2 == pytest.approx(40 * 30)
+    # independent reference: the rectangle less a robot-radius band along the 56 m of wall
+    # (half-discs at the free ends and the corners' quarter discs are second order)
+    lo = 40 * 30 - 56 * (R + fs.error_m + fs.cell_m) - 8 * np.pi * R * R
+    assert lo <= fs.region_area_m2[0] <= 40 * 30 - 56 * R + 1e-9
+    inside = fs.region_at(np.array([[20.0, 15.0], [2.0, 15.0], [20.0, 1.0]]))
+    assert inside.tolist() == [0, 0, 0]
+    assert fs.region_at(np.array([[-1.0, 15.0], [20.0, 31.0]])).tolist() == [-1, -1]
+
+
+def test_a_building_is_not_taken_as_open_and_open_can_be_forced_or_refused():
+    rows = box_segments(0, 0, 20, 10) + [(10, 0, 10, 4), (10, 6, 10, 10)]
+    assert not build_free_space(segments_map(rows)).is_open
+    forced = build_free_space(segments_map(rows), FreeSpaceConfig(open_map=True))
+    assert forced.is_open and forced.n_regions == 1  # the box is its own hull
+    with pytest.raises(InputError, match="free_space.open_map"):
+        FreeSpaceConfig(open_map="yes")  # type: ignore[arg-type]
+
+
+def test_convex_hull_and_its_mask_against_brute_force():
+    rng = np.random.default_rng(7)
+    pts = rng.normal(0, 5, (200, 2))
+    hull = convex_hull(pts)
+    # every point is inside or on every edge's left side
+    for a, b in zip(hull, np.roll(hull, -1, axis=0), strict=True):
+        cross = (b[0] - a[0]) * (pts[:, 1] - a[1]) - (b[1] - a[1]) * (pts[:, 0] - a[0])
+        assert (cross >= -1e-9).all()
+    assert polygon_area(np.array([[0, 0], [4, 0], [4, 3], [0, 3]], float)) == pytest.approx(12)
+    origin, cell, shape = (-20.0, -20.0), 0.5, (80, 80)
+    m = hull_mask(hull, origin, cell, shape)
+    i, j = np.mgrid[0 : shape[0], 0 : shape[1]]
+    c = np.stack([origin[0] + (j + 0.5) * cell, origin[1] + (i + 0.5) * cell], axis=-1).reshape(-1, 2)
+    ok = np.ones(len(c), dtype=bool)
+    for a, b in zip(hull, np.roll(hull, -1, axis=0), strict=True):
+        ok &= (b[0] - a[0]) * (c[:, 1] - a[1]) - (b[1] - a[1]) * (c[:, 0] - a[0]) >= -1e-9
+    assert (m.ravel() == ok).mean() > 0.995  # cells on the boundary may go either way
+    assert m.sum() * cell * cell == pytest.approx(polygon_area(hull), rel=0.05)
+
+
+def test_a_large_extent_gets_a_coarser_grid_within_the_cell_bound():
+    rows = box_segments(0, 0, 300, 200) + box_segments(100, 50, 110, 60)
+    cfg = FreeSpaceConfig(max_cells=4_000_000)
+    c, pad, nx, ny = grid_cell_m((0, 0, 300, 200), cfg)
+    assert nx * ny <= 4_000_000 and c > cfg.cell_m
+    assert c <= R / 2 and c == pytest.approx(round(c, 2))
+    fs = build_free_space(segments_map(rows), cfg)
+    assert fs.cell_m == c and fs.wall.size <= 4_000_000
+    assert fs.config.padding_m >= R + 2 * c
+    # what a robot's centre can reach, less the conservative band of the coarser grid
+    expected = (300 - 2 * R) * (200 - 2 * R) - (10 + 2 * R) * (10 + 2 * R)
+    assert expected * 0.985 <= fs.region_area_m2[0] <= expected
+    # the clearance stays a lower bound of the exact distance on the coarse grid
+    rng = np.random.default_rng(8)
+    i, j = rng.integers(0, fs.shape[0], 2000), rng.integers(0, fs.shape[1], 2000)
+    exact = point_segment_distance(fs.centres(i, j), np.array(rows, float)).min(axis=1)
+    assert (fs.clearance()[i, j] <= exact + 1e-6).all()
+
+
+def test_too_large_even_for_the_coarsest_grid_is_a_one_line_error_naming_the_map():
+    with pytest.raises(InputError, match=r"test: a 3000 x 3000 m map needs .* is it in millimetres") as e:
+        build_free_space(segments_map(box_segments(0, 0, 3000, 3000)))
+    assert "\n" not in str(e.value)
+    with pytest.raises(InputError, match="free_space.max_cells"):
+        FreeSpaceConfig(max_cells=10)
+
+
+@settings(max_examples=15, deadline=None)
+@given(w=st.floats(200.0, 600.0), h=st.floats(200.0, 600.0), cap=st.integers(1_000_000, 30_000_000))
+def test_the_chosen_grid_never_exceeds_the_cell_bound(w, h, cap):
+    cfg = FreeSpaceConfig(max_cells=cap)
+    try:
+        c, pad, nx, ny = grid_cell_m((0.0, 0.0, w, h), cfg)
+    except InputError:
+        # only when even half the robot radius is too fine
+        p = R + 2 * 0.15
+        assert (w + 2 * p) * (h + 2 * p) / 0.15**2 > cap * 0.98
+        return
+    assert nx * ny <= cap
+    assert cfg.cell_m <= c <= R / 2 + 1e-12
+    assert nx * c >= w + 2 * pad and ny * c >= h + 2 * pad

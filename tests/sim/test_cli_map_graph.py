@@ -92,3 +92,21 @@ def test_map_check_lists_the_loader_findings_and_convert_rescales(tmp_path, caps
     m = tmp_path / "m.vectormap.txt"
     assert main(["map", "convert", str(mm), str(m), "--scale", "0.001"]) == 0
     assert load_vectormap(m).extent() == (0.0, 0.0, 10.0, 6.0)
+
+
+def test_an_open_site_is_detected_or_declared_and_refused_with_closed(tmp_path, capsys):
+    lot = tmp_path / "lot.vectormap.txt"
+    # two walls that close nothing: a lot between them
+    save_vectormap(segments_map([(0, 0, 30, 0), (0, 20, 30, 20), (0, 0, 0, 3)]), lot)
+    assert main(["map", "check", str(lot)]) == 0
+    out = capsys.readouterr().out
+    assert "open map (detected" in out and "in 1 region(s)" in out
+    free = float(out.split("radius 0.30 m: ")[1].split(" m2")[0])
+    assert 0.9 * 30 * 20 < free < 30 * 20
+    assert main(["map", "graph", str(lot), "--open", "--out", str(tmp_path / "g.json")]) == 0
+    assert "open map (--open)" in capsys.readouterr().out
+    assert load_navgraph(tmp_path / "g.json").n_nodes > 0
+    assert main(["map", "check", str(lot), "--closed"]) == 2
+    assert "--open" in err_line(capsys)
+    assert main(["map", "check", str(lot), "--open", "--closed"]) == 2
+    assert "not allowed with" in err_line(capsys)

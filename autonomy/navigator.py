@@ -51,7 +51,7 @@ from autonomy.geometry import (
 )
 from autonomy.nearfield import line_points
 from autonomy.obstacle_memory import update_memory
-from autonomy.planner import NoPathError, astar, edge_key, path_points
+from autonomy.planner import NoPathError, astar, edge_key, parts, path_points
 from autonomy.vectormap import NavGraph
 
 _MEMORY_KEEP_MARGIN_M = 0.5
@@ -343,6 +343,8 @@ class Navigator:
         self.graph = graph
         self.cfg = cfg
         self.avoid = avoid
+        self._part = parts(graph, cfg.exclude_stairs)
+        """The connected part of the graph each node (by index) lies in (:func:`autonomy.planner.parts`)."""
         self.camera = camera
         self.walls = None if walls is None else np.asarray(walls, dtype=np.float64).reshape(-1, 4)
         self._wall_pts = None if self.walls is None else wall_points(self.walls, WALL_STEP_M)
@@ -438,25 +440,55 @@ class Navigator:
         return float(on.min()), float(on.max())
 
     # -- planning ----------------------------------------------------------------------
-    def nearest_reachable_node(self, xy: np.ndarray, avoid: np.ndarray | None = None) -> int:
+    def nearest_reachable_node(self, xy: np.ndarray, avoid: np.ndarray | None = None, goal_id: int | None = None) -> int:
         """The closest node that can be reached in a straight line (no wall in between).
 
         ``avoid``: world points (an obstacle that blocked an edge) the straight line must
         not run into (none within the avoidance radius of it, ahead); when every nearby
-        node's line does, as if there were none."""
+        node's line does, as if there were none. ``goal_id``: only the nodes with a path
+        to that node count (a plan must go on from its first node)."""
+        return self._nearest_in_reach(xy, avoid, goal_id)[0]
+
+    def _nearest_in_reach(self, xy: np.ndarray, avoid: np.ndarray | None, goal_id: int | None) -> tuple[int, bool]:
+        """:meth:`nearest_reachable_node`, and whether a straight line reaches it: of the
+        30 nodes nearest ``xy`` (of the goal's part), the first no wall (nor ``avoid``)
+        stands in front of; when every one has a wall in front, the nearest (False)."""
         nodes = self.graph.node_xy()
         order = np.argsort(np.hypot(nodes[:, 0] - xy[0], nodes[:, 1] - xy[1]))
+        if goal_id is not None:
+            order = order[self._part[order] == self._part[self.graph.index_of(goal_id)]]
         if avoid is not None and len(avoid):
             walls = self.walls if self.walls is not None and len(self.walls) else None
             for k in order[:30]:
                 if (walls is None or not crosses_any(xy, nodes[k], walls)) and not self._line_runs_into(xy, nodes[k], avoid):
-                    return int(self.graph.nodes[int(k)].id)
+                    return int(self.graph.nodes[int(k)].id), True
         if self.walls is None or not len(self.walls):
-            return int(self.graph.nodes[int(order[0])].id)
+            return int(self.graph.nodes[int(order[0])].id), True
         for k in order[:30]:
             if not crosses_any(xy, nodes[k], self.walls):
-                return int(self.graph.nodes[int(k)].id)
-        return int(self.graph.nodes[int(order[0])].id)
+                return int(self.graph.nodes[int(k)].id), True
+        return int(self.graph.nodes[int(order[0])].id), False
+
+    def connected(self, a_id: int, b_id: int) -> bool:
+        """Whether the graph has a path between two nodes (stairs as the plans take them)."""
+        return bool(self._part[self.graph.index_of(a_id)] == self._part[self.graph.index_of(b_id)])
+
+    def reaches(self, goal_ids, pose: np.ndarray) -> np.ndarray:
+        """Which of the goals (node ids) a plan from the pose sets out to without going
+        through a map wall: the nearest node in reach (:meth:`nearest_reachable_node`)
+        has a path to the goal, or a node of the goal's part is in reach in a straight
+        line. :meth:`set_goal` plans to the others too, from a node behind a wall: the
+        best a robot can do when its belief is wrong, but no place to choose to go."""
+        ids = np.atleast_1d(np.asarray(goal_ids, dtype=np.int64))
+        xy = np.asarray(pose[:2], dtype=np.float64)
+        part = self._part[[self.graph.index_of(int(g)) for g in ids]].reshape(-1)
+        here = self._part[self.graph.index_of(self.nearest_reachable_node(xy))]
+        ok = part == here
+        for p in np.unique(part[~ok]):
+            # One node of the part stands for all of it (the start depends on the part).
+            g = int(ids[np.flatnonzero(part == p)[0]])
+            ok[part == p] = self._nearest_in_reach(xy, None, g)[1]
+        return ok
 
     def _line_runs_into(self, p: np.ndarray, q: np.ndarray, pts: np.ndarray) -> bool:
         """Whether a robot driving straight from ``p`` to ``q`` meets one of the points
@@ -477,8 +509,12 @@ class Navigator:
 
         The plan leaves out the edges marked blocked (``blocked``), and does not start
         through what blocked them; when that leaves no path, the marks are forgotten and
-        the plan uses the whole graph (:class:`autonomy.planner.NoPathError` when even
-        that has none)."""
+        the plan uses the whole graph. It starts at the nearest node in reach that has a
+        path to the goal: a pose whose nearest node lies in a part of the graph cut off
+        from the goal (a wrong belief, a robot carried off) is the robot's to recover
+        from, so the plan is made from the nearest node that reaches the goal and this
+        never fails for where the pose is (whether the goal is the user's mistake is for
+        the caller to tell, from where the robot truly started: :meth:`reaches`)."""
         self._prune_blocked(t)
         nodes = self._route(goal_id, np.asarray(pose[:2]))
         if nodes is None:
@@ -490,14 +526,16 @@ class Navigator:
 
     def _route(self, goal_id: int, xy: np.ndarray) -> list[int] | None:
         """Graph nodes of a plan from ``xy`` to the goal without the blocked edges, not
-        starting through what blocked them; None when the blocked edges leave no path
-        (:class:`autonomy.planner.NoPathError` when there are none and still no path)."""
+        starting through what blocked them; None when the blocked edges leave no path.
+        Without blocked edges there is always one: it starts in the goal's part of the
+        graph (:meth:`nearest_reachable_node`)."""
         excluded = tuple(self.blocked)
         if not excluded:
-            return astar(self.graph, self.nearest_reachable_node(xy), goal_id, exclude_stairs=self.cfg.exclude_stairs)
+            return astar(self.graph, self.nearest_reachable_node(xy, goal_id=goal_id), goal_id, exclude_stairs=self.cfg.exclude_stairs)
         avoid = np.vstack([self._blocked_pts.get(e, np.zeros((0, 2))) for e in excluded])
         try:
-            return astar(self.graph, self.nearest_reachable_node(xy, avoid), goal_id, exclude_stairs=self.cfg.exclude_stairs, excluded=excluded)
+            start = self.nearest_reachable_node(xy, avoid, goal_id)
+            return astar(self.graph, start, goal_id, exclude_stairs=self.cfg.exclude_stairs, excluded=excluded)
         except NoPathError:
             return None
 
@@ -507,7 +545,7 @@ class Navigator:
         xy = np.asarray(pose[:2], dtype=np.float64)
         nodes = self._route(goal_id, xy)
         if nodes is None:
-            nodes = astar(self.graph, self.nearest_reachable_node(xy), goal_id, exclude_stairs=self.cfg.exclude_stairs)
+            nodes = astar(self.graph, self.nearest_reachable_node(xy, goal_id=goal_id), goal_id, exclude_stairs=self.cfg.exclude_stairs)
         return np.vstack([xy[None, :], path_points(self.graph, nodes)])
 
     def plan_length(self, goal_id: int, pose: np.ndarray) -> float:

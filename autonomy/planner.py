@@ -1,4 +1,4 @@
-"""Global planning on a navigation graph: A* between nodes, nearest reachable node.
+"""Global planning on a navigation graph: A* between nodes, the graph's connected parts.
 
 Edge costs are Euclidean lengths; the heuristic is the straight-line distance to the goal
 (admissible, so A* returns a shortest path). Edges flagged ``has_stairs`` are excluded by
@@ -19,7 +19,12 @@ from autonomy.vectormap import NavGraph
 
 
 class NoPathError(InputError):
-    """Start and goal are not connected in the (filtered) graph."""
+    """Start and goal are not connected in the (filtered) graph.
+
+    An InputError: raised out of the robot stack only for a goal that the place the
+    robot was started at has no path to (the user's map or mission is wrong). A pose
+    belief cut off from the goal is the robot's to recover from: the navigator plans
+    from a node that reaches the goal (:func:`parts`)."""
 
 
 def edge_key(a: int, b: int) -> tuple[int, int]:
@@ -78,6 +83,27 @@ def astar(
                 parent[v] = u
                 heapq.heappush(heap, (nc + math.hypot(xy[v, 0] - gx, xy[v, 1] - gy), nc, v))
     raise NoPathError(f"no path from node {start_id} to node {goal_id} in the navigation graph")
+
+
+def parts(graph: NavGraph, exclude_stairs: bool = True) -> np.ndarray:
+    """(N,) label by node index of the connected part of the graph each node lies in,
+    with the edges :func:`astar` uses by default (no stairs when ``exclude_stairs``):
+    two nodes have a path between them exactly when their labels are equal."""
+    adj = adjacency(graph, exclude_stairs)
+    label = np.full(len(adj), -1, dtype=np.int64)
+    n = 0
+    for s in range(len(adj)):
+        if label[s] >= 0:
+            continue
+        label[s] = n
+        todo = [s]
+        while todo:
+            for v, _ in adj[todo.pop()]:
+                if label[v] < 0:
+                    label[v] = n
+                    todo.append(v)
+        n += 1
+    return label
 
 
 def path_length(graph: NavGraph, path: list[int]) -> float:

@@ -51,6 +51,7 @@ from autonomy.mount_check import MountCheck, MountCheckConfig
 from autonomy.navigator import NavCommand, Navigator, NavigatorConfig
 from autonomy.nearfield import NearField, line_points_indexed
 from autonomy.observation import ObservationConfig, correspond
+from autonomy.planner import NoPathError
 from autonomy.raycast import SceneQuery, VisibilityGridConfig, load_or_build
 from autonomy.relocalization import GlobalLocalizer, Mode, RelocalizationConfig, Scan
 from autonomy.straight_runs import on_straight_runs
@@ -316,6 +317,9 @@ class RobotStack:
         self._walls: tuple[float, int, int] | None = None
         self._near_seen = np.zeros((0, 7))
         self._goal: int | None = None
+        self._home: np.ndarray | None = None
+        """Where the robot was started (x, y; :meth:`reset`), or the first goal when the
+        start was unknown: a goal with no path from there is the user's mistake."""
         self._last_depth_key: np.ndarray | None = None
         self._maybe_stale = False
         self._new_pixels = False
@@ -338,6 +342,7 @@ class RobotStack:
         self._last_depth_key = None
         self._pixels_odom = None
         self.odom = np.zeros(3) if pose is None else np.asarray(pose, dtype=np.float64).copy()
+        self._home = None if pose is None else self.odom[:2].copy()
         if pose is None:
             if self.health is None:
                 raise InputError("robot stack: an unknown start pose needs localization with recovery enabled")
@@ -922,10 +927,14 @@ class RobotStack:
         (:func:`autonomy.active_localization.drive_value`), the one most nearly ahead (the
         robot goes on the way it faces) among equals.
 
-        The plan is made on the best mode's map. Where the modes disagree about the way
-        out of a room (offices that mirror each other), a wrong mode's plan can lead into
-        a wall the robot has already seen; the scan rules such plans out, and when it
-        rules out all of them the one most nearly ahead is tried."""
+        The plan is made on the best mode's map, and only to nodes it can set out to from
+        the pose there (:meth:`Navigator.reaches`): a mode in a part of the graph cut off
+        from the others (a wrong mode in a room the map has no door to) has none of
+        those, and the robot looks round again (None) rather than set out through a wall.
+        Where the modes disagree about the way out of a room (offices that mirror each
+        other), a wrong mode's plan can lead into a wall the robot has already seen; the
+        scan rules such plans out, and when it rules out all of them the one most nearly
+        ahead is tried."""
         nav = self.navigator
         assert nav is not None
         rec = self.cfg.recovery
@@ -934,6 +943,9 @@ class RobotStack:
         m = rec.explore_m
         cand = np.flatnonzero((d >= m) & (d <= 2 * m))
         ids = np.array([nav.graph.nodes[int(k)].id for k in cand], dtype=np.int64)
+        if len(cand):
+            keep = nav.reaches(ids, pose)
+            cand, ids = cand[keep], ids[keep]
         fresh = ~np.isin(ids, np.array(sorted(self._explored), dtype=np.int64))
         if fresh.any():  # a place not tried yet (the last one may have been blocked)
             cand = cand[fresh]
@@ -946,10 +958,7 @@ class RobotStack:
         best, best_value = None, -1.0
         for k in order:
             node = int(nav.graph.nodes[int(k)].id)
-            try:
-                path = nav.plan_points(node, pose)
-            except InputError:  # no path from here on this mode's map
-                continue
+            path = nav.plan_points(node, pose)
             if not polyline_clear(points_in_frame(pose, path), seen, rec.explore_check_m, self.cfg.avoidance.robot_radius_m - EXPLORE_CLEAR_SLACK_M):
                 continue
             if len(modes) < 2:
@@ -994,9 +1003,23 @@ class RobotStack:
     def set_goal(self, node_id: int, t: float, pose: np.ndarray | None = None) -> float:
         """Plan to a navigation-graph node from the estimate (or ``pose``); returns the
         plan's length in metres. While relocalizing the goal is kept for when the robot
-        knows where it is again (the length is then the best mode's)."""
-        if self.navigator is None:
+        knows where it is again (the length is then the best mode's).
+
+        A goal that the place the robot was started at (:meth:`reset`; unknown there,
+        the first goal) has no path to is the user's mistake:
+        :class:`autonomy.planner.NoPathError`. One that only the belief has no path to
+        (a wrong belief in a part of the graph cut off from the goal) is the robot's:
+        the plan starts at the nearest node that reaches the goal, and the localization
+        recovers the belief (:meth:`Navigator.set_goal`)."""
+        nav = self.navigator
+        if nav is None:
             raise InputError("robot stack: built with navigate = false, it has no navigator")
+        if self._home is None:
+            home = nav.graph.node_xy()[nav.graph.index_of(int(node_id))]
+            self._home = np.asarray(home, dtype=np.float64).copy()
+        elif not nav.reaches(int(node_id), self._home)[0]:
+            start = nav.nearest_reachable_node(self._home)
+            raise NoPathError(f"no path from node {start} (where the robot started) to node {int(node_id)} in the navigation graph")
         self._goal = int(node_id)
         at = self.pose if pose is None else pose
         if self.relocalizing and pose is None:

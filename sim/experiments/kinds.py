@@ -30,6 +30,7 @@ KINDS: dict[str, str] = {
     "mapping_cuboid": "sim.experiments.mapping",
     "mapping_wall": "sim.experiments.mapping",
     "mapping_corridor": "sim.experiments.mapping",
+    "real_floors": "sim.experiments.real_floors",
 }
 
 

@@ -306,7 +306,7 @@ def markdown_table(rows: list[dict], total: dict) -> str:
     head = ["map", "seed", *(h for _, h, _ in COLUMNS)]
     lines = ["| " + " | ".join(head) + " |", "|" + "|".join(" --- " if i < 2 else " ---: " for i in range(len(head))) + "|"]
     for r in [*rows, total]:
-        first = [str(r["map"]) if r is not total else f"**total** ({total['runs']} runs)", "" if r["seed"] is None else str(r["seed"])]
+        first = [str(r["map"]) if r is not total else f"**total** ({total['runs']} run{'' if total['runs'] == 1 else 's'})", "" if r["seed"] is None else str(r["seed"])]
         lines.append("| " + " | ".join(first + [_cell(r.get(k), d) for k, _, d in COLUMNS]) + " |")
     return "\n".join(lines) + "\n"
 

@@ -11,8 +11,17 @@
 4. Each branch becomes straight edges of at most ``max_edge_m`` that stay within
    ``tolerance_m`` of it and keep ``robot radius + margin`` from every wall, checked
    exactly against the segments (:class:`~autonomy.geometry.WallIndex`).
-5. Free space farther than ``cover_radius_m`` from every edge (wide halls, room corners)
-   gets extra nodes on a lattice, joined to the graph by clear straight edges.
+5. Free space farther than ``cover_radius_m`` from every edge (wide halls, open sites)
+   gets a square lattice of nodes ``cover_spacing_m`` apart, turned to the walls' main
+   direction, joined to its lattice neighbours and to the graph by clear straight edges;
+   what the lattice misses (room corners) gets single nodes, farthest first.
+6. The graph is thinned: nodes joined by an edge shorter than ``merge_m`` become one, and
+   a node between two others is dropped when the straight edge between them stays clear,
+   within ``tolerance_m`` of it and no longer than ``max_edge_m`` (a door edge is kept
+   apart from the edges around it, so its speed limit stays on the doorway).
+
+Every step keeps the clearance of every edge exact; the thinning trades at most
+``tolerance_m`` of coverage at the graph's fringe for a few nodes per room.
 
 Edges narrower than ``door_clearance_m`` are marked ``has_door`` with the door speed;
 ``max_clearance`` is each edge's exact clearance.
@@ -61,16 +70,20 @@ class GraphBuildConfig:
     """Grid, robot radius and inside/outside settings."""
     margin_m: float = 0.05
     """Every edge keeps the robot radius plus this from every wall."""
-    max_edge_m: float = 3.0
-    """Longest edge (hand-made graphs space corridor nodes at most 3 m apart)."""
+    max_edge_m: float = 6.0
+    """Longest edge (the hand-made graphs' median edges are 3 to 6 m; a relocalizing robot
+    looks for nodes 6 to 12 m away)."""
     tolerance_m: float = 0.25
     """An edge stays within this of the skeleton branch it replaces."""
     spur_m: float = 0.75
     """A dead end reaching less than this beyond its junction's clearance is pruned."""
     cover_radius_m: float = 1.5
     """Free space farther than this from every edge gets extra nodes."""
-    cover_spacing_m: float = 2.0
-    """Lattice spacing of the extra nodes."""
+    cover_spacing_m: float = 3.0
+    """Lattice spacing of the extra nodes (twice ``cover_radius_m``: a square lattice's
+    edges then pass within ``cover_radius_m`` of every point between them)."""
+    merge_m: float = 0.75
+    """Nodes joined by an edge shorter than this become one, where the edges stay clear."""
     fill_clearance_m: float = 0.75
     """Extra nodes go where the walls are at least this far, where there is such a place."""
     door_clearance_m: float = 0.6
@@ -80,7 +93,7 @@ class GraphBuildConfig:
 
     def __post_init__(self) -> None:
         require_positive(self, "graph.", "margin_m", "max_edge_m", "tolerance_m", "spur_m", "cover_radius_m",
-                         "cover_spacing_m", "fill_clearance_m", "door_clearance_m", "door_speed_mps")
+                         "cover_spacing_m", "merge_m", "fill_clearance_m", "door_clearance_m", "door_speed_mps")
 
     @property
     def clearance_m(self) -> float:
@@ -374,8 +387,10 @@ class _Builder:
             s, e = stack.pop()
             a, b = pts[s], pts[e]
             if e - s <= 1:
-                self.chain(ids[s], ids[e], self.clear(a, b))
-                continue
+                c = self.clear(a, b)
+                if c >= need or np.hypot(*(b - a)) <= 1.5 * self.fs.cell_m:
+                    self.chain(ids[s], ids[e], c)  # neighbouring cells: clear on the grid
+                continue  # a representative a wall hides from its cluster's cell: no edge
             d = b - a
             L = float(np.hypot(*d))
             mid = pts[s + 1 : e]
@@ -478,8 +493,9 @@ def _branches(skel: np.ndarray, fs: FreeSpace, cfg: GraphBuildConfig) -> tuple[d
     reps = {c: xy(c) for c in used}
     out = []
     for a, b, p in branches.values():
-        pts = fs.centres(p // nx, p % nx)
-        pts[0], pts[-1] = reps[a], reps[b]
+        # the cluster's representative, then the branch's own cells (its end cells are in
+        # the clusters): the step from the representative is then within the cluster
+        pts = np.concatenate([reps[a][None], fs.centres(p // nx, p % nx), reps[b][None]])
         out.append((a, b, pts))
     return reps, out
 
@@ -518,7 +534,6 @@ def _cover(b: _Builder, fs: FreeSpace, graph_ok: np.ndarray, cfg: GraphBuildConf
     uncovered patch the farthest cells first, ``cover_spacing_m`` apart, each joined to
     the graph by clear straight edges."""
     target = fs.region >= 0
-    first = True
     for _ in range(rounds):
         far = _graph_distance(b, fs)
         uncovered = (far > cfg.cover_radius_m) & target
@@ -526,10 +541,19 @@ def _cover(b: _Builder, fs: FreeSpace, graph_ok: np.ndarray, cfg: GraphBuildConf
             return
         # candidates: cells with the graph clearance in or next to an uncovered patch
         near = distance_to_cells(fs, uncovered) <= 0.5 * cfg.cover_spacing_m
-        # prefer places away from the walls (a node in a room's corner would hug two walls)
+        # prefer places away from the walls (a node in a room's corner would hug two walls,
+        # and its edges would look like doorways): near a patch a roomy place can serve,
+        # only roomy places are candidates
         roomy = near & graph_ok & (fs.clearance() >= max(cfg.clearance_m, cfg.fill_clearance_m))
-        rows, cols = np.nonzero(roomy if roomy.any() and first else near & graph_ok)
-        first = False
+        cand = roomy
+        if roomy.any():
+            served = distance_to_cells(fs, roomy) <= cfg.cover_radius_m
+            rest = uncovered & ~served
+            if rest.any():
+                cand = roomy | (near & graph_ok & (distance_to_cells(fs, rest) <= 0.5 * cfg.cover_spacing_m))
+        else:
+            cand = near & graph_ok
+        rows, cols = np.nonzero(cand)
         if rows.size == 0:
             return
         order = np.argsort(-far[rows, cols], kind="stable")
@@ -537,6 +561,173 @@ def _cover(b: _Builder, fs: FreeSpace, graph_ok: np.ndarray, cfg: GraphBuildConf
         take = _spread(rows, cols, fs.shape, max(1, int(round(cfg.cover_spacing_m / fs.cell_m))))
         added = [b.node(p) for p in fs.centres(rows[take], cols[take])]
         _connect(b, added, cfg)
+
+
+def dominant_angle(segments: np.ndarray) -> float:
+    """The walls' main direction modulo 90 degrees, in [0, pi/2): the length-weighted mode
+    of the segment directions (1 degree bins), refined by the mean of those within 2 degrees."""
+    d = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
+    d = d[:, 2:] - d[:, :2]
+    w = np.hypot(d[:, 0], d[:, 1])
+    if not (w > 0).any():
+        return 0.0
+    q = np.mod(4.0 * np.arctan2(d[:, 1], d[:, 0]), 2 * np.pi)  # directions mod 90 deg, times 4
+    hist = np.bincount(np.minimum((q / (2 * np.pi) * 360).astype(np.int64), 359), weights=w, minlength=360)
+    # smooth over neighbouring bins (circularly) before taking the mode
+    sm = hist + np.roll(hist, 1) + np.roll(hist, -1)
+    mode = (np.argmax(sm) + 0.5) / 360 * 2 * np.pi
+    near = np.abs(np.angle(np.exp(1j * (q - mode)))) <= np.radians(8.0)
+    z = np.sum(w[near] * np.exp(1j * q[near]))
+    return float(np.mod(np.angle(z) if abs(z) > 0 else mode, 2 * np.pi) / 4.0)
+
+
+def _lattice(b: _Builder, fs: FreeSpace, graph_ok: np.ndarray, cfg: GraphBuildConfig, theta: float) -> None:
+    """A square lattice of nodes (``cover_spacing_m``, turned by ``theta``) where free space is
+    farther than ``cover_radius_m`` from the graph, each joined to its lattice neighbours and,
+    when one is within a lattice step, to the nearest old node it sees; a lattice piece that
+    reaches no old node is joined by its shortest clear link (or left out when its region
+    has other nodes, so that a region stays one component)."""
+    far = _graph_distance(b, fs)
+    uncovered = (far > cfg.cover_radius_m) & (fs.region >= 0)
+    if not uncovered.any():
+        return
+    s = cfg.cover_spacing_m
+    # lattice nodes only where the walls are at least fill_clearance_m away (a node by a
+    # wall would make its edges look like doorways); _cover fills what is left
+    ok = graph_ok & (distance_to_cells(fs, uncovered) <= 0.5 * s) & (fs.clearance() >= cfg.fill_clearance_m)
+    rows, cols = np.nonzero(ok)
+    if rows.size == 0:
+        return
+    c, sn = math.cos(theta), math.sin(theta)
+    p = fs.centres(rows, cols)
+    li = np.round((p[:, 0] * c + p[:, 1] * sn) / s).astype(np.int64)
+    lj = np.round((-p[:, 0] * sn + p[:, 1] * c) / s).astype(np.int64)
+    del p
+    span = int(lj.max() - lj.min()) + 1
+    flat = np.unique((li - li.min()) * span + (lj - lj.min()))
+    ij = np.stack([flat // span + li.min(), flat % span + lj.min()], axis=1)
+    u, v = ij[:, 0] * s, ij[:, 1] * s
+    pts = np.stack([u * c - v * sn, u * sn + v * c], axis=1)
+    r, k = fs.cell_of(pts)
+    inside = ok[r, k] & (b.walls.clearances(np.concatenate([pts, pts], axis=1), 5.0) >= max(cfg.clearance_m, cfg.fill_clearance_m))
+    ij, pts = ij[inside], pts[inside]
+    if not len(pts):
+        return
+    n_old = len(b.xy)
+    ids = {(int(i), int(j)): b.node(q) for (i, j), q in zip(ij, pts, strict=True)}
+    need = cfg.clearance_m + _ROUNDING_M
+    pairs = [(a, ids[(i + di, j + dj)]) for (i, j), a in ids.items() for di, dj in ((1, 0), (0, 1)) if (i + di, j + dj) in ids]
+    if pairs:
+        xy = np.asarray(b.xy)
+        pa = np.array(pairs)
+        cl = b.walls.clearances(np.concatenate([xy[pa[:, 0]], xy[pa[:, 1]]], axis=1), 5.0)
+        for (a, q), cv in zip(pairs, cl, strict=True):
+            if cv >= need:
+                b.edge(a, q, float(cv))
+    xy = np.asarray(b.xy)
+    old = xy[:n_old]
+    new = np.arange(n_old, len(xy))
+    linked = np.zeros(len(xy), dtype=bool)
+    if n_old:
+        for i in new:
+            d = np.hypot(old[:, 0] - xy[i, 0], old[:, 1] - xy[i, 1])
+            j = int(np.argmin(d))
+            if d[j] <= s and b.clear(xy[i], old[j]) >= need:
+                b.chain(int(i), j, b.clear(xy[i], old[j]))
+                linked[i] = True
+    # lattice pieces: link each to the old graph by its shortest clear link
+    ij_e = np.array([k for k in b.edges if k[0] >= n_old and k[1] >= n_old], dtype=np.int64).reshape(-1, 2) - n_old
+    comp = graph_components(len(new), ij_e)
+    region = fs.region_at(xy)
+    old_regions = set(region[:n_old].tolist())
+    for cpt in np.unique(comp):
+        members = new[comp == cpt]
+        if linked[members].any() or not n_old:
+            continue
+        d = np.hypot(xy[members, None, 0] - old[None, :, 0], xy[members, None, 1] - old[None, :, 1])
+        order = np.argsort(d, axis=None)[:64]
+        done = False
+        for flat in order:
+            mi, oj = np.unravel_index(flat, d.shape)
+            if d[mi, oj] > 4.0 * cfg.cover_radius_m:
+                break
+            cv = b.clear(xy[members[mi]], old[oj])
+            if cv >= need:
+                b.chain(int(members[mi]), int(oj), cv)
+                done = True
+                break
+        if not done and region[members[0]] in old_regions:
+            for key in [k for k in b.edges if k[0] in set(members.tolist())]:
+                del b.edges[key]
+
+
+def _simplify(b: _Builder, cfg: GraphBuildConfig) -> None:
+    """Merge nodes joined by a short edge and drop nodes between two others where a straight
+    clear edge replaces them (see the module docstring); dropped nodes lose their edges."""
+    need = cfg.clearance_m + _ROUNDING_M
+    xy = np.asarray(b.xy)
+    adj: dict[int, set[int]] = {i: set() for i in range(len(xy))}
+    for i, j in b.edges:
+        adj[i].add(j)
+        adj[j].add(i)
+
+    def key(i: int, j: int) -> tuple[int, int]:
+        return (min(i, j), max(i, j))
+
+    def is_door(i: int, j: int) -> bool:
+        return b.edges[key(i, j)] < cfg.door_clearance_m
+
+    def length(i: int, j: int) -> float:
+        return float(math.hypot(*(xy[i] - xy[j])))
+
+    # 1. short edges: the node with more neighbours stays
+    short = sorted((length(i, j), i, j) for i, j in b.edges if length(i, j) < cfg.merge_m)
+    for _, i, j in short:
+        if key(i, j) not in b.edges:
+            continue
+        keep, drop = (i, j) if len(adj[i]) >= len(adj[j]) else (j, i)
+        others = [w for w in adj[drop] if w != keep and w not in adj[keep]]
+        if any(length(keep, w) > cfg.max_edge_m for w in others):
+            continue
+        cl = b.walls.clearances(np.array([[*xy[keep], *xy[w]] for w in others]).reshape(-1, 4), 5.0)
+        if (cl < need).any():
+            continue
+        for w, cv in zip(others, cl, strict=True):
+            b.edges[key(keep, w)] = float(cv)
+            adj[keep].add(w)
+            adj[w].add(keep)
+        for w in list(adj[drop]):
+            del b.edges[key(drop, w)]
+            adj[w].discard(drop)
+        adj[drop].clear()
+    # 2. nodes between two others
+    changed = True
+    while changed:
+        changed = False
+        for m in range(len(xy)):
+            if len(adj[m]) != 2:
+                continue
+            a, c = tuple(adj[m])
+            if c in adj[a] or is_door(a, m) != is_door(m, c):
+                continue
+            ac = xy[c] - xy[a]
+            L = float(math.hypot(*ac))
+            if L > cfg.max_edge_m or L < 1e-9:
+                continue
+            t = float(np.dot(xy[m] - xy[a], ac)) / (L * L)
+            if not 0.0 < t < 1.0 or abs(float(ac[0] * (xy[m][1] - xy[a][1]) - ac[1] * (xy[m][0] - xy[a][0]))) / L > cfg.tolerance_m:
+                continue
+            cv = b.clear(xy[a], xy[c])
+            if cv < need:
+                continue
+            del b.edges[key(a, m)], b.edges[key(m, c)]
+            adj[a].discard(m)
+            adj[c].discard(m)
+            adj[m].clear()
+            b.edges[key(a, c)] = cv
+            adj[a].add(c)
+            adj[c].add(a)
+            changed = True
 
 
 def distance_to_cells(fs: FreeSpace, cells: np.ndarray) -> np.ndarray:
@@ -620,7 +811,9 @@ def build_navgraph(vm: VectorMap, cfg: GraphBuildConfig = GraphBuildConfig()) ->
         if sel.any():
             k = int(np.argmax(np.where(sel, fs.dist, -1.0)))
             b.node(fs.centres(np.array(k // fs.shape[1]), np.array(k % fs.shape[1])))
-    _cover(b, fs, graph_ok, cfg)
+    _lattice(b, fs, graph_ok, cfg, dominant_angle(vm.segments))
+    _cover(b, fs, graph_ok, cfg, rounds=2)
+    _simplify(b, cfg)
     return _finish(b, fs, cfg)
 
 
@@ -656,9 +849,14 @@ def _finish(b: _Builder, fs: FreeSpace, cfg: GraphBuildConfig) -> GraphBuild:
 # --------------------------------------------------------------------------- cache
 
 
+#: Bumped when the construction changes, so that cached graphs of the old one are rebuilt.
+GENERATOR_VERSION = 2
+
+
 def graph_key(vm: VectorMap, cfg: GraphBuildConfig) -> str:
-    """Hash of the walls and the settings (the cache key)."""
+    """Hash of the walls, the settings and the generator version (the cache key)."""
     h = hashlib.sha256()
+    h.update(f"v{GENERATOR_VERSION}".encode())
     h.update(np.ascontiguousarray(vm.segments, dtype=np.float64).tobytes())
     h.update(cfg.key().encode())
     return h.hexdigest()

@@ -9,7 +9,10 @@ people.
 offices along the exterior walls, a corridor loop, and blocks of double-loaded offices
 between internal corridors, some of them (partly) replaced by open atria with pillars.
 Doorways are gaps in the walls. Nav-graph edges keep at least
-``config.min_clearance_m`` from every wall.
+``config.min_clearance_m`` from every wall. ``config.irregularity``
+(:class:`~sim.simulator.irregular.Irregularity`, on by default) then makes the walls as
+irregular as a hand-drawn map's: slightly skewed, corners jittered, door recesses, jogs,
+broken and doubled lines.
 
 Two fixed buildings ship in ``sim/assets`` (``python -m sim.simulator.blueprints`` regenerates
 them): :func:`corridor_loop` (about 60 x 40 m) and :func:`small_floor` (16 x 10 m).
@@ -42,11 +45,13 @@ from autonomy.vectormap import (
     save_navgraph,
     save_vectormap,
 )
+from sim.simulator.irregular import Door, Irregularity, Piece, irregular_walls
 
 __all__ = [
     "Box",
     "Blueprint",
     "BuildingConfig",
+    "Irregularity",
     "generate_building",
     "corridor_loop",
     "small_floor",
@@ -128,6 +133,7 @@ class _Walls:
         self.gaps_h: dict[float, list[tuple[float, float]]] = defaultdict(list)
         self.gaps_v: dict[float, list[tuple[float, float]]] = defaultdict(list)
         self.extra: list[tuple[float, float, float, float]] = []
+        self.doors: list[Door] = []
 
     @staticmethod
     def _add(store: dict[float, list[tuple[float, float]]], c: float, a: float, b: float) -> None:
@@ -194,6 +200,15 @@ class _Walls:
         n = math.ceil((b - a) / max_seg - 1e-9)
         pts = [a] + [_q(a + (b - a) * k / n) for k in range(1, n)] + [b]
         return pts
+
+    def pieces(self) -> list[Piece]:
+        """The unsplit walls in :meth:`build`'s order: horizontal lines by y, then vertical by x."""
+        out: list[Piece] = []
+        for y in sorted(self.h):
+            out.extend((True, y, a, b) for a, b in self._pieces(self.h[y], self.gaps_h.get(y, [])))
+        for x in sorted(self.v):
+            out.extend((False, x, a, b) for a, b in self._pieces(self.v[x], self.gaps_v.get(x, [])))
+        return out
 
     def build(self, max_segment_m: float | None) -> np.ndarray:
         rows: list[tuple[float, float, float, float]] = []
@@ -343,6 +358,7 @@ def _add_room(
     t = _door_centre(room, side, corr, door_w, rng, door_t)
     lo, hi = _q(t - door_w / 2), _q(t + door_w / 2)
     wall, inward = _door_wall(room, side)
+    walls.doors.append((side in "SN", _q(wall), lo, hi, inward))
     if side in "SN":
         walls.gap_h(wall, lo, hi)
         pts = [(t, corr.c), (t, wall), (t, wall + inward * _DOOR_INNER_M)]
@@ -494,9 +510,13 @@ class BuildingConfig:
     node_spacing_m: float = 3.0
     """Largest gap between nav nodes along a corridor."""
     max_segment_m: float | None = None
-    """Split walls into collinear pieces at most this long (as mapped walls are)."""
+    """Split walls into pieces at most this long (as mapped walls are; collinear unless
+    ``irregularity`` bends them slightly at the breaks)."""
     min_clearance_m: float = 0.35
     """Nav edges keep at least this from every wall (robot radius 0.3 m plus margin)."""
+    irregularity: Irregularity = Irregularity()
+    """How far the walls depart from an exact square drawing, as in a hand-drawn map;
+    ``Irregularity.none()`` keeps them exactly axis-aligned."""
     name: str = "generated"
     """Blueprint name."""
 
@@ -531,6 +551,8 @@ class BuildingConfig:
             raise bad("n_atria", "an integer >= 0")
         if self.pillar_sides < 3:
             raise bad("pillar_sides", "an integer >= 3")
+        if not isinstance(self.irregularity, Irregularity):
+            raise bad("irregularity", "an Irregularity (Irregularity.none() for exact walls)")
         if self.corridor_width_range_m[0] / 2 < self.min_clearance_m + 0.3:
             raise bad("corridor_width_range_m", f"corridors at least {2 * (self.min_clearance_m + 0.3):.2f} m wide")
         if self.door_width_range_m[0] / 2 < self.min_clearance_m:
@@ -656,10 +678,12 @@ def _assemble(
     corridors: Sequence[Box],
     max_segment_m: float | None,
     name: str,
+    segments: np.ndarray | None = None,
 ) -> Blueprint:
-    """The finished :class:`Blueprint` from the builders and the zone lists."""
+    """The finished :class:`Blueprint` from the builders and the zone lists (``segments``,
+    if given, instead of the walls' own)."""
     return Blueprint(
-        vectormap=VectorMap(walls.build(max_segment_m), name=name),
+        vectormap=VectorMap(walls.build(max_segment_m) if segments is None else segments, name=name),
         navgraph=g.build(),
         rooms=tuple(rooms),
         open_areas=tuple(areas),
@@ -859,8 +883,17 @@ def generate_building(config: BuildingConfig, rng: np.random.Generator | int) ->
     corridors = grid.vcorrs + grid.hcorrs
     for corr in corridors:
         corr.chain(floor.g, config.node_spacing_m)
+    segments = None
+    if config.irregularity.active:  # drawn after the layout: the same seed, the same layout
+        w = floor.walls
+        segments = irregular_walls(
+            w.pieces(), np.array(w.extra, dtype=np.float64).reshape(-1, 4), w.doors,
+            floor.g.build().edge_segments(), config.irregularity, rng, config.min_clearance_m,
+            config.max_segment_m,
+        )
     return _assemble(
-        floor.walls, floor.g, floor.rooms, floor.areas, [c.box for c in corridors], config.max_segment_m, config.name
+        floor.walls, floor.g, floor.rooms, floor.areas, [c.box for c in corridors], config.max_segment_m,
+        config.name, segments,
     )
 
 
@@ -914,6 +947,7 @@ def corridor_loop() -> Blueprint:
         block_length_m=26.0,
         atrium_length_range_m=(12.0, 14.0),
         max_segment_m=1.0,
+        irregularity=Irregularity.none(),  # the shipped file stays as it is
         name="corridor_loop",
     )
     return generate_building(cfg, 7)

@@ -260,7 +260,8 @@ def test_large_floor_size_and_invariants():
     bp = generate_building(BuildingConfig.large(), 0)
     assert bp.vectormap.n_segments >= 9000
     x0, y0, x1, y1 = bp.extent()
-    assert (x1 - x0, y1 - y0) == (100.0, 100.0)
+    # irregular walls: an exterior jog reaches up to 0.3 m out, a corner moves a few cm
+    assert abs(x1 - x0 - 100.0) <= 0.5 and abs(y1 - y0 - 100.0) <= 0.5
     assert len(bp.open_areas) == 3
     check_invariants(bp, reference=False)
 

@@ -210,3 +210,62 @@ def test_the_graph_is_cached_beside_the_map_and_rebuilt_when_stale(tmp_path, mon
     assert parse_navgraph_json(cache.read_text()).n_nodes == g2.n_nodes
     cache.write_text("{ not json")
     assert load_or_build_navgraph(vm2, path).n_nodes == g2.n_nodes
+
+
+# --------------------------------------------------------------------------- large and open maps
+
+
+def test_an_open_lot_gets_a_regular_lattice_that_covers_it():
+    # three walls that close nothing; 30 x 20 m between them
+    vm = segments_map([(0, 0, 30, 0), (0, 20, 30, 20), (0, 0, 0, 3)])
+    gb = build_navgraph(vm)
+    assert gb.free_space.is_open
+    g = gb.graph
+    assert _exact_clearances(g, vm).min() >= NEED
+    assert gb.n_components == 1
+    assert coverage(g, gb.free_space, 1.5) >= 0.95
+    # sparse: about one node per 3 x 3 m lattice square (a 2 m lattice would need 150)
+    assert g.n_nodes <= 0.75 * (30 * 20) / 2**2
+
+
+def test_dominant_angle_of_turned_walls():
+    for deg in (0.0, 17.0, 44.0, 63.0):
+        t = np.radians(deg)
+        rows = np.array(box_segments(0, 0, 10, 6), float)
+        c, s = np.cos(t), np.sin(t)
+        rot = np.stack([rows[:, 0] * c - rows[:, 1] * s, rows[:, 0] * s + rows[:, 1] * c,
+                        rows[:, 2] * c - rows[:, 3] * s, rows[:, 2] * s + rows[:, 3] * c], axis=1)
+        got = np.degrees(gbmod.dominant_angle(rot))
+        assert abs((got - deg + 45) % 90 - 45) < 0.5
+
+
+@pytest.mark.slow
+def test_a_campus_sized_open_map_builds_within_time_and_memory(tmp_path):
+    """A 440 x 480 m open site (building blocks along streets): a coarser grid, under a
+    minute and 4 GB in a fresh process, and a graph that keeps the clearance."""
+    import resource
+    import subprocess
+    import sys
+    import time
+
+    rng = np.random.default_rng(9)
+    rows = []
+    for bx in range(0, 440, 55):
+        for by in range(0, 480, 60):
+            w, h = rng.uniform(20, 40), rng.uniform(20, 40)
+            rows += box_segments(bx, by, bx + w, by + h, gap=(bx + 5, bx + 6.2))
+    path = tmp_path / "campus.vectormap.txt"
+    from autonomy.vectormap import save_vectormap
+
+    save_vectormap(segments_map(rows), path)
+    out = tmp_path / "campus.navigation.json"
+    t0 = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "sim.cli", "map", "graph", str(path), "--out", str(out)], check=True,
+                   capture_output=True, text=True)
+    dt = time.perf_counter() - t0
+    rss_gb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1e6
+    assert dt < 60 and rss_gb < 4.0
+    g = load_navgraph(out)
+    vm = segments_map(rows)
+    assert WallIndex(vm.segments).clearances(g.edge_segments(), 5.0).min() >= NEED
+    assert g.n_nodes > 1000

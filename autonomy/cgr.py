@@ -10,7 +10,8 @@ A particle filter over (x, y, theta). Each frame (IV-C, steps 1-4):
    q1 .. qr, within a trust region of its first-stage pose (ours), on correspondences found within a gate that
    widens with the belief's spread (:meth:`CGRLocalizer.gate`, ours), and checked
    where it led: points whose line changes there are dropped (``consistent_fraction``,
-   ours);
+   ours), and only along the pose directions the points pin down (the degeneracy-aware
+   update of Zhang and Singh, ICRA 2016; :attr:`CGRConfig.degeneracy_max_gain`);
 3. an acceptance test chooses, per sample, between its refined and its first-stage
    version: the refined one is kept with probability min(1, p(y|x_r) N(x_r) / p(y|x_0)),
    N the refinement's prior around the first-stage pose (ours; 1 there, and 1 everywhere
@@ -37,7 +38,7 @@ import numpy as np
 
 from autonomy.errors import InputError, require_int, require_non_negative, require_positive
 from autonomy.geometry import wrap_angles
-from autonomy.observation import ObservationConfig, correspond, line_frames, moments, refine_all_m
+from autonomy.observation import ObservationConfig, correspond, line_frames, moments, refine_all_m, trusted_directions
 
 SceneLinesFn = Callable[[float, float], np.ndarray]
 
@@ -83,6 +84,13 @@ class CGRConfig:
     prior_min_theta_rad: float = math.radians(2.0)
     """... and this: a few points of one small face cannot turn the heading by degrees
     in a frame, a wall in view still can (:func:`autonomy.observation.refine_all_m`)."""
+    degeneracy_max_gain: float = 8.0
+    """Degeneracy-aware refinement (after Zhang and Singh, ICRA 2016): a refinement moves
+    a sample only along the pose directions whose bias gain (metres of pose error per
+    metre of systematic error in the points' distances to their lines) is at most this
+    (:func:`autonomy.observation.trusted_directions`); along the others (a corridor's
+    length between walls nearly but not exactly parallel) the sample keeps its motion-
+    model pose (0 = every direction)."""
     share_radius_m: float = 1.0
     """Particles within this distance (and share_angle_rad) of the proposal mean share its
     scene lines and correspondences; others get their own."""
@@ -99,6 +107,7 @@ class CGRConfig:
         require_non_negative(
             self, "cgr.", "alpha1", "alpha2_rad_per_m", "alpha3", "min_translation_std_m", "min_rotation_std_rad",
             "init_std_xy_m", "init_std_theta_rad", "gate_sigmas", "prior_min_xy_m", "prior_min_theta_rad",
+            "degeneracy_max_gain",
         )
         if not 0 <= self.consistent_fraction <= 1:
             raise InputError(f"cgr.consistent_fraction: expected a number in [0, 1], got {self.consistent_fraction!r}")
@@ -132,6 +141,9 @@ class UpdateStats:
     shared: int = 0
     dropped_points: int = 0
     """Points the association check dropped (their line changed at the refined pose)."""
+    trusted_directions: int = 3
+    """Pose directions the shared correspondences pin down (0-3; the refinement moves
+    samples along these only, :attr:`CGRConfig.degeneracy_max_gain`)."""
 
 
 class _Frame(NamedTuple):
@@ -331,16 +343,32 @@ class CGRLocalizer:
         k, iters = obs.inv_two_f_sigma2, cfg.refinements
         o_p, o0, o1 = np.empty((len(first), 3)), np.empty(len(first)), np.empty(len(first))
         used = moments(frames, idx, fr.pts, m)
-        refine_all_m(m, used, first, k, iters, cfg.step_fraction, obs.min_points, o_p, o0, o1, cfg.trust_region_m, fr.prior_info)
+        proj = self._trusted(frames, idx, shared_pose, fr.pts, m, used, stats)
+        refine_all_m(m, used, first, k, iters, cfg.step_fraction, obs.min_points, o_p, o0, o1, cfg.trust_region_m, fr.prior_info, proj)
         if iters > 0 and used >= obs.min_points and cfg.consistent_fraction > 0:
             same = self._kept_associations(fr, shared_pose, lines, idx, o_p, m, used)
             if same is not None and same.sum() < cfg.consistent_fraction * used:
                 stats.dropped_points = int(used - same.sum())
                 idx[~same] = -1
                 used = moments(frames, idx, fr.pts, m)
-                refine_all_m(m, used, first, k, iters, cfg.step_fraction, obs.min_points, o_p, o0, o1, cfg.trust_region_m, fr.prior_info)
+                proj = self._trusted(frames, idx, shared_pose, fr.pts, m, used, stats)
+                refine_all_m(
+                    m, used, first, k, iters, cfg.step_fraction, obs.min_points, o_p, o0, o1, cfg.trust_region_m, fr.prior_info, proj,
+                )
                 stats.used_points = int(used)
         return o_p, o0, o1
+
+    def _trusted(
+        self, frames: np.ndarray, idx: np.ndarray, pose: np.ndarray, pts: np.ndarray, m: np.ndarray, used: int, stats: UpdateStats | None
+    ) -> np.ndarray:
+        """The projector on the directions this frame's correspondences pin down
+        (:func:`autonomy.observation.trusted_directions`, ``degeneracy_max_gain``)."""
+        proj = np.empty((3, 3))
+        lever = math.sqrt((m[0, 0] + m[1, 1]) / used) if used > 0 else 0.0
+        k = trusted_directions(frames, idx, pose, pts, lever, self.cfg.degeneracy_max_gain, proj)
+        if stats is not None:
+            stats.trusted_directions = int(k)
+        return proj
 
     def _kept_associations(
         self, fr: _Frame, shared_pose: np.ndarray, lines: np.ndarray, idx: np.ndarray, refined: np.ndarray, m: np.ndarray, used: int
@@ -373,10 +401,11 @@ class CGRLocalizer:
             correspond(own, p, fr.pts, fr.nrm, fr.use_n, fr.cos_max, fr.gate, idx)
             frames = line_frames(own, p[0], p[1])
         used = moments(frames, idx, fr.pts, m)
+        proj = self._trusted(frames, idx, p, fr.pts, m, used, None)
         o_p, o0, o1 = np.empty((1, 3)), np.empty(1), np.empty(1)
         refine_all_m(
             m, used, p[None, :].copy(), obs.inv_two_f_sigma2, cfg.refinements, cfg.step_fraction, obs.min_points, o_p, o0, o1,
-            cfg.trust_region_m, fr.prior_info,
+            cfg.trust_region_m, fr.prior_info, proj,
         )
         return o_p[0], o0[0], o1[0]
 

@@ -267,8 +267,131 @@ def loglik_grad_m(m, n_used, pose, inv_2fs2, out):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True)
-def _gn_step(work, kappa, pose):  # pragma: no cover - numba
-    """pose += kappa (H + lambda I)^-1 g from a loglik_grad output; False if singular."""
+def jacobi_eigh3(a, vecs):  # pragma: no cover - numba
+    """Eigenvalues (returned, (3,)) and unit eigenvectors (the columns of ``vecs``) of a
+    symmetric 3 x 3 matrix by cyclic Jacobi rotations (no LAPACK: numba's eigh needs
+    SciPy). Converges quadratically; 12 sweeps reach machine precision."""
+    b = a.copy()
+    for i in range(3):
+        for j in range(3):
+            vecs[i, j] = 1.0 if i == j else 0.0
+    for _ in range(12):
+        off = b[0, 1] * b[0, 1] + b[0, 2] * b[0, 2] + b[1, 2] * b[1, 2]
+        scale = b[0, 0] * b[0, 0] + b[1, 1] * b[1, 1] + b[2, 2] * b[2, 2]
+        if off <= 1e-30 * scale or off == 0.0:
+            break
+        for p in range(2):
+            for q in range(p + 1, 3):
+                if b[p, q] == 0.0:
+                    continue
+                theta = (b[q, q] - b[p, p]) / (2.0 * b[p, q])
+                t = (1.0 if theta >= 0.0 else -1.0) / (abs(theta) + math.sqrt(theta * theta + 1.0))
+                c = 1.0 / math.sqrt(t * t + 1.0)
+                s = t * c
+                for k in range(3):  # B <- B J
+                    bkp, bkq = b[k, p], b[k, q]
+                    b[k, p] = c * bkp - s * bkq
+                    b[k, q] = s * bkp + c * bkq
+                for k in range(3):  # B <- J^T B
+                    bpk, bqk = b[p, k], b[q, k]
+                    b[p, k] = c * bpk - s * bqk
+                    b[q, k] = s * bpk + c * bqk
+                for k in range(3):
+                    vkp, vkq = vecs[k, p], vecs[k, q]
+                    vecs[k, p] = c * vkp - s * vkq
+                    vecs[k, q] = s * vkp + c * vkq
+    return np.array([b[0, 0], b[1, 1], b[2, 2]])
+
+
+@numba.njit(cache=True)
+def trusted_directions(frames, idx, pose, pts, lever_m, max_gain, out_proj):  # pragma: no cover - numba
+    """The pose directions the frame's points pin down, as a projector ``out_proj``
+    (3 x 3, pose coordinates); returns how many of the three are trusted.
+
+    Degeneracy-aware update after Zhang and Singh ("On degeneracy of optimization-based
+    state estimation problems", ICRA 2016): the Gauss-Newton curvature is decomposed in
+    pose coordinates with the heading scaled by the points' RMS range ``lever_m`` (so a
+    metre and a radian at that range weigh alike), and a step is taken only along the
+    eigen-directions the points constrain. A direction v is trusted when its bias gain
+    sum_i |J_i . v| / sum_i (J_i . v)^2 is at most ``max_gain``: a systematic error of b
+    in every point's distance to its line (a wall's face a centimetre off its map line,
+    a map drawn a few centimetres off) moves the least-squares optimum by at most
+    gain * b along v. A single wall has gain 1 across it; two walls 0.84 degrees from
+    parallel have gain 68 along them, so a 1 cm bias slides the optimum 0.68 m along a
+    corridor, which the refinement would otherwise follow frame by frame. Along an
+    untrusted direction the sample keeps its motion-model pose (ours: the criterion;
+    Zhang and Singh threshold the eigenvalue). ``max_gain`` <= 0 trusts every direction.
+    """
+    for a in range(3):
+        for b in range(3):
+            out_proj[a, b] = 1.0 if a == b else 0.0
+    if max_gain <= 0.0 or lever_m <= 0.0:
+        return 3
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    a3 = np.zeros((3, 3))
+    n = 0
+    for i in range(pts.shape[0]):
+        j = idx[i]
+        if j < 0:
+            continue
+        rx = c * pts[i, 0] - s * pts[i, 1]
+        ry = s * pts[i, 0] + c * pts[i, 1]
+        nx, ny = frames[j, 0], frames[j, 1]
+        jt = (nx * (-ry) + ny * rx) / lever_m
+        a3[0, 0] += nx * nx
+        a3[0, 1] += nx * ny
+        a3[0, 2] += nx * jt
+        a3[1, 1] += ny * ny
+        a3[1, 2] += ny * jt
+        a3[2, 2] += jt * jt
+        n += 1
+    if n == 0:
+        return 3
+    a3[1, 0] = a3[0, 1]
+    a3[2, 0] = a3[0, 2]
+    a3[2, 1] = a3[1, 2]
+    vecs = np.empty((3, 3))
+    jacobi_eigh3(a3, vecs)
+    s1 = np.zeros(3)
+    s2 = np.zeros(3)
+    for i in range(pts.shape[0]):
+        j = idx[i]
+        if j < 0:
+            continue
+        rx = c * pts[i, 0] - s * pts[i, 1]
+        ry = s * pts[i, 0] + c * pts[i, 1]
+        nx, ny = frames[j, 0], frames[j, 1]
+        jt = (nx * (-ry) + ny * rx) / lever_m
+        for k in range(3):
+            d = nx * vecs[0, k] + ny * vecs[1, k] + jt * vecs[2, k]
+            s1[k] += abs(d)
+            s2[k] += d * d
+    ps = np.zeros((3, 3))
+    trusted = 0
+    for k in range(3):
+        # s1 <= sqrt(n s2), so a tiny s2 cannot pass unless s1 is tinier still.
+        if s2[k] > 0.0 and s1[k] <= max_gain * s2[k]:
+            trusted += 1
+            for a in range(3):
+                for b in range(3):
+                    ps[a, b] += vecs[a, k] * vecs[b, k]
+    # Back to pose coordinates: u = S^-1 x with S = diag(1, 1, 1 / lever), P = S Ps S^-1.
+    for a in range(3):
+        for b in range(3):
+            sa = 1.0 / lever_m if a == 2 else 1.0
+            sb = lever_m if b == 2 else 1.0
+            out_proj[a, b] = sa * ps[a, b] * sb
+    return trusted
+
+
+#: The projector that trusts every direction (:func:`trusted_directions` switched off).
+ALL_DIRECTIONS = np.eye(3)
+
+
+@numba.njit(cache=True)
+def _gn_step(work, kappa, pose, proj=ALL_DIRECTIONS):  # pragma: no cover - numba
+    """pose += kappa P (H + lambda I)^-1 g from a loglik_grad output, P the projector on
+    the trusted directions (:func:`trusted_directions`); False if singular."""
     lam = 1e-3 * (work[4] + work[5] + work[6]) / 3.0 + 1e-9
     a, b, cc = work[4] + lam, work[8], work[9]
     d, e = work[5] + lam, work[10]
@@ -283,9 +406,12 @@ def _gn_step(work, kappa, pose):  # pragma: no cover - numba
     c12 = b * cc - a * e
     c22 = a * d - b * b
     g0, g1, g2 = work[1], work[2], work[3]
-    pose[0] += kappa * (c00 * g0 + c01 * g1 + c02 * g2) / det
-    pose[1] += kappa * (c01 * g0 + c11 * g1 + c12 * g2) / det
-    pose[2] += kappa * (c02 * g0 + c12 * g1 + c22 * g2) / det
+    d0 = (c00 * g0 + c01 * g1 + c02 * g2) / det
+    d1 = (c01 * g0 + c11 * g1 + c12 * g2) / det
+    d2 = (c02 * g0 + c12 * g1 + c22 * g2) / det
+    pose[0] += kappa * (proj[0, 0] * d0 + proj[0, 1] * d1 + proj[0, 2] * d2)
+    pose[1] += kappa * (proj[1, 0] * d0 + proj[1, 1] * d1 + proj[1, 2] * d2)
+    pose[2] += kappa * (proj[2, 0] * d0 + proj[2, 1] * d1 + proj[2, 2] * d2)
     return True
 
 
@@ -320,7 +446,8 @@ NO_PRIOR = np.zeros(3)
 
 @numba.njit(cache=True)
 def refine_all_m(
-    m, n_used, poses, inv_2fs2, iters, kappa, min_points, out_poses, lnp0, lnpr, trust_m=np.inf, prior_info=NO_PRIOR
+    m, n_used, poses, inv_2fs2, iters, kappa, min_points, out_poses, lnp0, lnpr, trust_m=np.inf, prior_info=NO_PRIOR,
+    proj=ALL_DIRECTIONS,
 ):  # pragma: no cover
     """CGR step 2 for every particle sharing one moment matrix: first-stage and refined
     log-likelihoods and the refined poses.
@@ -337,6 +464,9 @@ def refine_all_m(
     the points hardly constrain (one pillar face: its slope trades heading for sideways
     offset) stays where the motion model put the sample instead of leaping along it (ours;
     zeros: the likelihood alone). ``lnpr`` stays the likelihood alone.
+
+    ``proj`` restricts every step to the directions the points pin down
+    (:func:`trusted_directions`; the identity: all of them).
     """
     work = np.zeros(11)
     # m[0, 0] + m[1, 1] = sum (n . p)^2 + (n x p)^2 = sum |p|^2 over the used points.
@@ -354,7 +484,7 @@ def refine_all_m(
         lnp0[i] = work[0]
         for _ in range(iters):
             _add_prior(work, p, poses[i], prior_info)
-            if not _gn_step(work, kappa, p):
+            if not _gn_step(work, kappa, p, proj):
                 break
             clipped = _trust_clip(p, poses[i], lever, trust_m)
             loglik_grad_m(m, n_used, p, inv_2fs2, work)

@@ -234,8 +234,12 @@ def test_tracks_a_200_m_loop_with_20_percent_odometry_noise() -> None:
     path = path + path[: int((200 - length) / 0.025) + 2]
     # The filter's motion model matches the injected noise (alpha 0.2 instead of the
     # default 0.1, which under-disperses the particles and loses the track on the second lap).
+    # The worst error over seeds 0-3 is 0.19-0.26 m (0.17-0.23 m with every direction
+    # trusted: on exact walls with unbiased points the degeneracy-aware step gives up a
+    # little information that a drawn floor plan would turn into a slide).
     errs, _ = _run(segs, path, path[0], CGRConfig(alpha1=0.2, alpha3=0.2), obs_noise=0.015)
-    assert errs[:, 0].max() < 0.2, errs[:, 0].max()
+    assert errs[:, 0].max() < 0.3, errs[:, 0].max()
+    assert np.percentile(errs[:, 0], 95) < 0.16
 
 
 def test_moment_matrix_gives_the_same_likelihood_gradient_and_curvature() -> None:
@@ -334,7 +338,7 @@ def test_gate_widens_with_the_belief_spread() -> None:
         CGRConfig(gate_sigmas=-1.0)
 
 
-def _box_beside_a_pillar(consistent_fraction: float, seed: int) -> tuple[CGRLocalizer, np.ndarray]:
+def _box_beside_a_pillar(consistent_fraction: float, seed: int, max_gain: float = CGRConfig().degeneracy_max_gain) -> tuple[CGRLocalizer, np.ndarray]:
     """The frame that broke the 200 m corner run, reduced: the only thing in view is an
     unmapped box's face 0.4 m in front of a pillar's face and off its end. The rays to
     the box hit the pillar face, so the box's points correspond to it; refined on the
@@ -347,7 +351,8 @@ def _box_beside_a_pillar(consistent_fraction: float, seed: int) -> tuple[CGRLoca
     world_to_robot = np.array([[c, s], [-s, c]])
     pts = (box - true[:2]) @ world_to_robot.T
     nrm = np.tile([1.0, 0.0], (40, 1)) @ world_to_robot.T
-    loc = CGRLocalizer(lambda x, y: face, CGRConfig(consistent_fraction=consistent_fraction), ObservationConfig(), np.random.default_rng(seed))
+    cfg = CGRConfig(consistent_fraction=consistent_fraction, degeneracy_max_gain=max_gain)
+    loc = CGRLocalizer(lambda x, y: face, cfg, ObservationConfig(), np.random.default_rng(seed))
     loc.reset(true, 0.12, math.radians(3.0))
     loc.update(pts, nrm)
     return loc, true
@@ -358,8 +363,9 @@ def test_association_check_drops_a_box_matched_to_a_pillar_beside_it(seed: int) 
     loc, true = _box_beside_a_pillar(0.5, seed)
     assert loc.last.dropped_points >= 30
     assert math.hypot(*(loc.estimate().pose[:2] - true[:2])) < 0.1
-    # Without the check the same frame pulls the estimate 0.4 m off.
-    off, _ = _box_beside_a_pillar(0.0, seed)
+    # Without the check (and without the degeneracy-aware step, which alone holds part
+    # of the pull: one face pins one direction) the same frame pulls the estimate 0.4 m off.
+    off, _ = _box_beside_a_pillar(0.0, seed, max_gain=0.0)
     assert off.last.dropped_points == 0 and math.hypot(*(off.estimate().pose[:2] - true[:2])) > 0.3
 
 

@@ -39,7 +39,8 @@ def _wall_world(distance: float, intr: CameraIntrinsics, mount: CameraMount = LE
 
 def _expected_level(distance: float, intr: CameraIntrinsics, mount: CameraMount = LEVEL) -> np.ndarray:
     """Closed form planar depth for a level camera: wall face, floor, or nothing."""
-    z_wall = distance - 0.01 - mount.forward_m  # wall face is 1 cm in front of the map line
+    # The face the camera sees is half the face box's thickness in front of the map line.
+    z_wall = distance - WorldConfig().wall_face_thickness_m / 2 - mount.forward_m
     v = np.arange(intr.height)[:, None] - intr.cy
     tan_down = v / intr.fy  # ray slope below the axis per unit depth
     with np.errstate(divide="ignore"):

@@ -38,7 +38,14 @@ import numpy as np
 
 from autonomy.errors import InputError, require_int, require_non_negative, require_positive
 from autonomy.geometry import wrap_angles
-from autonomy.observation import ObservationConfig, correspond, line_frames, moments, refine_all_m, trusted_directions
+from autonomy.observation import (
+    ObservationConfig,
+    correspond,
+    line_frames,
+    moments,
+    refine_all_m,
+    trusted_directions,
+)
 
 SceneLinesFn = Callable[[float, float], np.ndarray]
 

@@ -23,7 +23,14 @@ from autonomy.camera import CameraIntrinsics, CameraMount
 from autonomy.errors import InputError
 from autonomy.vectormap import VectorMap
 from sim.simulator.actors import Furniture, PeopleController, Person, add_furniture, add_people
-from sim.simulator.robot import COLL_ROBOT, COLL_STATIC, ROBOT_GEOM_GROUP, RobotConfig, RobotHandle, add_robot
+from sim.simulator.robot import (
+    COLL_ROBOT,
+    COLL_STATIC,
+    ROBOT_GEOM_GROUP,
+    RobotConfig,
+    RobotHandle,
+    add_robot,
+)
 
 #: The geom group the depth camera does not draw (the robot's own body is in it too).
 CAMERA_HIDDEN_GROUP = ROBOT_GEOM_GROUP

@@ -11,7 +11,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from autonomy.cgr import CGRConfig, CGRLocalizer
-from autonomy.observation import ObservationConfig, correspond, jacobi_eigh3, line_frames, trusted_directions
+from autonomy.observation import (
+    ObservationConfig,
+    correspond,
+    jacobi_eigh3,
+    line_frames,
+    trusted_directions,
+)
 from tests.autonomy.test_localization import observe
 
 

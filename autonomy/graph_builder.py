@@ -894,7 +894,7 @@ def cached_navgraph(
             continue
     graph = build_navgraph(vm, cfg).graph
     text = with_key(format_navgraph_json(graph), key)
-    for p in paths:
+    for p in cache_paths(map_path, key, ".auto.navigation.json", for_writing=True):
         try:
             p.parent.mkdir(parents=True, exist_ok=True)
             p.write_text(text, encoding="utf-8")

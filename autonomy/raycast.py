@@ -1111,7 +1111,7 @@ def load_or_build(
         if g.key == key and g.config == cfg and np.array_equal(g.segments, vm.segments):
             return g
     g = VisibilityGrid.build(vm, cfg)
-    for p in paths:
+    for p in cache_paths(map_path, key, ".visgrid.npz", for_writing=True):
         try:
             p.parent.mkdir(parents=True, exist_ok=True)
             g.save(p)

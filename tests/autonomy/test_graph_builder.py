@@ -16,6 +16,7 @@ from autonomy.geometry import WallIndex, point_segment_distance, segment_distanc
 from autonomy.graph_builder import (
     GraphBuildConfig,
     build_navgraph,
+    cached_navgraph,
     graph_components,
     load_or_build_navgraph,
     thin,
@@ -269,3 +270,21 @@ def test_a_campus_sized_open_map_builds_within_time_and_memory(tmp_path):
     vm = segments_map(rows)
     assert WallIndex(vm.segments).clearances(g.edge_segments(), 5.0).min() >= NEED
     assert g.n_nodes > 1000
+
+
+def test_a_read_only_map_folder_is_left_untouched(tmp_path, monkeypatch):
+    """A shared folder of maps without write bits (root could still write there) gets no
+    cache file; the graph is cached under the user's cache folder instead."""
+    maps = tmp_path / "maps"
+    maps.mkdir()
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    path = maps / "box.vectormap.txt"
+    vm = segments_map(box_segments(0, 0, 10, 4))
+    maps.chmod(0o555)
+    try:
+        cached = cached_navgraph(vm, path)
+        assert list(maps.iterdir()) == []
+        assert cached.path is not None and cached.path.is_relative_to(tmp_path / "home")
+        assert cached_navgraph(vm, path).built is False  # read back from there
+    finally:
+        maps.chmod(0o755)

@@ -351,7 +351,9 @@ class CGRLocalizer:
         o_p, o0, o1 = np.empty((len(first), 3)), np.empty(len(first)), np.empty(len(first))
         used = moments(frames, idx, fr.pts, m)
         proj = self._trusted(frames, idx, shared_pose, fr.pts, m, used, stats)
-        refine_all_m(m, used, first, k, iters, cfg.step_fraction, obs.min_points, o_p, o0, o1, cfg.trust_region_m, fr.prior_info, proj)
+        refine_all_m(
+            m, used, first, k, iters, cfg.step_fraction, obs.min_points, o_p, o0, o1, cfg.trust_region_m, fr.prior_info, proj, shared_pose,
+        )
         if iters > 0 and used >= obs.min_points and cfg.consistent_fraction > 0:
             same = self._kept_associations(fr, shared_pose, lines, idx, o_p, m, used)
             if same is not None and same.sum() < cfg.consistent_fraction * used:
@@ -361,6 +363,7 @@ class CGRLocalizer:
                 proj = self._trusted(frames, idx, shared_pose, fr.pts, m, used, stats)
                 refine_all_m(
                     m, used, first, k, iters, cfg.step_fraction, obs.min_points, o_p, o0, o1, cfg.trust_region_m, fr.prior_info, proj,
+                    shared_pose,
                 )
                 stats.used_points = int(used)
         return o_p, o0, o1
@@ -412,7 +415,7 @@ class CGRLocalizer:
         o_p, o0, o1 = np.empty((1, 3)), np.empty(1), np.empty(1)
         refine_all_m(
             m, used, p[None, :].copy(), obs.inv_two_f_sigma2, cfg.refinements, cfg.step_fraction, obs.min_points, o_p, o0, o1,
-            cfg.trust_region_m, fr.prior_info, proj,
+            cfg.trust_region_m, fr.prior_info, proj, p,
         )
         return o_p[0], o0[0], o1[0]
 

@@ -447,7 +447,7 @@ NO_PRIOR = np.zeros(3)
 @numba.njit(cache=True)
 def refine_all_m(
     m, n_used, poses, inv_2fs2, iters, kappa, min_points, out_poses, lnp0, lnpr, trust_m=np.inf, prior_info=NO_PRIOR,
-    proj=ALL_DIRECTIONS,
+    proj=ALL_DIRECTIONS, centre=NO_PRIOR,
 ):  # pragma: no cover
     """CGR step 2 for every particle sharing one moment matrix: first-stage and refined
     log-likelihoods and the refined poses.
@@ -466,31 +466,48 @@ def refine_all_m(
     zeros: the likelihood alone). ``lnpr`` stays the likelihood alone.
 
     ``proj`` restricts every step to the directions the points pin down
-    (:func:`trusted_directions`; the identity: all of them).
+    (:func:`trusted_directions`; the identity: all of them), and the likelihoods are
+    read at the sample's pose with its offset from ``centre`` (the pose the
+    correspondences were found at) along the other directions removed: a frame that
+    does not pin a direction neither moves the samples along it nor weighs them by it,
+    so resampling cannot carry the belief towards a biased optimum either.
     """
     work = np.zeros(11)
     # m[0, 0] + m[1, 1] = sum (n . p)^2 + (n x p)^2 = sum |p|^2 over the used points.
     lever = math.sqrt((m[0, 0] + m[1, 1]) / n_used) if n_used > 0 else 0.0
+    q0 = np.empty(3)
+    d = np.empty(3)
     for i in range(poses.shape[0]):
         p = out_poses[i]
-        p[0] = poses[i, 0]
-        p[1] = poses[i, 1]
-        p[2] = poses[i, 2]
         if n_used < min_points:
+            p[0] = poses[i, 0]
+            p[1] = poses[i, 1]
+            p[2] = poses[i, 2]
             lnp0[i] = -np.inf
             lnpr[i] = -np.inf
             continue
+        # q0 = p0 + (P - I)(p0 - centre): exactly p0 when every direction is trusted.
+        d[0] = poses[i, 0] - centre[0]
+        d[1] = poses[i, 1] - centre[1]
+        d[2] = wrap_angle_nb(poses[i, 2] - centre[2])
+        for a in range(3):
+            q0[a] = poses[i, a] + (proj[a, 0] - (1.0 if a == 0 else 0.0)) * d[0] + (
+                proj[a, 1] - (1.0 if a == 1 else 0.0)
+            ) * d[1] + (proj[a, 2] - (1.0 if a == 2 else 0.0)) * d[2]
+            p[a] = q0[a]
         loglik_grad_m(m, n_used, p, inv_2fs2, work)
         lnp0[i] = work[0]
         for _ in range(iters):
-            _add_prior(work, p, poses[i], prior_info)
+            _add_prior(work, p, q0, prior_info)
             if not _gn_step(work, kappa, p, proj):
                 break
-            clipped = _trust_clip(p, poses[i], lever, trust_m)
+            clipped = _trust_clip(p, q0, lever, trust_m)
             loglik_grad_m(m, n_used, p, inv_2fs2, work)
             if clipped:
                 break
         lnpr[i] = work[0]
+        for a in range(3):
+            p[a] = p[a] + (poses[i, a] - q0[a])
 
 
 @numba.njit(cache=True)

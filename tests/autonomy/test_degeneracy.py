@@ -122,7 +122,7 @@ def _biased_corridor_drift(max_gain: float, seed: int) -> float:
 
 @pytest.mark.parametrize("seed", range(3))
 def test_a_small_bias_does_not_slide_the_estimate_along_a_corridor(seed: int) -> None:
-    assert _biased_corridor_drift(8.0, seed) < 0.08
+    assert _biased_corridor_drift(8.0, seed) < 0.03
     # Every direction trusted: the estimate slides towards the biased optimum, about
     # 0.68 m along the corridor.
     assert _biased_corridor_drift(0.0, seed) > 0.5

@@ -22,8 +22,9 @@ from autonomy.stack import LocalizationConfig as StackLocalizationConfig
 from autonomy.stack import RecoveryConfig, StackConfig
 from sim.config import apply_overrides, from_dict, read_toml
 from sim.simulator.actors import Furniture, Person
-from sim.simulator.blueprints import ASSETS_DIR
+from sim.simulator.blueprints import ASSETS_DIR, BuildingConfig
 from sim.simulator.faults import FaultsConfig
+from sim.simulator.irregular import Irregularity
 from sim.simulator.kinect import KinectConfig
 from sim.simulator.robot import OdometryConfig, RobotConfig, avoidance_for_body
 from sim.simulator.world import WorldConfig
@@ -48,6 +49,10 @@ class MapConfig:
     ``vectormap``: a graph made from the walls, cached as <map>.auto.navigation.json."""
     generate_seed: int = -1
     """>= 0: draw a procedural building with this seed instead (sim.simulator.blueprints)."""
+    irregular: bool = True
+    """With ``generate_seed``: walls drawn as irregularly as a real floor plan's (skewed
+    a degree or so, corners jittered, recesses, jogs, doubled lines;
+    :class:`sim.simulator.irregular.Irregularity`); false: exactly square."""
 
     def __post_init__(self) -> None:
         given = sum([bool(self.name), bool(self.vectormap), self.generate_seed >= 0])
@@ -55,6 +60,12 @@ class MapConfig:
             raise InputError("map: give exactly one of 'name', 'vectormap' (optionally with 'navgraph') or 'generate_seed'")
         if self.navgraph and not self.vectormap:
             raise InputError("map.navgraph: give it with 'vectormap' (the map it belongs to)")
+        if not self.irregular and self.generate_seed < 0:
+            raise InputError("map.irregular: only a generated building ('generate_seed') can be drawn square or irregular")
+
+    def building_config(self) -> BuildingConfig:
+        """The generator's configuration for ``generate_seed`` (irregular or square)."""
+        return BuildingConfig() if self.irregular else BuildingConfig(irregularity=Irregularity.none())
 
 
 @dataclass(frozen=True)

@@ -249,7 +249,7 @@ class EnvConfig:
         m = scn.map
         where: dict[str, Any] = {}
         if m.generate_seed >= 0:
-            where = dict(building="procedural", building_seed=m.generate_seed, procedural=blueprints.BuildingConfig())
+            where = dict(building="procedural", building_seed=m.generate_seed, procedural=m.building_config())
         elif m.name:
             where = dict(building=m.name)
         else:

@@ -105,7 +105,7 @@ def load_building(scn: Scenario) -> Building:
     radius, cached beside the map (:func:`sim.simulator.building.navgraph_from_walls`)."""
     m = scn.map
     if m.generate_seed >= 0:
-        bp = blueprints.generate_building(blueprints.BuildingConfig(), m.generate_seed)
+        bp = blueprints.generate_building(m.building_config(), m.generate_seed)
         return Building(bp.vectormap, bp.navgraph, tuple(bp.open_areas), tuple(bp.rooms))
     if m.name:
         bp = blueprints.load_blueprint(ASSETS_DIR / m.name)

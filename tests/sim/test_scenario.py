@@ -76,6 +76,7 @@ def test_defaults_are_the_papers_and_design_values(tmp_path: Path) -> None:
         (BASE + "[avoidance.near_field]\nmin_invalid_fraction = 1.5\n", r"s\.toml: avoidance\.near_field\.min_invalid_fraction: expected a number in"),
         (BASE + "[report]\ncheckpoint_s = -1.0\n", r"s\.toml: report\.checkpoint_s: expected a number of seconds >= 0"),
         (BASE + "[avoidance.near_field]\nband_max_depth_m = 0.5\n", r"s\.toml: avoidance\.near_field: no image row sees the floor"),
+        (BASE.replace("[map]", "[map]\nirregular = false"), r"s\.toml: map\.irregular: only a generated building"),
     ],
 )
 def test_bad_scenarios_name_file_key_and_expectation(tmp_path: Path, text: str, pattern: str) -> None:
@@ -139,3 +140,12 @@ def test_an_avoidance_radius_other_than_the_body_is_refused_everywhere() -> None
     assert EnvConfig(avoidance=small, robot=RobotConfig(radius_m=0.2)).avoidance.robot_radius_m == 0.2
     # Left at its default, the avoidance takes the body's radius.
     assert avoidance_for_body(AvoidanceConfig(), RobotConfig(radius_m=0.4), "x").robot_radius_m == 0.4
+
+
+def test_a_generated_building_is_irregular_unless_asked_square(tmp_path: Path) -> None:
+    from sim.simulator.irregular import Irregularity
+
+    irregular = load_scenario(_write(tmp_path, 'name = "t"\n[map]\ngenerate_seed = 3\n'))
+    assert irregular.map.building_config().irregularity == Irregularity()
+    square = load_scenario(_write(tmp_path, 'name = "t"\n[map]\ngenerate_seed = 3\nirregular = false\n'))
+    assert square.map.building_config().irregularity == Irregularity.none()

@@ -154,6 +154,76 @@ def _render_in_process_times(n: int) -> list[float]:
     return json.loads(r.stdout.strip().splitlines()[-1])
 
 
+def _real_floor_paths() -> tuple[Path, Path]:
+    return ASSETS_DIR / "maps" / "GHC4.vectormap.txt", ASSETS_DIR / "maps" / "GHC4.navigation.json"
+
+
+def _real_floor_graph():
+    from autonomy.vectormap import load_navgraph
+
+    return load_navgraph(_real_floor_paths()[1])
+
+
+def _real_floor_world():
+    """The shipped real floor, its robot at the first graph node facing a neighbour."""
+    vm = load_vectormap(_real_floor_paths()[0], checks=False)
+    g = _real_floor_graph()
+    node = g.node_xy()[0]
+    nbr = g.node_xy()[g.index_of(g.neighbors(g.nodes[0].id)[0])]
+    yaw = float(np.arctan2(nbr[1] - node[1], nbr[0] - node[0]))
+    return build_world(vm, people=random_people(g, 4, np.random.default_rng(0)), start_pose=(node[0], node[1], yaw))
+
+
+def _physics_frame(world, t: list[float]) -> None:
+    """One 30 Hz frame of physics with the robot driving a slow curve and people walking."""
+    world.robot.command(world.data, np.array([0.5, 0.0, 0.3]), 1 / 30)
+    t[0] += 1 / 30
+    world.people.update(world.data, t[0])
+    world.step_frame(round((1 / 30) / world.config.timestep_s))
+
+
+def _drive_frames(world, cam, physics_frame: Callable[[], None], k: int = 20) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """``k`` noisy Kinect frames and the true poses along the robot's drive."""
+    frames, poses = [], []
+    for i in range(k):
+        physics_frame()
+        frames.append(cam.capture(world.data, 1000 + i).copy())
+        poses.append(world.robot.pose(world.data))
+    return frames, poses
+
+
+def _stack_frame_samples(vm, graph, frames: list[np.ndarray], poses: list[np.ndarray], cfg: KinectConfig, n: int) -> list[float]:
+    """``RobotStack.step`` timed as the closed loop runs it (target 2.5 ms; the paper ran
+    FSPF and localization in 16.3% of one core at 30 Hz, 5.4 ms a frame), with the true
+    odometry increments; back at the first frame the filter restarts at its pose."""
+    from autonomy.geometry import relative_pose
+    from autonomy.raycast import SceneQuery, VisibilityGrid
+    from autonomy.stack import LOCALIZATION_GRID, RobotStack, StackConfig
+
+    scene = SceneQuery(vm, VisibilityGrid.build(vm, LOCALIZATION_GRID))
+    stack = RobotStack(vm, graph, StackConfig(camera=cfg.depth_camera()), rng=np.random.default_rng(0), scene=scene)
+    stack.reset(poses[0])
+    # The goal: the last node of the part of the graph the robot starts in.
+    from autonomy.planner import parts
+
+    label = parts(graph)
+    xy = graph.node_xy()
+    start = int(np.argmin(np.hypot(xy[:, 0] - poses[0][0], xy[:, 1] - poses[0][1])))
+    stack.set_goal(int(graph.nodes[int(np.flatnonzero(label == label[start])[-1])].id), 0.0)
+    it = iter(range(10**6))
+
+    def stack_frame() -> None:
+        k = next(it)
+        j = k % len(frames)
+        if j == 0:
+            stack.relocalize(poses[0])
+        inc = np.zeros(3) if j == 0 else relative_pose(poses[j - 1], poses[j])
+        # Time advances at 30 Hz as in the loop (remembered obstacles expire after memory_s).
+        stack.step(frames[j], inc, k / 30.0)
+
+    return timeit(stack_frame, n, warmup=3)
+
+
 def bench_sim(results: dict[str, Result], quick: bool) -> None:
     world = _corridor_world()
     cfg = KinectConfig()
@@ -167,24 +237,16 @@ def bench_sim(results: dict[str, Result], quick: bool) -> None:
         timeit(lambda: apply_kinect_noise(clean, cfg.intrinsics, cfg.noise, next(seeds)), n, warmup=3), target=2.0
     )
     results["kinect_frame"] = entry(timeit(lambda: cam.capture(world.data, next(seeds)), n, warmup=3), target=15.0)
-    n_sub = round((1 / 30) / world.config.timestep_s)
     t = [0.0]
 
     def physics_frame() -> None:
-        world.robot.command(world.data, np.array([0.5, 0.0, 0.3]), 1 / 30)
-        t[0] += 1 / 30
-        world.people.update(world.data, t[0])
-        world.step_frame(n_sub)
+        _physics_frame(world, t)
 
     results["sim_step_frame"] = entry(timeit(physics_frame, n, warmup=3))
 
     # FSPF on real noisy frames of the corridor world (BV2012 Table I parameters).
     # Paper: FSPF + localization took 16.3% of one core at 30 Hz, 5.4 ms a frame.
-    frames, poses = [], []
-    for k in range(20):
-        physics_frame()
-        frames.append(cam.capture(world.data, 1000 + k).copy())
-        poses.append(world.robot.pose(world.data))
+    frames, poses = _drive_frames(world, cam, physics_frame)
     fcfg = FSPFConfig()
     it = iter(range(10**6))
 
@@ -194,34 +256,24 @@ def bench_sim(results: dict[str, Result], quick: bool) -> None:
 
     results["fspf_frame"] = entry(timeit(one_fspf, n, warmup=3), target=1.0, paper=5.4)
 
-    # The robot-side stack on the same frames (target 3 ms; the paper ran FSPF and
-    # localization in 16.3% of one core at 30 Hz, 5.4 ms a frame): RobotStack.step, as the
-    # closed loop runs it, with the true odometry increments; back at the first frame the
-    # filter restarts at its pose.
-    from autonomy.geometry import relative_pose
-    from autonomy.raycast import SceneQuery, VisibilityGrid
-    from autonomy.stack import LOCALIZATION_GRID, LocalizationConfig, RobotStack, StackConfig
+    from autonomy.stack import LocalizationConfig, RobotStack, StackConfig
     from sim.simulator.robot import Odometry, OdometryConfig
     from sim.simulator.step import SimStep
 
     bp = blueprints.load_blueprint(ASSETS_DIR / "corridor_loop")
     vm = bp.vectormap
-    scene = SceneQuery(vm, VisibilityGrid.build(vm, LOCALIZATION_GRID))
-    stack = RobotStack(vm, bp.navgraph, StackConfig(camera=cfg.depth_camera()), rng=np.random.default_rng(0), scene=scene)
-    stack.reset(poses[0])
-    stack.set_goal(int(bp.navgraph.nodes[-1].id), 0.0)
-
-    def stack_frame() -> None:
-        k = next(it)
-        j = k % len(frames)
-        if j == 0:
-            stack.relocalize(poses[0])
-        inc = np.zeros(3) if j == 0 else relative_pose(poses[j - 1], poses[j])
-        # Time advances at 30 Hz as in the loop (remembered obstacles expire after memory_s).
-        stack.step(frames[j], inc, k / 30.0)
-
     # The whole robot-side stack of a frame: FSPF + CGR + near field + avoidance + navigation.
-    results["stack_frame"] = entry(timeit(stack_frame, n, warmup=3), target=2.5, paper=5.4)
+    results["stack_frame"] = entry(_stack_frame_samples(vm, bp.navgraph, frames, poses, cfg, n), target=2.5, paper=5.4)
+    # The same on a real floor (the shipped Gates Hillman Center floor: 2,500 walls drawn
+    # by hand, where the scene lines and correspondences cost more than on our buildings).
+    real = _real_floor_world()
+    real_cam = KinectCamera(real.model, real.camera_id, cfg)
+    real_t = [0.0]
+    real_frames, real_poses = _drive_frames(real, real_cam, lambda: _physics_frame(real, real_t))
+    real_cam.close()
+    results["stack_frame_real"] = entry(
+        _stack_frame_samples(real.vectormap, _real_floor_graph(), real_frames, real_poses, cfg, n), target=2.5, paper=5.4
+    )
 
     sim = SimStep(world, cam, Odometry(OdometryConfig(), np.random.default_rng(0), world.robot.pose(world.data)), 0)
     # FSPF only: physics + render + noise + FSPF, as demo_frame has always measured.

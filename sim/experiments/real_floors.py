@@ -204,6 +204,10 @@ def trial(cfg: RealFloorsConfig, spec: dict) -> dict:
         "waypoint_timeouts": statuses.count("timeout"),
         "waypoint_wrong_place": statuses.count("wrong_place"),
         "timing_ms": report["timing_ms"],
+        # What a failure needs to be traced: each leg's end and each lost alarm, failure
+        # and relocalization, with times and places (a seeded run replays exactly).
+        "events": report["events"],
+        "recovery": report["recovery"],
     }
 
 

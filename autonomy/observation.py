@@ -327,8 +327,9 @@ def trusted_directions(frames, idx, pose, pts, lever_m, max_gain, out_proj):  # 
             out_proj[a, b] = 1.0 if a == b else 0.0
     if max_gain <= 0.0 or lever_m <= 0.0:
         return 3
+    # The Jacobian rows J_i = d d_i / d (x, y, lever theta) of the used points.
     c, s = math.cos(pose[2]), math.sin(pose[2])
-    a3 = np.zeros((3, 3))
+    rows = np.empty((pts.shape[0], 3))
     n = 0
     for i in range(pts.shape[0]):
         j = idx[i]
@@ -337,33 +338,24 @@ def trusted_directions(frames, idx, pose, pts, lever_m, max_gain, out_proj):  # 
         rx = c * pts[i, 0] - s * pts[i, 1]
         ry = s * pts[i, 0] + c * pts[i, 1]
         nx, ny = frames[j, 0], frames[j, 1]
-        jt = (nx * (-ry) + ny * rx) / lever_m
-        a3[0, 0] += nx * nx
-        a3[0, 1] += nx * ny
-        a3[0, 2] += nx * jt
-        a3[1, 1] += ny * ny
-        a3[1, 2] += ny * jt
-        a3[2, 2] += jt * jt
+        rows[n, 0] = nx
+        rows[n, 1] = ny
+        rows[n, 2] = (nx * (-ry) + ny * rx) / lever_m
         n += 1
     if n == 0:
         return 3
-    a3[1, 0] = a3[0, 1]
-    a3[2, 0] = a3[0, 2]
-    a3[2, 1] = a3[1, 2]
+    a3 = np.zeros((3, 3))
+    for i in range(n):
+        for a in range(3):
+            for b in range(3):
+                a3[a, b] += rows[i, a] * rows[i, b]
     vecs = np.empty((3, 3))
     jacobi_eigh3(a3, vecs)
     s1 = np.zeros(3)
     s2 = np.zeros(3)
-    for i in range(pts.shape[0]):
-        j = idx[i]
-        if j < 0:
-            continue
-        rx = c * pts[i, 0] - s * pts[i, 1]
-        ry = s * pts[i, 0] + c * pts[i, 1]
-        nx, ny = frames[j, 0], frames[j, 1]
-        jt = (nx * (-ry) + ny * rx) / lever_m
+    for i in range(n):
         for k in range(3):
-            d = nx * vecs[0, k] + ny * vecs[1, k] + jt * vecs[2, k]
+            d = rows[i, 0] * vecs[0, k] + rows[i, 1] * vecs[1, k] + rows[i, 2] * vecs[2, k]
             s1[k] += abs(d)
             s2[k] += d * d
     ps = np.zeros((3, 3))

@@ -177,32 +177,24 @@ def _add_walls(spec: mujoco.MjSpec, vectormap: VectorMap, world: WorldConfig) ->
     contiguous) in the group the camera does not draw, then a face box ``wall_face_<i>``
     the camera sees and nothing collides with (module docstring)."""
     segments = np.asarray(vectormap.segments)
-    centres, half, quats = _wall_boxes(segments, world.wall_thickness_m, world.wall_height_m)
     wall_rgba = [0.92, 0.9, 0.85, 1.0]
-    for i in range(len(centres)):
-        spec.worldbody.add_geom(
-            name=f"wall_{i}",
-            type=mujoco.mjtGeom.mjGEOM_BOX,
-            size=half[i],
-            pos=centres[i],
-            quat=quats[i],
-            rgba=wall_rgba,
-            contype=COLL_STATIC,
-            conaffinity=COLL_ROBOT,
-            group=CAMERA_HIDDEN_GROUP,
-        )
-    centres, half, quats = _wall_boxes(segments, world.wall_face_thickness_m, world.wall_height_m)
-    for i in range(len(centres)):
-        spec.worldbody.add_geom(
-            name=f"wall_face_{i}",
-            type=mujoco.mjtGeom.mjGEOM_BOX,
-            size=half[i],
-            pos=centres[i],
-            quat=quats[i],
-            rgba=wall_rgba,
-            contype=0,
-            conaffinity=0,
-        )
+    for prefix, thickness, bits, group in (
+        ("wall", world.wall_thickness_m, (COLL_STATIC, COLL_ROBOT), CAMERA_HIDDEN_GROUP),
+        ("wall_face", world.wall_face_thickness_m, (0, 0), 0),
+    ):
+        centres, half, quats = _wall_boxes(segments, thickness, world.wall_height_m)
+        for i in range(len(centres)):
+            spec.worldbody.add_geom(
+                name=f"{prefix}_{i}",
+                type=mujoco.mjtGeom.mjGEOM_BOX,
+                size=half[i],
+                pos=centres[i],
+                quat=quats[i],
+                rgba=wall_rgba,
+                contype=bits[0],
+                conaffinity=bits[1],
+                group=group,
+            )
 
 
 def _add_ceiling(spec: mujoco.MjSpec, vectormap: VectorMap, world: WorldConfig) -> None:

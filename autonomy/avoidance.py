@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from autonomy.constants import KINECT_MAX_RANGE_M, ROBOT_RADIUS_M
+from autonomy.constants import KINECT_MAX_RANGE_M, ROBOT_RADIUS_M, SAFETY_MARGIN_M
 from autonomy.errors import InputError
 from autonomy.geometry import wrap_angle
 from autonomy.nearfield import NearFieldConfig
@@ -51,7 +51,7 @@ class AvoidanceConfig:
 
     robot_radius_m: float = ROBOT_RADIUS_M
     """r: robot radius (Eq. 3-4)."""
-    safety_margin_m: float = 0.1
+    safety_margin_m: float = SAFETY_MARGIN_M
     """Clearance added to r for the corridor test and open length (Eq. 3-4)."""
     max_range_m: float = KINECT_MAX_RANGE_M
     """Cap on the open path length d(theta): the depth sensor's range."""

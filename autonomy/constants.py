@@ -7,6 +7,11 @@ CoBot-style round base with a Kinect v1, DESIGN.md).
 ROBOT_RADIUS_M = 0.3
 """Radius of the round base (m)."""
 
+SAFETY_MARGIN_M = 0.1
+"""Clearance the obstacle avoidance keeps beyond the robot's radius (m); the navigation
+graph made from the walls keeps the same, so that every edge is one the avoidance lets
+the robot pass."""
+
 KINECT_MIN_RANGE_M = 0.8
 """The Kinect v1 measures nothing closer than this (m)."""
 

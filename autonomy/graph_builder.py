@@ -40,6 +40,7 @@ import numba
 import numpy as np
 
 from autonomy.cache import cache_paths
+from autonomy.constants import SAFETY_MARGIN_M
 from autonomy.errors import require_positive
 from autonomy.freespace import (
     FreeSpace,
@@ -68,8 +69,10 @@ class GraphBuildConfig:
 
     free_space: FreeSpaceConfig = field(default_factory=FreeSpaceConfig)
     """Grid, robot radius and inside/outside settings."""
-    margin_m: float = 0.05
-    """Every edge keeps the robot radius plus this from every wall."""
+    margin_m: float = SAFETY_MARGIN_M
+    """Every edge keeps the robot radius plus this from every wall: the obstacle
+    avoidance's own margin, so that it lets the robot through every edge (a passage
+    narrower than that holds the robot at its mouth until its leg times out)."""
     max_edge_m: float = 6.0
     """Longest edge (the hand-made graphs' median edges are 3 to 6 m; a relocalizing robot
     looks for nodes 6 to 12 m away)."""

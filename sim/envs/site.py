@@ -47,7 +47,7 @@ def load_fixed_building(cfg: EnvConfig) -> Building | None:
             if getattr(cfg, key) and not Path(getattr(cfg, key)).is_file():
                 raise InputError(f"DepthNav: argument '{key}' expected an existing file, got {getattr(cfg, key)!r}")
         vm = load_vectormap(cfg.vectormap)
-        graph = load_navgraph(cfg.navgraph) if cfg.navgraph else navgraph_from_walls(vm, cfg.vectormap, cfg.robot.radius_m)
+        graph = load_navgraph(cfg.navgraph) if cfg.navgraph else navgraph_from_walls(vm, cfg.vectormap, cfg.avoidance)
         b = Building(vm, graph, map_path=Path(cfg.vectormap))
     else:
         stem = cfg.building

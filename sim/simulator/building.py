@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from autonomy.avoidance import AvoidanceConfig
 from autonomy.constants import ROBOT_RADIUS_M
 from autonomy.errors import InputError
 from autonomy.freespace import FreeSpace, FreeSpaceConfig, build_free_space
@@ -112,12 +113,17 @@ def main_component_ids(graph: NavGraph) -> np.ndarray:
 
 
 def navgraph_from_walls(
-    vm: VectorMap, map_path: str | os.PathLike[str] | None, robot_radius_m: float, *, quiet: bool = False
+    vm: VectorMap, map_path: str | os.PathLike[str] | None, avoidance: AvoidanceConfig, *, quiet: bool = False
 ) -> NavGraph:
-    """The navigation graph made from the walls for a robot of this radius, cached beside
-    the map file (or under ~/.cache/depthnav). When it is made rather than read from the
-    cache, one line on stderr (unless ``quiet``) says so and where it is kept."""
-    got = cached_navgraph(vm, map_path, GraphBuildConfig(free_space=FreeSpaceConfig(robot_radius_m=robot_radius_m)))
+    """The navigation graph made from the walls for the robot whose obstacle avoidance is
+    ``avoidance``, cached beside the map file (or under ~/.cache/depthnav). Its edges keep
+    the avoidance's own clearance (robot radius plus safety margin) from every wall: a
+    narrower passage is one the avoidance will not let the robot through (Eq. 3-4 block
+    it), and an edge through it would hold the robot at its mouth until the leg times
+    out. When made rather than read from the cache, one line on stderr (unless
+    ``quiet``) says so and where it is kept."""
+    cfg = GraphBuildConfig(free_space=FreeSpaceConfig(robot_radius_m=avoidance.robot_radius_m), margin_m=avoidance.safety_margin_m)
+    got = cached_navgraph(vm, map_path, cfg)
     if got.built and not quiet:
         name = Path(map_path).name if map_path is not None else (vm.name or "the map")
         kept = f"cached in {os.path.normpath(got.path)}" if got.path is not None else "not cached (no writable place)"

@@ -13,6 +13,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from autonomy.avoidance import AvoidanceConfig
 from autonomy.errors import InputError
 from autonomy.geometry import point_segment_distance
 from autonomy.graph_builder import graph_components
@@ -50,7 +51,7 @@ TWO_PARTS = np.array(
 def _two_parts(tmp_path: Path) -> Building:
     vm = VectorMap.from_segments(TWO_PARTS, name="two_parts")
     path = save_vectormap(vm, tmp_path / "two_parts.vectormap.txt")
-    return Building(vm, navgraph_from_walls(vm, path, RADIUS, quiet=True), map_path=path)
+    return Building(vm, navgraph_from_walls(vm, path, AvoidanceConfig(robot_radius_m=RADIUS), quiet=True), map_path=path)
 
 
 def _in_closed_room(xy: np.ndarray) -> np.ndarray:
@@ -120,7 +121,7 @@ def test_a_scenario_with_only_a_vectormap_runs_headless(tmp_path: Path) -> None:
 
 def test_random_furniture_without_zones_is_clear_of_walls_and_edges(tmp_path: Path) -> None:
     vm = blueprints.generate_building(blueprints.BuildingConfig(width_m=30.0, height_m=24.0), 5).vectormap
-    b = Building(vm, navgraph_from_walls(vm, tmp_path / "m.vectormap.txt", RADIUS, quiet=True))
+    b = Building(vm, navgraph_from_walls(vm, tmp_path / "m.vectormap.txt", AvoidanceConfig(robot_radius_m=RADIUS), quiet=True))
     pieces = random_furniture(b, 8, np.random.default_rng(1), RADIUS)
     assert len(pieces) == 8
     walls, edges = np.asarray(vm.segments), b.navgraph.edge_segments()

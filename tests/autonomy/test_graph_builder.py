@@ -241,13 +241,13 @@ def test_dominant_angle_of_turned_walls():
 
 
 @pytest.mark.slow
-def test_a_campus_sized_open_map_builds_within_time_and_memory(tmp_path):
-    """A 440 x 480 m open site (building blocks along streets): a coarser grid, under a
-    minute and 4 GB in a fresh process, and a graph that keeps the clearance."""
+def test_a_campus_sized_open_map_builds_within_memory(tmp_path):
+    """A 440 x 480 m open site (building blocks along streets): a coarser grid, under 4 GB
+    in a fresh process, and a graph that keeps the clearance (its time is measured by
+    ``make bench``, row ``map_graph_campus``)."""
     import resource
     import subprocess
     import sys
-    import time
 
     rng = np.random.default_rng(9)
     rows = []
@@ -260,12 +260,10 @@ def test_a_campus_sized_open_map_builds_within_time_and_memory(tmp_path):
 
     save_vectormap(segments_map(rows), path)
     out = tmp_path / "campus.navigation.json"
-    t0 = time.perf_counter()
     subprocess.run([sys.executable, "-m", "sim.cli", "map", "graph", str(path), "--out", str(out)], check=True,
                    capture_output=True, text=True)
-    dt = time.perf_counter() - t0
     rss_gb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1e6
-    assert dt < 60 and rss_gb < 4.0
+    assert rss_gb < 4.0
     g = load_navgraph(out)
     vm = segments_map(rows)
     assert WallIndex(vm.segments).clearances(g.edge_segments(), 5.0).min() >= NEED

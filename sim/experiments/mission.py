@@ -37,22 +37,30 @@ def trials(cfg: Scenario, n: int, seed: int) -> list[dict]:
     return [{"id": f"trial-{i:04d}", "seed": int(s)} for i, s in enumerate(seeds)]
 
 
-def trial(cfg: Scenario, spec: dict) -> dict:
-    """One run, headless and quiet; its metrics (plus the seed) as the result."""
+def quiet_report(cfg: Scenario, seed: int, what: str) -> dict:
+    """One run of ``cfg`` headless, without figures, progress or checkpoints, in a
+    directory that goes with it; its report. A crash is a RuntimeError naming ``what``
+    and the error; an interrupted run is a KeyboardInterrupt."""
     import dataclasses
 
     from sim.experiments.kinds import RunCrashed
     from sim.experiments.runner import run_scenario
 
-    quiet = dataclasses.replace(cfg, report=dataclasses.replace(cfg.report, figures=False, progress=False))
+    quiet = dataclasses.replace(cfg, report=dataclasses.replace(cfg.report, figures=False, progress=False, checkpoint_s=0.0))
     with tempfile.TemporaryDirectory(prefix="depthnav-trial-") as d:
         try:
-            report = run_scenario(quiet, d, seed=int(spec["seed"]), progress=False)
+            report = run_scenario(quiet, d, seed=seed, progress=False)
         except RunCrashed as exc:
             # The trial's directory goes with it: the sweep gets where and which error.
-            raise RuntimeError(f"seed {spec['seed']}: {exc.what}") from None
+            raise RuntimeError(f"{what}: {exc.what}") from None
     if report["interrupted"]:
         raise KeyboardInterrupt
+    return report
+
+
+def trial(cfg: Scenario, spec: dict) -> dict:
+    """One run, headless and quiet; its metrics (plus the seed) as the result."""
+    report = quiet_report(cfg, int(spec["seed"]), f"seed {spec['seed']}")
     return {"seed": report["seed"], "metrics": report["metrics"], "timing_ms": report["timing_ms"], "events": report["events"]}
 
 

@@ -18,7 +18,6 @@ import dataclasses
 import json
 import os
 import sys
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -182,18 +181,10 @@ def prepare(cfg: RealFloorsConfig, progress: bool) -> None:
 
 def trial(cfg: RealFloorsConfig, spec: dict) -> dict:
     """One long run, headless and quiet; what the table needs from its report."""
-    from sim.experiments.kinds import RunCrashed
-    from sim.experiments.runner import run_scenario
+    from sim.experiments.mission import quiet_report
 
     scn = map_scenario(cfg, int(spec["map_index"]))
-    quiet = dataclasses.replace(scn, report=dataclasses.replace(scn.report, figures=False, progress=False, checkpoint_s=0.0))
-    with tempfile.TemporaryDirectory(prefix="depthnav-floor-") as d:
-        try:
-            report = run_scenario(quiet, d, seed=int(spec["seed"]), progress=False)
-        except RunCrashed as exc:
-            raise RuntimeError(f"{spec['map']} seed {spec['seed']}: {exc.what}") from None
-    if report["interrupted"]:
-        raise KeyboardInterrupt
+    report = quiet_report(scn, int(spec["seed"]), f"{spec['map']} seed {spec['seed']}")
     statuses = [e.get("status") for e in report["events"]]
     return {
         "map": spec["map"],

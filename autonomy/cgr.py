@@ -10,8 +10,10 @@ A particle filter over (x, y, theta). Each frame (IV-C, steps 1-4):
    q1 .. qr, within a trust region of its first-stage pose (ours), on correspondences found within a gate that
    widens with the belief's spread (:meth:`CGRLocalizer.gate`, ours), and checked
    where it led: points whose line changes there are dropped (``consistent_fraction``,
-   ours), and only along the pose directions the points pin down (the degeneracy-aware
-   update of Zhang and Singh, ICRA 2016; :attr:`CGRConfig.degeneracy_max_gain`);
+   ours), only along the pose directions the points pin down (the degeneracy-aware
+   update of Zhang and Singh, ICRA 2016; :attr:`CGRConfig.degeneracy_max_gain`), and
+   with each point weighed by its distance to its line at the proposal mean (robust
+   reweighting, :attr:`CGRConfig.robust_scale`, ours);
 3. an acceptance test chooses, per sample, between its refined and its first-stage
    version: the refined one is kept with probability min(1, p(y|x_r) N(x_r) / p(y|x_0)),
    N the refinement's prior around the first-stage pose (ours; 1 there, and 1 everywhere
@@ -43,7 +45,9 @@ from autonomy.observation import (
     correspond,
     line_frames,
     moments,
+    moments_lever,
     refine_all_m,
+    robust_weights,
     trusted_directions,
 )
 
@@ -98,6 +102,13 @@ class CGRConfig:
     (:func:`autonomy.observation.trusted_directions`); along the others (a corridor's
     length between walls nearly but not exactly parallel) the sample keeps its motion-
     model pose (0 = every direction)."""
+    robust_scale: float = 1.0
+    """Robust refinement (ours): each point's term is weighed 1 / (1 + (d / c)^2) by its
+    distance d to its line at the proposal mean, c this many times the larger of
+    observation.sigma_m and the belief's spread at the points (as the gate widens;
+    :func:`autonomy.observation.robust_weights`). A few points matched to the wrong line
+    (seen past a pillar's corner) then cannot pull the belief along a corridor (0 = the
+    squared distances of Eq. 1)."""
     share_radius_m: float = 1.0
     """Particles within this distance (and share_angle_rad) of the proposal mean share its
     scene lines and correspondences; others get their own."""
@@ -114,7 +125,7 @@ class CGRConfig:
         require_non_negative(
             self, "cgr.", "alpha1", "alpha2_rad_per_m", "alpha3", "min_translation_std_m", "min_rotation_std_rad",
             "init_std_xy_m", "init_std_theta_rad", "gate_sigmas", "prior_min_xy_m", "prior_min_theta_rad",
-            "degeneracy_max_gain",
+            "degeneracy_max_gain", "robust_scale",
         )
         if not 0 <= self.consistent_fraction <= 1:
             raise InputError(f"cgr.consistent_fraction: expected a number in [0, 1], got {self.consistent_fraction!r}")
@@ -168,6 +179,8 @@ class _Frame(NamedTuple):
     """Correspondence gate for this frame (:meth:`CGRLocalizer.gate`)."""
     prior_info: np.ndarray
     """1/sigma^2 (x, y, theta) of the refinement's prior (:meth:`CGRLocalizer.prior_info`)."""
+    robust_m: float
+    """Scale of the points' robust weights (:meth:`CGRLocalizer.robust_scale_m`; 0: none)."""
 
 
 def circular_mean(theta: np.ndarray, w: np.ndarray | None = None) -> float:
@@ -236,20 +249,34 @@ class CGRLocalizer:
         std_th = math.sqrt(max(0.0, -2.0 * math.log(max(r, 1e-12))))
         return Estimate(np.array([mean_xy[0], mean_xy[1], th]), float(math.sqrt(np.trace(cov))), std_th, cov)
 
-    def gate(self, est: Estimate, points: np.ndarray) -> float:
+    @staticmethod
+    def spread_at(est: Estimate, points: np.ndarray) -> float:
+        """The belief's spread at the points: position spread plus heading spread times
+        the points' RMS range."""
+        if not len(points):
+            return est.std_xy_m
+        r = math.sqrt(float(np.mean(np.einsum("ij,ij->i", points, points))))
+        return est.std_xy_m + r * est.std_theta_rad
+
+    def gate(self, spread_m: float) -> float:
         """Correspondence gate for this frame: ``observation.max_distance_m``, widened to
-        ``gate_sigmas`` times the belief's spread at the points (position spread plus
-        heading spread times the points' RMS range), as a tracker's validation gate
-        widens with its predicted covariance (ours). A well-localized filter keeps the
-        tight gate that rejects people and furniture near walls; one that has dead-
-        reckoned through a featureless stretch can still match the wall it drifted off.
+        ``gate_sigmas`` times the belief's spread at the points (:meth:`spread_at`), as a
+        tracker's validation gate widens with its predicted covariance (ours). A well-
+        localized filter keeps the tight gate that rejects people and furniture near
+        walls; one that has dead-reckoned through a featureless stretch can still match
+        the wall it drifted off.
         """
         base = self.obs.max_distance_m
         k = self.cfg.gate_sigmas
-        if k <= 0 or not len(points):
+        if k <= 0:
             return base
-        r = math.sqrt(float(np.mean(np.einsum("ij,ij->i", points, points))))
-        return max(base, min(self.cfg.max_gate_m, k * (est.std_xy_m + r * est.std_theta_rad)))
+        return max(base, min(self.cfg.max_gate_m, k * spread_m))
+
+    def robust_scale_m(self, spread_m: float) -> float:
+        """Scale c of the robust weights (:attr:`CGRConfig.robust_scale`): that many times
+        the larger of the measurement noise and the belief's spread at the points (0: off)."""
+        k = self.cfg.robust_scale
+        return 0.0 if k <= 0 else k * max(self.obs.sigma_m, spread_m)
 
     def prior_info(self, est: Estimate) -> np.ndarray:
         """Information (1/sigma^2 for x, y, theta) of the refinement's prior: the belief's
@@ -298,7 +325,10 @@ class CGRLocalizer:
         self.last_lines = lines
         if len(lines) == 0:
             return stats
-        frame = _Frame(pts, nrm, use_n, math.cos(self.obs.theta_max_rad), self.gate(est, pts), self.prior_info(est))
+        spread = self.spread_at(est, pts)
+        frame = _Frame(
+            pts, nrm, use_n, math.cos(self.obs.theta_max_rad), self.gate(spread), self.prior_info(est), self.robust_scale_m(spread)
+        )
         refined, lnp0, lnpr = self._refine(frame, est.pose, lines, stats)
         lnp = self._accept(refined, lnp0, lnpr, stats, frame.prior_info)
         self._resample(lnp, stats)
@@ -349,8 +379,10 @@ class CGRLocalizer:
         cfg, obs = self.cfg, self.obs
         k, iters = obs.inv_two_f_sigma2, cfg.refinements
         o_p, o0, o1 = np.empty((len(first), 3)), np.empty(len(first)), np.empty(len(first))
-        used = moments(frames, idx, fr.pts, m)
-        proj = self._trusted(frames, idx, shared_pose, fr.pts, m, used, stats)
+        w = np.empty(len(fr.pts))
+        robust_weights(frames, idx, shared_pose, fr.pts, fr.robust_m, w)
+        used = moments(frames, idx, fr.pts, m, w)
+        proj = self._trusted(frames, idx, shared_pose, fr.pts, m, w, stats)
         refine_all_m(
             m, used, first, k, iters, cfg.step_fraction, obs.min_points, o_p, o0, o1, cfg.trust_region_m, fr.prior_info, proj, shared_pose,
         )
@@ -359,8 +391,8 @@ class CGRLocalizer:
             if same is not None and same.sum() < cfg.consistent_fraction * used:
                 stats.dropped_points = int(used - same.sum())
                 idx[~same] = -1
-                used = moments(frames, idx, fr.pts, m)
-                proj = self._trusted(frames, idx, shared_pose, fr.pts, m, used, stats)
+                used = moments(frames, idx, fr.pts, m, w)
+                proj = self._trusted(frames, idx, shared_pose, fr.pts, m, w, stats)
                 refine_all_m(
                     m, used, first, k, iters, cfg.step_fraction, obs.min_points, o_p, o0, o1, cfg.trust_region_m, fr.prior_info, proj,
                     shared_pose,
@@ -369,13 +401,13 @@ class CGRLocalizer:
         return o_p, o0, o1
 
     def _trusted(
-        self, frames: np.ndarray, idx: np.ndarray, pose: np.ndarray, pts: np.ndarray, m: np.ndarray, used: int, stats: UpdateStats | None
+        self, frames: np.ndarray, idx: np.ndarray, pose: np.ndarray, pts: np.ndarray, m: np.ndarray, w: np.ndarray,
+        stats: UpdateStats | None,
     ) -> np.ndarray:
-        """The projector on the directions this frame's correspondences pin down
-        (:func:`autonomy.observation.trusted_directions`, ``degeneracy_max_gain``)."""
+        """The projector on the directions this frame's correspondences, weighed by ``w``,
+        pin down (:func:`autonomy.observation.trusted_directions`, ``degeneracy_max_gain``)."""
         proj = np.empty((3, 3))
-        lever = math.sqrt((m[0, 0] + m[1, 1]) / used) if used > 0 else 0.0
-        k = trusted_directions(frames, idx, pose, pts, lever, self.cfg.degeneracy_max_gain, proj)
+        k = trusted_directions(frames, idx, pose, pts, moments_lever(m), self.cfg.degeneracy_max_gain, proj, w)
         if stats is not None:
             stats.trusted_directions = int(k)
         return proj
@@ -392,7 +424,7 @@ class CGRLocalizer:
         there are the same."""
         obs = self.obs
         at = np.array([refined[:, 0].mean(), refined[:, 1].mean(), circular_mean(refined[:, 2])])
-        lever = math.sqrt((m[0, 0] + m[1, 1]) / used)  # RMS range of the used points
+        lever = moments_lever(m)  # RMS range of the used points
         moved = math.hypot(at[0] - shared_pose[0], at[1] - shared_pose[1]) + lever * abs(float(wrap_angles(at[2] - shared_pose[2])))
         if moved <= obs.sigma_m:
             return None
@@ -410,8 +442,10 @@ class CGRLocalizer:
         if len(own):
             correspond(own, p, fr.pts, fr.nrm, fr.use_n, fr.cos_max, fr.gate, idx)
             frames = line_frames(own, p[0], p[1])
-        used = moments(frames, idx, fr.pts, m)
-        proj = self._trusted(frames, idx, p, fr.pts, m, used, None)
+        w = np.empty(len(fr.pts))
+        robust_weights(frames, idx, p, fr.pts, fr.robust_m, w)
+        used = moments(frames, idx, fr.pts, m, w)
+        proj = self._trusted(frames, idx, p, fr.pts, m, w, None)
         o_p, o0, o1 = np.empty((1, 3)), np.empty(1), np.empty(1)
         refine_all_m(
             m, used, p[None, :].copy(), obs.inv_two_f_sigma2, cfg.refinements, cfg.step_fraction, obs.min_points, o_p, o0, o1,

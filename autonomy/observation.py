@@ -199,14 +199,45 @@ def loglik_grad(frames, idx, pose, pts, inv_2fs2, out):  # pragma: no cover - nu
 
 
 @numba.njit(cache=True)
-def moments(frames, idx, pts, out):  # pragma: no cover - numba
-    """The 5 x 5 moment matrix M = sum v_i v_i^T of the used points; returns their count.
+def robust_weights(frames, idx, pose, pts, scale, out):  # pragma: no cover - numba
+    """Cauchy weights w_i = 1 / (1 + (d_i / scale)^2) of the used points at ``pose`` (0 for
+    the others) into ``out``; every used point weighs 1 when ``scale`` <= 0.
+
+    Iteratively reweighted least squares with the weights of one pose (ours): the
+    refinement's squared distances (Eq. 1) let a few points matched to the wrong line
+    outweigh hundreds on the right one. Points seen just past a pillar's corner, matched
+    to the pillar's face 0.3-0.5 m in front of them, pulled a sample 0.37 m along a
+    corridor in one frame; weighed by their distance at the proposal mean, they barely
+    count, while a whole wall the belief is off from keeps its pull (a step along a
+    direction all of whose points weigh alike is the same at any weight).
+    """
+    x, y, th = pose[0], pose[1], pose[2]
+    c, s = math.cos(th), math.sin(th)
+    for i in range(pts.shape[0]):
+        j = idx[i]
+        if j < 0:
+            out[i] = 0.0
+            continue
+        if scale <= 0.0:
+            out[i] = 1.0
+            continue
+        rx = c * pts[i, 0] - s * pts[i, 1] + x
+        ry = s * pts[i, 0] + c * pts[i, 1] + y
+        d = (frames[j, 0] * rx + frames[j, 1] * ry - frames[j, 2]) / scale
+        out[i] = 1.0 / (1.0 + d * d)
+
+
+@numba.njit(cache=True)
+def moments(frames, idx, pts, out, weights=None):  # pragma: no cover - numba
+    """The 5 x 5 moment matrix M = sum w_i v_i v_i^T of the used points; returns their count.
 
     With fixed correspondences, d_i = v_i . z where v_i = (n . p_i, n x p_i, n_x, n_y, -c)
     (p_i in the robot frame, n and c of its line) and z = (cos theta, sin theta, t_x,
-    t_y, 1). So ln p(y | x) = -k z^T M z, its gradient and its Gauss-Newton curvature at
-    any pose follow from M alone (:func:`loglik_grad_m`): one pass over the points serves
-    every particle that shares the correspondences, and every refinement step.
+    t_y, 1). So ln p(y | x) = -k sum w_i d_i^2 = -k z^T M z, its gradient and its
+    Gauss-Newton curvature at any pose follow from M alone (:func:`loglik_grad_m`): one
+    pass over the points serves every particle that shares the correspondences, and every
+    refinement step. ``weights`` (:func:`robust_weights`; None: all 1) scale each point's
+    term; M[2, 2] + M[3, 3] is their sum.
     """
     for a in range(5):
         for b in range(5):
@@ -217,6 +248,7 @@ def moments(frames, idx, pts, out):  # pragma: no cover - numba
         j = idx[i]
         if j < 0:
             continue
+        w = 1.0 if weights is None else weights[i]
         nx, ny = frames[j, 0], frames[j, 1]
         v[0] = nx * pts[i, 0] + ny * pts[i, 1]
         v[1] = ny * pts[i, 0] - nx * pts[i, 1]
@@ -225,12 +257,20 @@ def moments(frames, idx, pts, out):  # pragma: no cover - numba
         v[4] = -frames[j, 2]
         for a in range(5):
             for b in range(a, 5):
-                out[a, b] += v[a] * v[b]
+                out[a, b] += w * v[a] * v[b]
         n += 1
     for a in range(5):
         for b in range(a):
             out[a, b] = out[b, a]
     return n
+
+
+@numba.njit(cache=True)
+def moments_lever(m):  # pragma: no cover - numba
+    """The (weighted) RMS range of the points behind a moment matrix: M[0, 0] + M[1, 1] is
+    sum w |p|^2 and M[2, 2] + M[3, 3] is sum w (:func:`moments`); 0 without points."""
+    wsum = m[2, 2] + m[3, 3]
+    return math.sqrt((m[0, 0] + m[1, 1]) / wsum) if wsum > 0.0 else 0.0
 
 
 @numba.njit(cache=True)
@@ -304,7 +344,7 @@ def jacobi_eigh3(a, vecs):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True)
-def trusted_directions(frames, idx, pose, pts, lever_m, max_gain, out_proj):  # pragma: no cover - numba
+def trusted_directions(frames, idx, pose, pts, lever_m, max_gain, out_proj, weights=None):  # pragma: no cover - numba
     """The pose directions the frame's points pin down, as a projector ``out_proj``
     (3 x 3, pose coordinates); returns how many of the three are trusted.
 
@@ -321,6 +361,7 @@ def trusted_directions(frames, idx, pose, pts, lever_m, max_gain, out_proj):  # 
     corridor, which the refinement would otherwise follow frame by frame. Along an
     untrusted direction the sample keeps its motion-model pose (ours: the criterion;
     Zhang and Singh threshold the eigenvalue). ``max_gain`` <= 0 trusts every direction.
+    ``weights`` (:func:`robust_weights`; None: all 1) weigh the points as the refinement does.
     """
     for a in range(3):
         for b in range(3):
@@ -330,11 +371,13 @@ def trusted_directions(frames, idx, pose, pts, lever_m, max_gain, out_proj):  # 
     # The Jacobian rows J_i = d d_i / d (x, y, lever theta) of the used points.
     c, s = math.cos(pose[2]), math.sin(pose[2])
     rows = np.empty((pts.shape[0], 3))
+    wr = np.empty(pts.shape[0])
     n = 0
     for i in range(pts.shape[0]):
         j = idx[i]
         if j < 0:
             continue
+        wr[n] = 1.0 if weights is None else weights[i]
         rx = c * pts[i, 0] - s * pts[i, 1]
         ry = s * pts[i, 0] + c * pts[i, 1]
         nx, ny = frames[j, 0], frames[j, 1]
@@ -348,7 +391,7 @@ def trusted_directions(frames, idx, pose, pts, lever_m, max_gain, out_proj):  # 
     for i in range(n):
         for a in range(3):
             for b in range(3):
-                a3[a, b] += rows[i, a] * rows[i, b]
+                a3[a, b] += wr[i] * rows[i, a] * rows[i, b]
     vecs = np.empty((3, 3))
     jacobi_eigh3(a3, vecs)
     s1 = np.zeros(3)
@@ -356,8 +399,8 @@ def trusted_directions(frames, idx, pose, pts, lever_m, max_gain, out_proj):  # 
     for i in range(n):
         for k in range(3):
             d = rows[i, 0] * vecs[0, k] + rows[i, 1] * vecs[1, k] + rows[i, 2] * vecs[2, k]
-            s1[k] += abs(d)
-            s2[k] += d * d
+            s1[k] += wr[i] * abs(d)
+            s2[k] += wr[i] * d * d
     ps = np.zeros((3, 3))
     trusted = 0
     for k in range(3):
@@ -465,8 +508,7 @@ def refine_all_m(
     so resampling cannot carry the belief towards a biased optimum either.
     """
     work = np.zeros(11)
-    # m[0, 0] + m[1, 1] = sum (n . p)^2 + (n x p)^2 = sum |p|^2 over the used points.
-    lever = math.sqrt((m[0, 0] + m[1, 1]) / n_used) if n_used > 0 else 0.0
+    lever = moments_lever(m)
     q0 = np.empty(3)
     d = np.empty(3)
     for i in range(poses.shape[0]):

@@ -327,18 +327,20 @@ def test_gate_widens_with_the_belief_spread() -> None:
     loc = CGRLocalizer(lambda x, y: room(), CGRConfig(), ObservationConfig(), np.random.default_rng(0))
     pts = np.array([[3.0, 0.0], [0.0, 3.0]])  # RMS range 3 m
     tight = Estimate(np.zeros(3), 0.05, 0.01, np.eye(2))
-    assert loc.gate(tight, pts) == pytest.approx(0.5)
+    assert loc.gate(loc.spread_at(tight, pts)) == pytest.approx(0.5)
     loose = Estimate(np.zeros(3), 0.2, 0.03, np.eye(2))
-    assert loc.gate(loose, pts) == pytest.approx(3.0 * (0.2 + 3.0 * 0.03))
+    assert loc.gate(loc.spread_at(loose, pts)) == pytest.approx(3.0 * (0.2 + 3.0 * 0.03))
     lost = Estimate(np.zeros(3), 2.0, 0.3, np.eye(2))
-    assert loc.gate(lost, pts) == pytest.approx(CGRConfig().max_gate_m)
+    assert loc.gate(loc.spread_at(lost, pts)) == pytest.approx(CGRConfig().max_gate_m)
     fixed = CGRLocalizer(lambda x, y: room(), CGRConfig(gate_sigmas=0.0), ObservationConfig(), np.random.default_rng(0))
-    assert fixed.gate(loose, pts) == pytest.approx(0.5)
+    assert fixed.gate(fixed.spread_at(loose, pts)) == pytest.approx(0.5)
     with pytest.raises(InputError, match="gate_sigmas"):
         CGRConfig(gate_sigmas=-1.0)
 
 
-def _box_beside_a_pillar(consistent_fraction: float, seed: int, max_gain: float = CGRConfig().degeneracy_max_gain) -> tuple[CGRLocalizer, np.ndarray]:
+def _box_beside_a_pillar(
+    consistent_fraction: float, seed: int, max_gain: float = CGRConfig().degeneracy_max_gain, robust_scale: float = CGRConfig().robust_scale
+) -> tuple[CGRLocalizer, np.ndarray]:
     """The frame that broke the 200 m corner run, reduced: the only thing in view is an
     unmapped box's face 0.4 m in front of a pillar's face and off its end. The rays to
     the box hit the pillar face, so the box's points correspond to it; refined on the
@@ -351,7 +353,7 @@ def _box_beside_a_pillar(consistent_fraction: float, seed: int, max_gain: float 
     world_to_robot = np.array([[c, s], [-s, c]])
     pts = (box - true[:2]) @ world_to_robot.T
     nrm = np.tile([1.0, 0.0], (40, 1)) @ world_to_robot.T
-    cfg = CGRConfig(consistent_fraction=consistent_fraction, degeneracy_max_gain=max_gain)
+    cfg = CGRConfig(consistent_fraction=consistent_fraction, degeneracy_max_gain=max_gain, robust_scale=robust_scale)
     loc = CGRLocalizer(lambda x, y: face, cfg, ObservationConfig(), np.random.default_rng(seed))
     loc.reset(true, 0.12, math.radians(3.0))
     loc.update(pts, nrm)
@@ -363,9 +365,9 @@ def test_association_check_drops_a_box_matched_to_a_pillar_beside_it(seed: int) 
     loc, true = _box_beside_a_pillar(0.5, seed)
     assert loc.last.dropped_points >= 30
     assert math.hypot(*(loc.estimate().pose[:2] - true[:2])) < 0.1
-    # Without the check (and without the degeneracy-aware step, which alone holds part
-    # of the pull: one face pins one direction) the same frame pulls the estimate 0.4 m off.
-    off, _ = _box_beside_a_pillar(0.0, seed, max_gain=0.0)
+    # Without the check (and without the degeneracy-aware step and the robust weights,
+    # which each hold part of the pull) the same frame pulls the estimate 0.4 m off.
+    off, _ = _box_beside_a_pillar(0.0, seed, max_gain=0.0, robust_scale=0.0)
     assert off.last.dropped_points == 0 and math.hypot(*(off.estimate().pose[:2] - true[:2])) > 0.3
 
 

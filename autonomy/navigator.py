@@ -616,6 +616,13 @@ class Navigator:
             return False
         return self.walls is None or not len(self.walls) or not crosses_any(xy, b, self.walls)
 
+    def remaining_m(self, pose: np.ndarray) -> float:
+        """Length of the plan still ahead of the pose (from the plan's point nearest it);
+        0 without a plan."""
+        if len(self.path) < 2:
+            return 0.0
+        return float(self._cum[-1]) - self._project(np.asarray(pose[:2], dtype=np.float64))
+
     def _project(self, xy: np.ndarray) -> float:
         """Arc length of the point of the plan nearest ``xy``."""
         t, dist = point_segment_projection(xy, self._segments)

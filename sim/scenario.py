@@ -107,8 +107,10 @@ class MissionConfig:
     """Long run: keep drawing random waypoints until the robot has driven this far
     (0 = visit the given / drawn waypoints once)."""
     waypoint_timeout_s: float = 0.0
-    """A waypoint not reached within this time counts as failed; 0 = automatic
-    (30 s plus twice the leg's nominal time at cruise speed)."""
+    """A waypoint not reached within this time counts as failed; 0 = automatic: 30 s plus
+    twice the nominal time of the leg's plan at cruise speed, re-armed with what is left
+    of the plan when the navigator re-plans round a block (at most three times the first
+    budget; :func:`sim.experiments.waypoints.follow_plan`)."""
 
     def __post_init__(self) -> None:
         if self.target_distance_m < 0:

@@ -39,7 +39,7 @@ from sim.experiments.columns import Column
 from sim.experiments.kinds import crash_block, stopped, write_crash
 from sim.experiments.memory import release_free_memory, resident_mb
 from sim.experiments.trace import TRACE_FILE, in_window, trace_record, write_trace
-from sim.experiments.waypoints import Mission, close_leg, leg_timeout, plan_mission
+from sim.experiments.waypoints import Mission, close_leg, follow_plan, plan_mission, start_leg
 from sim.scenario import Scenario
 from sim.simulator import blueprints
 from sim.simulator.actors import Furniture, Person
@@ -384,8 +384,8 @@ def drive(run: Run, recorder, progress: bool | None, checkpoint: Callable[[], No
         run.times.append(0.0)
         # The first frame, so the navigator sees before it moves.
         run.stack.perceive(first.depth)
-        mission.timeout_s = leg_timeout(scn.mission, run.stack.set_goal(mission.goal, 0.0, mission.start_pose), scn.navigator.cruise_speed_mps)
-        mission.started_at = 0.0
+        length = run.stack.set_goal(mission.goal, 0.0, mission.start_pose)
+        start_leg(mission, scn.mission, length, _plan_nodes(run.stack), 0.0, scn.navigator.cruise_speed_mps)
         while run.frames < max_frames and not mission.done:
             if not tick(run, recorder):
                 break
@@ -430,6 +430,11 @@ def tick(run: Run, recorder) -> bool:
     override = None if run.use_estimate else pose
     nav = stack.decide(t, override)
     nav_ms = stack.timings_s["navigation"]
+    if stack.navigator is not None:
+        follow_plan(
+            run.mission, run.scn.mission, stack.navigator.plan_nodes, stack.navigator.remaining_m(control_pose), t,
+            run.scn.navigator.cruise_speed_mps,
+        )
     run.nav_states[nav.state] = run.nav_states.get(nav.state, 0) + 1
     run.near_frames += int(nav.near_points > 0)
     timed_out = t - run.mission.started_at > run.mission.timeout_s
@@ -481,8 +486,13 @@ def next_leg(
     if mission.done:
         return None
     length = stack.set_goal(mission.goal, t, control_pose)
-    mission.timeout_s = leg_timeout(scn.mission, length, scn.navigator.cruise_speed_mps)
+    start_leg(mission, scn.mission, length, _plan_nodes(stack), t, scn.navigator.cruise_speed_mps)
     return stack.decide(t, override)
+
+
+def _plan_nodes(stack: RobotStack) -> list[int]:
+    """The navigator's plan (graph nodes); none without a navigator."""
+    return [] if stack.navigator is None else stack.navigator.plan_nodes
 
 
 def note_contacts(

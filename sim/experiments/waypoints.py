@@ -29,6 +29,11 @@ ARRIVAL_TRUTH_MARGIN_M = 0.5
 LEG_TIMEOUT_BASE_S = 30.0
 #: ... plus this many times the leg's nominal time at cruise speed.
 LEG_TIMEOUT_FACTOR = 2.0
+#: The budget follows the plan: when the navigator re-plans (round a passage a person or a
+#: piece of furniture blocks), the budget becomes what has been used plus the automatic
+#: timeout of what is left of the new plan, if that is more, but never more than this
+#: many times the leg's first budget (a robot that re-plans without end still fails).
+LEG_TIMEOUT_MAX_FACTOR = 3.0
 
 
 @dataclass
@@ -40,6 +45,12 @@ class Mission:
     current: int = 0
     started_at: float = 0.0
     timeout_s: float = 0.0
+    first_timeout_s: float = 0.0
+    """The leg's budget when it started (:data:`LEG_TIMEOUT_MAX_FACTOR`)."""
+    plan: tuple[int, ...] = ()
+    """The navigator's plan (its graph nodes) the budget was last set for."""
+    rearmed: int = 0
+    """How many times the current leg's budget grew with a re-plan."""
     reached: int = 0
     failed: int = 0
     events: list[dict] = field(default_factory=list)
@@ -131,6 +142,28 @@ def leg_timeout(m: MissionConfig, length_m: float, cruise_speed_mps: float) -> f
     return LEG_TIMEOUT_BASE_S + LEG_TIMEOUT_FACTOR * length_m / cruise_speed_mps
 
 
+def start_leg(mission: Mission, m: MissionConfig, length_m: float, plan: list[int], t: float, cruise_speed_mps: float) -> None:
+    """Start the current leg at ``t`` on a plan of ``length_m`` (its graph nodes ``plan``)."""
+    mission.started_at = t
+    mission.timeout_s = mission.first_timeout_s = leg_timeout(m, length_m, cruise_speed_mps)
+    mission.plan = tuple(plan)
+    mission.rearmed = 0
+
+
+def follow_plan(mission: Mission, m: MissionConfig, plan: list[int], remaining_m: float, t: float, cruise_speed_mps: float) -> None:
+    """The leg's budget after the navigator's plan became ``plan`` with ``remaining_m`` left
+    (:data:`LEG_TIMEOUT_MAX_FACTOR`); a timeout the mission gives stays as given."""
+    key = tuple(plan)
+    if key == mission.plan or m.waypoint_timeout_s > 0:
+        return
+    mission.plan = key
+    used = t - mission.started_at
+    budget = min(used + leg_timeout(m, remaining_m, cruise_speed_mps), LEG_TIMEOUT_MAX_FACTOR * mission.first_timeout_s)
+    if budget > mission.timeout_s:
+        mission.timeout_s = budget
+        mission.rearmed += 1
+
+
 def close_leg(
     mission: Mission, m: MissionConfig, graph: NavGraph, *, arrived: bool, timed_out: bool, truth_xy: np.ndarray, t: float,
     distance_m: float, arrival_radius_m: float, rng: np.random.Generator, recovering: bool = False,
@@ -151,6 +184,7 @@ def close_leg(
             "status": "reached" if ok else ("timeout" if timed_out else "wrong_place"),
             "leg_s": round(t - mission.started_at, 3),
             "distance_m": round(distance_m, 2),
+            **({"budget_s": round(mission.timeout_s, 1), "rearmed": mission.rearmed} if mission.rearmed else {}),
         }
     )
     mission.current += 1

@@ -34,6 +34,8 @@ SCENARIOS_DIR = Path(__file__).resolve().parent.parent / "scenarios"
 
 MISSION_KINDS = ("waypoints",)
 FOLLOWERS = ("navigator", "ground_truth")
+#: map.free_space: an open map, a closed one, or told from the walls.
+FREE_SPACE = ("auto", "open", "closed")
 
 
 @dataclass(frozen=True)
@@ -54,7 +56,18 @@ class MapConfig:
     a degree or so, corners jittered, recesses, jogs, doubled lines;
     :class:`sim.simulator.irregular.Irregularity`); false: exactly square."""
 
+    free_space: str = "auto"
+    """With ``vectormap``: where the robot may be. ``closed``: only what the walls enclose
+    (a building); ``open``: everything within the walls' convex hull (a parking lot, a
+    yard: walls that enclose no inside); ``auto``: open when the walls are sparse or
+    enclose almost nothing (:mod:`autonomy.freespace`). The graph made from the walls and
+    the places of random furniture follow it."""
+
     def __post_init__(self) -> None:
+        if self.free_space not in FREE_SPACE:
+            raise InputError(f"map.free_space {self.free_space!r}: expected one of {', '.join(FREE_SPACE)}")
+        if self.free_space != "auto" and not self.vectormap:
+            raise InputError("map.free_space: only a map given as 'vectormap' can be declared open or closed")
         given = sum([bool(self.name), bool(self.vectormap), self.generate_seed >= 0])
         if given != 1:
             raise InputError("map: give exactly one of 'name', 'vectormap' (optionally with 'navgraph') or 'generate_seed'")
@@ -62,6 +75,11 @@ class MapConfig:
             raise InputError("map.navgraph: give it with 'vectormap' (the map it belongs to)")
         if not self.irregular and self.generate_seed < 0:
             raise InputError("map.irregular: only a generated building ('generate_seed') can be drawn square or irregular")
+
+    @property
+    def open_map(self) -> bool | None:
+        """``free_space`` as :attr:`autonomy.freespace.FreeSpaceConfig.open_map`."""
+        return {"auto": None, "open": True, "closed": False}[self.free_space]
 
     def building_config(self) -> BuildingConfig:
         """The generator's configuration for ``generate_seed`` (irregular or square)."""

@@ -112,8 +112,8 @@ def load_building(scn: Scenario) -> Building:
         return Building(bp.vectormap, bp.navgraph, tuple(bp.open_areas), tuple(bp.rooms), ASSETS_DIR / f"{m.name}.vectormap.txt")
     path = scn.resolve(m.vectormap)
     vm = load_vectormap(path)
-    graph = load_navgraph(scn.resolve(m.navgraph)) if m.navgraph else navgraph_from_walls(vm, path, scn.avoidance)
-    return Building(vm, graph, map_path=path)
+    graph = load_navgraph(scn.resolve(m.navgraph)) if m.navgraph else navgraph_from_walls(vm, path, scn.avoidance, open_map=m.open_map)
+    return Building(vm, graph, map_path=path, open_map=m.open_map)
 
 
 def write_tum(path: Path, t: np.ndarray, poses: np.ndarray) -> None:

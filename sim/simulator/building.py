@@ -59,6 +59,9 @@ class Building:
     open_areas: tuple[tuple[float, float, float, float], ...] = ()
     rooms: tuple[tuple[float, float, float, float], ...] = ()
     map_path: Path | None = None
+    open_map: bool | None = None
+    """Whether the map is open (its free space the walls' convex hull), closed, or None:
+    told from the walls (:attr:`autonomy.freespace.FreeSpaceConfig.open_map`)."""
     _free: dict[float, FreeSpace] = field(default_factory=dict, init=False, repr=False, compare=False)
     _main: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
 
@@ -78,7 +81,7 @@ class Building:
         nowhere); computed once per radius."""
         key = float(robot_radius_m)
         if key not in self._free:
-            self._free[key] = build_free_space(self.vectormap, FreeSpaceConfig(robot_radius_m=key))
+            self._free[key] = build_free_space(self.vectormap, FreeSpaceConfig(robot_radius_m=key, open_map=self.open_map))
         return self._free[key]
 
     def free_spot(self, rng: np.random.Generator, clearance_m: float, robot_radius_m: float) -> np.ndarray | None:
@@ -113,16 +116,20 @@ def main_component_ids(graph: NavGraph) -> np.ndarray:
 
 
 def navgraph_from_walls(
-    vm: VectorMap, map_path: str | os.PathLike[str] | None, avoidance: AvoidanceConfig, *, quiet: bool = False
+    vm: VectorMap, map_path: str | os.PathLike[str] | None, avoidance: AvoidanceConfig, *, quiet: bool = False,
+    open_map: bool | None = None,
 ) -> NavGraph:
     """The navigation graph made from the walls for the robot whose obstacle avoidance is
     ``avoidance``, cached beside the map file (or under ~/.cache/depthnav). Its edges keep
     the avoidance's own clearance (robot radius plus safety margin) from every wall: a
     narrower passage is one the avoidance will not let the robot through (Eq. 3-4 block
     it), and an edge through it would hold the robot at its mouth until the leg times
-    out. When made rather than read from the cache, one line on stderr (unless
-    ``quiet``) says so and where it is kept."""
-    cfg = GraphBuildConfig(free_space=FreeSpaceConfig(robot_radius_m=avoidance.robot_radius_m), margin_m=avoidance.safety_margin_m)
+    out. ``open_map``: the map is open, closed, or (None) told from the walls
+    (:attr:`autonomy.freespace.FreeSpaceConfig.open_map`). When made rather than read
+    from the cache, one line on stderr (unless ``quiet``) says so and where it is kept."""
+    cfg = GraphBuildConfig(
+        free_space=FreeSpaceConfig(robot_radius_m=avoidance.robot_radius_m, open_map=open_map), margin_m=avoidance.safety_margin_m
+    )
     got = cached_navgraph(vm, map_path, cfg)
     if got.built and not quiet:
         name = Path(map_path).name if map_path is not None else (vm.name or "the map")

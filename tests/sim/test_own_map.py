@@ -105,6 +105,29 @@ def test_map_keys_are_checked(tmp_path: Path) -> None:
         load_scenario(_scenario(tmp_path, "missing.vectormap.txt"))
 
 
+def test_map_free_space_declares_a_map_open_or_closed(tmp_path: Path) -> None:
+    """``[map] free_space``: TWO_PARTS closed (as told from its walls, which enclose two
+    insides) is the U and the doorless room; declared open, everything within the walls'
+    convex hull is free, so the 2 m strip between the two boxes becomes a third part."""
+    save_vectormap(VectorMap.from_segments(TWO_PARTS, name="two_parts"), tmp_path / "two_parts.vectormap.txt")
+    parts = {}
+    for kind in ("auto", "closed", "open"):
+        scn = load_scenario(_scenario(tmp_path, "two_parts.vectormap.txt"), [f'map.free_space="{kind}"'])
+        b = load_building(scn)
+        labels = graph_components(b.navgraph.n_nodes, b.navgraph.edge_indices())
+        fs = b.free_space(RADIUS)
+        parts[kind] = (int(labels.max()) + 1, fs.is_open)
+        if kind == "open":
+            x = b.navgraph.node_xy()[:, 0]
+            assert ((x > 12.0) & (x < 14.0)).any()
+    assert parts["auto"] == parts["closed"] == (2, False)
+    assert parts["open"] == (3, True)
+    with pytest.raises(InputError, match=r"map\.free_space 'ajar': expected one of auto, open, closed"):
+        load_scenario(_scenario(tmp_path, "two_parts.vectormap.txt"), ['map.free_space="ajar"'])
+    with pytest.raises(InputError, match=r"map\.free_space: only a map given as 'vectormap'"):
+        load_scenario(_scenario(tmp_path, "x.txt"), ['map.vectormap=""', 'map.name="small_floor"', 'map.free_space="open"'])
+
+
 @pytest.mark.slow
 def test_a_scenario_with_only_a_vectormap_runs_headless(tmp_path: Path) -> None:
     _office_walls(tmp_path)

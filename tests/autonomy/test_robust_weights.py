@@ -127,3 +127,55 @@ def test_points_matched_to_the_wrong_line_do_not_move_the_estimate(seed: int) ->
     # 0.6-1 degree and move it 4-6 cm.
     moved_m, turned_deg = _past_the_corner(0.0, seed)
     assert moved_m > 0.035 and turned_deg > 0.5
+
+
+def _second_round_weights(segs: np.ndarray, belief: np.ndarray, pts: np.ndarray, nrm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The correspondences at ``belief`` and the second round's weights of a wide belief
+    (0.3 m, 2 degrees: the first round's scale is wide)."""
+    loc = CGRLocalizer(lambda x, y: segs, CGRConfig(), ObservationConfig(), np.random.default_rng(0))
+    idx = np.empty(len(pts), dtype=np.int64)
+    correspond(segs, belief, pts, nrm, True, math.cos(math.radians(35)), 1.5, idx)
+    frames = line_frames(segs, belief[0], belief[1])
+    w = np.empty(len(pts))
+    robust_weights(frames, idx, belief, pts, loc.robust_scale_m(0.3 + 4.0 * math.radians(2.0)), w)
+    m = np.empty((5, 5))
+    used = moments(frames, idx, pts, m, w)
+    loc._reweigh(frames, idx, belief, pts, m, used, w)
+    return idx, w
+
+
+def _robot_frame(world: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    return (world - pose[:2]) @ np.array([[c, -s], [s, c]])
+
+
+def test_the_second_round_drops_points_matched_to_a_line_behind_the_others() -> None:
+    """58 points of a wall 4 m ahead and 14 whose rays, from a belief 5 cm off, pass the
+    wall's end and meet a parallel line 0.69 m behind it: at the pose that fits them all
+    best the 14 are still about 0.6 m off, the 58 within centimetres."""
+    segs = np.array([[2.0, 0.0, 10.0, 0.0], [-2.0, 0.69, 1.98, 0.69]])
+    true = np.array([4.0, -4.2, math.pi / 2])
+    rng = np.random.default_rng(1)
+    on_wall = np.column_stack([rng.uniform(2.3, 3.0, 58), 0.003 * rng.standard_normal(58)])
+    past_end = np.column_stack([rng.uniform(2.0, 2.1, 14), 0.003 * rng.standard_normal(14)])
+    pts = _robot_frame(np.vstack([on_wall, past_end]), true)
+    nrm = np.tile([-1.0, 0.0], (72, 1))
+    belief = true + [-0.15, 0.0, math.radians(0.7)]
+    idx, w = _second_round_weights(segs, belief, pts, nrm)
+    assert (idx[58:] == 1).sum() >= 10  # the premise: most of the 14 meet the line behind
+    wrong = idx == 1
+    assert w[wrong].max() < 0.1 and np.median(w[idx == 0]) > 0.5
+
+
+def test_the_second_round_keeps_the_only_points_that_pin_a_direction() -> None:
+    """A corridor whose walls pin only the across direction and a wall across its end
+    3.5 m ahead; the belief is 0.25 m short along the corridor (odometry drift), so the end
+    wall's points are 0.25 m off at the belief. They alone pin that direction: where
+    everything fits best they fit too, and keep their weight."""
+    segs = np.array([[-10.0, -1.0, 3.5, -1.0], [-10.0, 1.0, 3.5, 1.0], [3.5, -1.0, 3.5, 1.0]])
+    true = np.zeros(3)
+    rng = np.random.default_rng(2)
+    pts, nrm = observe(segs, true, rng, n=600, noise=0.005, lateral=0.0)
+    idx, w = _second_round_weights(segs, true - [0.25, 0.0, 0.0], pts, nrm)
+    end = idx == 2
+    assert end.sum() > 30 and np.median(w[end]) > 0.5

@@ -184,7 +184,11 @@ def close_leg(
             "status": "reached" if ok else ("timeout" if timed_out else "wrong_place"),
             "leg_s": round(t - mission.started_at, 3),
             "distance_m": round(distance_m, 2),
-            **({"budget_s": round(mission.timeout_s, 1), "rearmed": mission.rearmed} if mission.rearmed else {}),
+            **(
+                {"budget_s": round(mission.timeout_s, 1), "first_budget_s": round(mission.first_timeout_s, 1), "rearmed": mission.rearmed}
+                if mission.rearmed
+                else {}
+            ),
         }
     )
     mission.current += 1

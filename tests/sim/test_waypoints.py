@@ -76,6 +76,16 @@ def test_a_detour_rearms_the_budget_with_what_is_left_of_the_new_plan():
     assert mission.timeout_s == 30.0 + LEG_TIMEOUT_BASE_S + LEG_TIMEOUT_FACTOR * 50.0 and mission.rearmed == 1
     follow_plan(mission, m, [1, 9, 2], 1.0, 41.0, 1.0)  # a shorter plan never shortens it
     assert mission.timeout_s == 30.0 + LEG_TIMEOUT_BASE_S + LEG_TIMEOUT_FACTOR * 50.0 and mission.rearmed == 1
+    # The leg's event says what the budget became and what it was at first.
+    graph = load_building(load_scenario(SCENARIOS_DIR / "demo.toml")).navgraph
+    ids = [int(i) for i in graph.node_ids()[:2]]
+    mission.waypoints = ids
+    close_leg(
+        mission, m, graph, arrived=True, timed_out=False, truth_xy=graph.node_xy()[0], t=100.0, distance_m=60.0,
+        arrival_radius_m=0.5, rng=np.random.default_rng(0),
+    )
+    ev = mission.events[-1]
+    assert ev["rearmed"] == 1 and ev["budget_s"] == round(mission.timeout_s, 1) and ev["first_budget_s"] == round(first, 1)
 
 
 def test_a_leg_that_replans_without_end_still_times_out():

@@ -109,9 +109,10 @@ class CGRConfig:
     """Robust refinement (ours): each point's term is weighed 1 / (1 + (d / c)^2) by its
     distance d to its line at the proposal mean, c this many times the larger of
     observation.sigma_m and the belief's spread at the points (as the gate widens;
-    :func:`autonomy.observation.robust_weights`). A few points matched to the wrong line
-    (seen past a pillar's corner) then cannot pull the belief along a corridor (0 = the
-    squared distances of Eq. 1)."""
+    :func:`autonomy.observation.robust_weights`), then weighed again at the pose that
+    fits them best on the residuals' own scale (:meth:`CGRLocalizer._reweigh`). A few
+    points matched to the wrong line (seen past a pillar's corner) then cannot pull the
+    belief along a corridor (0 = the squared distances of Eq. 1, one round)."""
     share_radius_m: float = 1.0
     """Particles within this distance (and share_angle_rad) of the proposal mean share its
     scene lines and correspondences; others get their own."""

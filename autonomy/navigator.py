@@ -51,7 +51,7 @@ from autonomy.geometry import (
 )
 from autonomy.nearfield import line_points
 from autonomy.obstacle_memory import update_memory
-from autonomy.planner import NoPathError, astar, edge_key, parts, path_points
+from autonomy.planner import NoPathError, astar, blind_lengths, edge_key, parts, path_points
 from autonomy.vectormap import NavGraph
 
 _MEMORY_KEEP_MARGIN_M = 0.5
@@ -180,6 +180,16 @@ class NavigatorConfig:
     sweeps the walls, e.g. while the localization searches for the robot)."""
     exclude_stairs: bool = True
     """Plans avoid edges flagged has_stairs."""
+    coastal_weight: float = 2.0
+    """Coastal navigation (after Roy, Burgard, Fox and Thrun, ICRA 1999; ours): a metre of
+    plan farther than ``coastal_range_m`` from every wall costs 1 + this many metres, so
+    plans keep walls in the camera's range where a detour allows it. The localization
+    matches walls only: across a hall with none within the camera's 4 m it dead-reckons,
+    and the belief that comes out of 20 m of that (0.3-0.4 m wide on a real floor) can
+    match the first far face it sees to a parallel wall behind it (0 = shortest paths)."""
+    coastal_range_m: float = 3.0
+    """A place farther than this from every wall is blind for :attr:`coastal_weight`
+    (under the Kinect's 4 m: a wall at the range's end fills little of the view)."""
     memory_s: float = 2.0
     """Obstacle memory: sensed points outside the camera's view persist this long (the
     Kinect sees +-29 degrees and nothing closer than 0.8 m, so a person beside or right
@@ -287,13 +297,13 @@ class NavigatorConfig:
             "trail_s", "trail_tolerance_m", "look_back_m", "blocked_edge_s", "blocked_wait_s", "blocked_check_m",
             "long_detour_m", "long_detour_wait_s",
             "narrow_lookahead_m", "narrow_slack_m", "narrow_before_m", "narrow_horizon_m",
-            "memory_beside_s", "memory_beside_m", "shadow_m",
+            "memory_beside_s", "memory_beside_m", "shadow_m", "coastal_weight",
         )
         if self.narrow_lookahead_m > self.lookahead_m:
             raise InputError(
                 f"navigator.narrow_lookahead_m: expected at most lookahead_m ({self.lookahead_m!r}), got {self.narrow_lookahead_m!r}"
             )
-        require_positive(self, "navigator.", "memory_cell_m", "memory_radius_m", "look_turn_rate_rad_s")
+        require_positive(self, "navigator.", "memory_cell_m", "memory_radius_m", "look_turn_rate_rad_s", "coastal_range_m")
         # The memory merges cells on a dense grid over memory_radius_m + 0.5 (obstacle_memory.py).
         finest = (self.memory_radius_m + _MEMORY_KEEP_MARGIN_M) / 250
         if self.memory_cell_m < finest:
@@ -348,6 +358,11 @@ class Navigator:
         self.camera = camera
         self.walls = None if walls is None else np.asarray(walls, dtype=np.float64).reshape(-1, 4)
         self._wall_pts = None if self.walls is None else wall_points(self.walls, WALL_STEP_M)
+        self._coastal: dict[tuple[int, int], float] = {}
+        """Extra plan cost per edge for its blind metres (:attr:`NavigatorConfig.coastal_weight`)."""
+        if self.walls is not None and cfg.coastal_weight > 0:
+            blind = blind_lengths(graph, self.walls, cfg.coastal_range_m)
+            self._coastal = {k: cfg.coastal_weight * v for k, v in blind.items()}
         self._local = np.zeros((0, 2))
         self._local_centre: np.ndarray | None = None
         self._local_radius = 0.0
@@ -531,11 +546,14 @@ class Navigator:
         graph (:meth:`nearest_reachable_node`)."""
         excluded = tuple(self.blocked)
         if not excluded:
-            return astar(self.graph, self.nearest_reachable_node(xy, goal_id=goal_id), goal_id, exclude_stairs=self.cfg.exclude_stairs)
+            return astar(
+                self.graph, self.nearest_reachable_node(xy, goal_id=goal_id), goal_id, exclude_stairs=self.cfg.exclude_stairs,
+                extra=self._coastal,
+            )
         avoid = np.vstack([self._blocked_pts.get(e, np.zeros((0, 2))) for e in excluded])
         try:
             start = self.nearest_reachable_node(xy, avoid, goal_id)
-            return astar(self.graph, start, goal_id, exclude_stairs=self.cfg.exclude_stairs, excluded=excluded)
+            return astar(self.graph, start, goal_id, exclude_stairs=self.cfg.exclude_stairs, excluded=excluded, extra=self._coastal)
         except NoPathError:
             return None
 
@@ -545,7 +563,10 @@ class Navigator:
         xy = np.asarray(pose[:2], dtype=np.float64)
         nodes = self._route(goal_id, xy)
         if nodes is None:
-            nodes = astar(self.graph, self.nearest_reachable_node(xy, goal_id=goal_id), goal_id, exclude_stairs=self.cfg.exclude_stairs)
+            nodes = astar(
+                self.graph, self.nearest_reachable_node(xy, goal_id=goal_id), goal_id, exclude_stairs=self.cfg.exclude_stairs,
+                extra=self._coastal,
+            )
         return np.vstack([xy[None, :], path_points(self.graph, nodes)])
 
     def plan_length(self, goal_id: int, pose: np.ndarray) -> float:

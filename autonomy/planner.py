@@ -1,20 +1,23 @@
 """Global planning on a navigation graph: A* between nodes, the graph's connected parts.
 
-Edge costs are Euclidean lengths; the heuristic is the straight-line distance to the goal
-(admissible, so A* returns a shortest path). Edges flagged ``has_stairs`` are excluded by
-default (a wheeled base cannot take them), and so are the edges given as ``excluded``
-(node id pairs, either direction: the navigator's edges found blocked).
+Edge costs are Euclidean lengths, plus any ``extra`` cost per edge (the navigator's
+coastal cost on stretches where the camera sees no wall, :func:`blind_lengths`); the
+heuristic is the straight-line distance to the goal (admissible, so A* returns a cheapest
+path). Edges flagged ``has_stairs`` are excluded by default (a wheeled base cannot take
+them), and so are the edges given as ``excluded`` (node id pairs, either direction: the
+navigator's edges found blocked).
 """
 
 from __future__ import annotations
 
 import heapq
 import math
-from collections.abc import Collection
+from collections.abc import Collection, Mapping
 
 import numpy as np
 
 from autonomy.errors import InputError
+from autonomy.geometry import WallIndex
 from autonomy.vectormap import NavGraph
 
 
@@ -33,10 +36,14 @@ def edge_key(a: int, b: int) -> tuple[int, int]:
 
 
 def adjacency(
-    graph: NavGraph, exclude_stairs: bool = True, excluded: Collection[tuple[int, int]] = ()
+    graph: NavGraph,
+    exclude_stairs: bool = True,
+    excluded: Collection[tuple[int, int]] = (),
+    extra: Mapping[tuple[int, int], float] | None = None,
 ) -> list[list[tuple[int, float]]]:
-    """Adjacency lists by node index: (neighbour index, edge length). ``excluded``: edges
-    (node id pairs, either direction) left out."""
+    """Adjacency lists by node index: (neighbour index, edge cost): the edge's length plus
+    ``extra`` (by :func:`edge_key`; none: 0). ``excluded``: edges (node id pairs, either
+    direction) left out."""
     xy = graph.node_xy()
     adj: list[list[tuple[int, float]]] = [[] for _ in range(len(xy))]
     skip = {edge_key(int(a), int(b)) for a, b in excluded}
@@ -47,19 +54,28 @@ def adjacency(
             continue
         a, b = graph.index_of(e.s0_id), graph.index_of(e.s1_id)
         d = float(math.hypot(*(xy[a] - xy[b])))
+        if extra:
+            d += extra.get(edge_key(e.s0_id, e.s1_id), 0.0)
         adj[a].append((b, d))
         adj[b].append((a, d))
     return adj
 
 
 def astar(
-    graph: NavGraph, start_id: int, goal_id: int, *, exclude_stairs: bool = True, excluded: Collection[tuple[int, int]] = ()
+    graph: NavGraph,
+    start_id: int,
+    goal_id: int,
+    *,
+    exclude_stairs: bool = True,
+    excluded: Collection[tuple[int, int]] = (),
+    extra: Mapping[tuple[int, int], float] | None = None,
 ) -> list[int]:
-    """Node ids of a shortest path from start to goal (both included), not using the
-    ``excluded`` edges (node id pairs, both directions)."""
+    """Node ids of a cheapest path from start to goal (both included), not using the
+    ``excluded`` edges (node id pairs, both directions), each edge costing its length
+    plus ``extra`` (non-negative, by :func:`edge_key`; none: a shortest path)."""
     xy = graph.node_xy()
     s, g = graph.index_of(start_id), graph.index_of(goal_id)
-    adj = adjacency(graph, exclude_stairs, excluded)
+    adj = adjacency(graph, exclude_stairs, excluded, extra)
     gx, gy = xy[g]
     cost = {s: 0.0}
     parent = {s: -1}
@@ -145,3 +161,35 @@ def dijkstra(adj: list[list[tuple[int, float]]], sources: dict[int, float]) -> t
                 parent[v] = u
                 heapq.heappush(heap, (nd, v))
     return dist, parent
+
+
+def blind_lengths(graph: NavGraph, walls: np.ndarray, range_m: float, step_m: float = 0.25) -> dict[tuple[int, int], float]:
+    """Metres of each edge (by :func:`edge_key`; only edges with some) farther than
+    ``range_m`` from every wall, measured at the midpoints of pieces at most ``step_m``
+    long: where a depth camera of that range sees no wall, the localization dead-reckons
+    (the blind stretches of coastal navigation, Roy, Burgard, Fox and Thrun, ICRA 1999)."""
+    if not (range_m > 0 and math.isfinite(range_m)):
+        raise InputError(f"blind_lengths: range_m: expected a positive number, got {range_m!r}")
+    w = np.asarray(walls, dtype=np.float64).reshape(-1, 4)
+    xy = graph.node_xy()
+    keys: list[tuple[int, int]] = []
+    mids: list[np.ndarray] = []
+    piece: list[float] = []
+    for e in graph.edges:
+        a, b = xy[graph.index_of(e.s0_id)], xy[graph.index_of(e.s1_id)]
+        length = float(math.hypot(*(b - a)))
+        n = max(1, math.ceil(length / step_m))
+        t = (np.arange(n) + 0.5) / n
+        keys.append(edge_key(e.s0_id, e.s1_id))
+        mids.append(a + t[:, None] * (b - a))
+        piece.append(length / n)
+    if not keys:
+        return {}
+    counts = [len(m) for m in mids]
+    pts = np.vstack(mids)
+    if len(w):
+        clear = WallIndex(w, bucket_m=max(1.0, range_m)).clearances(np.hstack([pts, pts]), range_m)
+    else:
+        clear = np.full(len(pts), range_m)
+    blind = np.add.reduceat((clear >= range_m).astype(np.float64), np.cumsum([0] + counts[:-1]))
+    return {k: float(c * p) for k, c, p in zip(keys, blind, piece, strict=True) if c > 0}

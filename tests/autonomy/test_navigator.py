@@ -636,3 +636,37 @@ def test_a_plan_starting_on_its_first_edge_does_not_double_back() -> None:
     assert drive_by_the_door(uncapped, start, 0)[1].count("turning") > 2 * states.count("turning")
     # Off the edge's line by more than its clearance, the plan goes by its first node.
     assert nav.set_goal(0, np.array([DOOR_X + 0.6, 5.55, 0.0])) > 0.775 + 4.661 + 0.5
+
+
+def _hall() -> tuple[NavGraph, np.ndarray]:
+    """A 24 x 14 m hall: a straight edge across its middle, farther than 3 m from every
+    wall for 18 of its 20 m, and a way round along a wall, 1.5 m from it, 31 m long."""
+    walls = np.array([[0, 0, 24, 0], [24, 0, 24, 14], [24, 14, 0, 14], [0, 14, 0, 0]], float)
+    pts = {1: (2.0, 7.0), 2: (22.0, 7.0), 3: (2.0, 1.5), 4: (22.0, 1.5)}
+    nodes = tuple(NavNode(id=i, x=x, y=y) for i, (x, y) in pts.items())
+    edges = tuple(NavEdge(s0_id=a, s1_id=b) for a, b in [(1, 2), (1, 3), (3, 4), (4, 2)])
+    return NavGraph(nodes=nodes, edges=edges), walls
+
+
+def test_plans_keep_walls_in_the_cameras_range_where_a_detour_allows() -> None:
+    graph, walls = _hall()
+    start = np.array([2.0, 7.0, 0.0])
+    nav = Navigator(graph, walls=walls)
+    nav.set_goal(2, start, 0.0)
+    assert nav.plan_nodes == [1, 3, 4, 2]  # 31 m along the wall, not 18 blind metres
+    # Shortest paths without the coastal cost, or without the walls to measure it by.
+    for shortest in (Navigator(graph, NavigatorConfig(coastal_weight=0.0), walls=walls), Navigator(graph)):
+        shortest.set_goal(2, start, 0.0)
+        assert shortest.plan_nodes == [1, 2]
+    # A blind metre costs 1 + coastal_weight metres: the 11 m detour pays from a weight of
+    # 11 / 18; at 0.2 the hall is crossed.
+    cheap = Navigator(graph, NavigatorConfig(coastal_weight=0.2), walls=walls)
+    cheap.set_goal(2, start, 0.0)
+    assert cheap.plan_nodes == [1, 2]
+
+
+def test_coastal_config_is_checked() -> None:
+    with pytest.raises(InputError, match="navigator.coastal_weight"):
+        NavigatorConfig(coastal_weight=-1.0)
+    with pytest.raises(InputError, match="navigator.coastal_range_m"):
+        NavigatorConfig(coastal_range_m=0.0)

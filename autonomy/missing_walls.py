@@ -21,7 +21,8 @@ camera mount) is followed from the camera's position at the belief to the first 
 scene's lines. The pixel **expects a wall** at the planar depth z of that hit when z lies
 between ``min_range + margin_m`` and ``max_range - margin_m`` (a pose a few decimetres
 off moves a wall across the range's ends), the ray does not meet the floor first, and it
-meets the wall less than ``max_incidence_rad`` from the wall's normal. Of those that
+meets the wall less than ``max_incidence_rad`` from the wall's normal and at least
+``end_margin_m`` from a free end of its line (one no other line joins). Of those that
 returned a depth, a pixel **sees past** the wall when every valid depth within
 ``window_px`` of it in its row is farther than ``z + tol_m + tol_per_m2 z^2`` (a pose a
 little off moves a wall's end by a pixel or two; the Kinect's depth noise grows with
@@ -48,6 +49,8 @@ __all__ = ["MissingWallsConfig", "missing_walls"]
 
 #: Bins of direction around the camera for the ray casts (about half a degree each).
 BEARING_BINS = 512
+#: Lines whose end points lie this close continue one wall (:func:`_free_ends`).
+END_JOIN_M = 0.02
 
 
 @dataclass(frozen=True)
@@ -70,6 +73,10 @@ class MissingWallsConfig:
     """... plus this times the wall's depth squared (m per m^2) sees past it."""
     window_px: int = 2
     """Every valid depth within this many pixels in the row must be past the wall."""
+    end_margin_m: float = 0.3
+    """A ray that meets its line less than this from an end where no other line joins
+    (a wall's free end) expects nothing: a belief a few centimetres off moves such an
+    end across the rays beside it, and past it the camera sees the floor (0 = every ray)."""
     min_returned: int = 10
     """Frames with fewer pixels expecting a wall that returned carry no evidence."""
 
@@ -78,12 +85,12 @@ class MissingWallsConfig:
         require_int(self, "recovery.missing.", "stride_v_px", minimum=1)
         require_int(self, "recovery.missing.", "window_px", minimum=0)
         require_int(self, "recovery.missing.", "min_returned", minimum=1)
-        require_non_negative(self, "recovery.missing.", "margin_m", "tol_m", "tol_per_m2")
+        require_non_negative(self, "recovery.missing.", "margin_m", "tol_m", "tol_per_m2", "end_margin_m")
         require_positive(self, "recovery.missing.", "max_incidence_rad")
 
 
 @numba.njit(cache=True)
-def _missing_kernel(depth, lines, px, py, pth, rot, trans, fx, fy, cx, cy, su, sv, zlo, zhi, cos_max, tol_m, tol_q, win):  # pragma: no cover - numba
+def _missing_kernel(depth, lines, px, py, pth, rot, trans, fx, fy, cx, cy, su, sv, zlo, zhi, cos_max, tol_m, tol_q, win, end_m):  # pragma: no cover - numba
     """(expecting, returned, past) pixel counts (module docstring). ``px, py, pth``: the
     belief's robot pose; ``rot``, ``trans``: robot_from_camera."""
     h, w = depth.shape
@@ -93,6 +100,7 @@ def _missing_kernel(depth, lines, px, py, pth, rot, trans, fx, fy, cx, cy, su, s
     cam_h = trans[2]
     # Each ray is tested only against the lines in its direction.
     offsets, ids = _bearing_index(lines, ox, oy, BEARING_BINS)
+    free = _free_ends(lines, END_JOIN_M)
     n_exp = 0
     n_ret = 0
     n_past = 0
@@ -123,6 +131,9 @@ def _missing_kernel(depth, lines, px, py, pth, rot, trans, fx, fy, cx, cy, su, s
             L = math.sqrt(ex * ex + ey * ey)
             if L <= 0.0 or abs(dx * ey - dy * ex) / L < cos_max:
                 continue  # grazing: the camera may drop it
+            along = ((ox + t * dx - lines[bj, 0]) * ex + (oy + t * dy - lines[bj, 1]) * ey) / L
+            if (free[bj, 0] and along < end_m) or (free[bj, 1] and along > L - end_m):
+                continue  # near the wall's end: a small pose error moves the end across the ray
             n_exp += 1
             far = z + tol_m + tol_q * z * z
             returned = False
@@ -139,6 +150,30 @@ def _missing_kernel(depth, lines, px, py, pth, rot, trans, fx, fy, cx, cy, su, s
                 if not short:
                     n_past += 1
     return n_exp, n_ret, n_past
+
+
+@numba.njit(cache=True)
+def _free_ends(lines, join_m):  # pragma: no cover - numba
+    """(M, 2) whether each line's first and second end point is a wall's end: no other
+    line has an end point within ``join_m`` of it (a map draws one wall as several
+    collinear pieces, and a corner as two lines that share an end)."""
+    m = lines.shape[0]
+    free = np.ones((m, 2), dtype=np.bool_)
+    j2 = join_m * join_m
+    for i in range(m):
+        for a in range(2):
+            px, py = lines[i, 2 * a], lines[i, 2 * a + 1]
+            for k in range(m):
+                if k == i:
+                    continue
+                for b in range(2):
+                    qx, qy = lines[k, 2 * b] - px, lines[k, 2 * b + 1] - py
+                    if qx * qx + qy * qy <= j2:
+                        free[i, a] = False
+                        break
+                if not free[i, a]:
+                    break
+    return free
 
 
 def missing_walls(
@@ -164,6 +199,6 @@ def missing_walls(
         d, ln, float(p[0]), float(p[1]), float(p[2]), rc[:3, :3].copy(), rc[:3, 3].copy(),
         float(intr.fx), float(intr.fy), float(intr.cx), float(intr.cy), int(cfg.stride_u_px), int(cfg.stride_v_px),
         float(min_range_m + cfg.margin_m), float(max_range_m - cfg.margin_m), float(math.cos(cfg.max_incidence_rad)),
-        float(cfg.tol_m), float(cfg.tol_per_m2), int(cfg.window_px),
+        float(cfg.tol_m), float(cfg.tol_per_m2), int(cfg.window_px), float(cfg.end_margin_m),
     )
     return int(n_exp), int(n_ret), int(n_past)

@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 from autonomy.camera import DepthCamera, pixel_rays
 from autonomy.errors import InputError
 from autonomy.health import HealthConfig
-from autonomy.missing_walls import MissingWallsConfig, missing_walls
+from autonomy.missing_walls import END_JOIN_M, MissingWallsConfig, missing_walls
 from autonomy.raycast import SceneQuery, load_or_build
 from autonomy.stack import LOCALIZATION_GRID
 from sim.simulator.blueprints import ASSETS_DIR, load_blueprint
@@ -76,6 +76,13 @@ def reference(depth, lines, pose, cfg=CFG):
                 continue
             cos_inc = abs(d[0] * e[j, 1] - d[1] * e[j, 0]) / np.hypot(*e[j])
             if cos_inc < math.cos(cfg.max_incidence_rad):
+                continue
+            along = uu[j] * np.hypot(*e[j])
+            ends = lines[:, [[0, 1], [2, 3]]].reshape(-1, 2)  # 2 end points per line
+            near = np.hypot(*(ends[None, :, :] - lines[j, [[0, 1], [2, 3]]][:, None, :]).transpose(2, 0, 1)) <= END_JOIN_M
+            near[:, [2 * j, 2 * j + 1]] = False
+            free0, free1 = not near[0].any(), not near[1].any()
+            if (free0 and along < cfg.end_margin_m) or (free1 and along > np.hypot(*e[j]) - cfg.end_margin_m):
                 continue
             n_exp += 1
             row = slice(max(0, u - cfg.window_px), u + cfg.window_px + 1)
@@ -152,9 +159,29 @@ def test_grazing_and_out_of_range_walls_expect_nothing(scene) -> None:
     assert count(scene, depth, pose, MissingWallsConfig(margin_m=1.6))[0] == 0  # 2.4 m > 4 - 1.6
 
 
+def test_a_small_pose_error_at_a_walls_end_is_no_contradiction() -> None:
+    """A 0.5 m jog 2.5 m ahead, a long wall 4 m behind it, the camera looking past the
+    jog's end. From a belief 8 cm to the side the rays beside the jog meet it near its
+    end, where the camera saw the floor and the far wall: without the end margin they
+    see past a wall; with it those rays expect nothing and the view agrees."""
+    from autonomy.vectormap import VectorMap
+
+    vm = VectorMap([[2.5, 0.3, 2.5, 0.8], [6.5, -3.0, 6.5, 3.0]], name="jog")
+    scene = SceneQuery(vm, load_or_build(vm, None, LOCALIZATION_GRID))
+    truth = np.array([0.0, 0.0, 0.0])
+    depth = _RENDER.render(scene, truth)
+    belief = np.array([0.0, -0.08, 0.0])
+    lines = scene.scene_lines(0.0, -0.08)[0]
+    def past(end_margin_m: float) -> int:
+        cfg = MissingWallsConfig(end_margin_m=end_margin_m)
+        return missing_walls(depth, lines, belief, CAM.intrinsics, RC, CAM.min_range_m, CAM.max_range_m, cfg)[2]
+    assert past(0.0) > 0
+    assert past(CFG.end_margin_m) == 0
+
+
 def test_bad_config_names_the_key() -> None:
     for kw, key in [({"stride_u_px": 0}, "stride_u_px"), ({"stride_v_px": 1.5}, "stride_v_px"), ({"margin_m": -0.1}, "margin_m"),
-                    ({"min_returned": 0}, "min_returned"), ({"tol_m": -1.0}, "tol_m"), ({"max_incidence_rad": 0.0}, "max_incidence_rad")]:
+                    ({"min_returned": 0}, "min_returned"), ({"tol_m": -1.0}, "tol_m"), ({"end_margin_m": -0.1}, "end_margin_m"), ({"max_incidence_rad": 0.0}, "max_incidence_rad")]:
         with pytest.raises(InputError, match=f"recovery.missing.{key}"):
             MissingWallsConfig(**kw)
 

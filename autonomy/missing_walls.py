@@ -156,23 +156,29 @@ def _missing_kernel(depth, lines, px, py, pth, rot, trans, fx, fy, cx, cy, su, s
 def _free_ends(lines, join_m):  # pragma: no cover - numba
     """(M, 2) whether each line's first and second end point is a wall's end: no other
     line has an end point within ``join_m`` of it (a map draws one wall as several
-    collinear pieces, and a corner as two lines that share an end)."""
+    collinear pieces, and a corner as two lines that share an end). The end points are
+    swept in order of x, each compared with those within ``join_m`` of it in x."""
     m = lines.shape[0]
     free = np.ones((m, 2), dtype=np.bool_)
-    j2 = join_m * join_m
+    xs = np.empty(2 * m)
     for i in range(m):
-        for a in range(2):
-            px, py = lines[i, 2 * a], lines[i, 2 * a + 1]
-            for k in range(m):
-                if k == i:
-                    continue
-                for b in range(2):
-                    qx, qy = lines[k, 2 * b] - px, lines[k, 2 * b + 1] - py
-                    if qx * qx + qy * qy <= j2:
-                        free[i, a] = False
-                        break
-                if not free[i, a]:
-                    break
+        xs[2 * i] = lines[i, 0]
+        xs[2 * i + 1] = lines[i, 2]
+    order = np.argsort(xs)
+    j2 = join_m * join_m
+    for oi in range(2 * m):
+        p = order[oi]
+        i, a = p // 2, p % 2
+        px, py = lines[i, 2 * a], lines[i, 2 * a + 1]
+        for oj in range(oi + 1, 2 * m):
+            q = order[oj]
+            k, b = q // 2, q % 2
+            qx, qy = lines[k, 2 * b], lines[k, 2 * b + 1]
+            if qx - px > join_m:
+                break
+            if k != i and (qx - px) * (qx - px) + (qy - py) * (qy - py) <= j2:
+                free[i, a] = False
+                free[k, b] = False
     return free
 
 

@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 from autonomy.camera import DepthCamera, pixel_rays
 from autonomy.errors import InputError
 from autonomy.health import HealthConfig
-from autonomy.missing_walls import END_JOIN_M, MissingWallsConfig, missing_walls
+from autonomy.missing_walls import END_JOIN_M, MissingWallsConfig, _free_ends, missing_walls
 from autonomy.raycast import SceneQuery, load_or_build
 from autonomy.stack import LOCALIZATION_GRID
 from sim.simulator.blueprints import ASSETS_DIR, load_blueprint
@@ -177,6 +177,22 @@ def test_a_small_pose_error_at_a_walls_end_is_no_contradiction() -> None:
         return missing_walls(depth, lines, belief, CAM.intrinsics, RC, CAM.min_range_m, CAM.max_range_m, cfg)[2]
     assert past(0.0) > 0
     assert past(CFG.end_margin_m) == 0
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**31), st.integers(1, 120))
+def test_free_ends_match_all_pairs(seed: int, m: int) -> None:
+    """The x-sorted sweep of :func:`_free_ends` against every pair of end points, on
+    lines a third of which start within 1.5 cm of another's end."""
+    rng = np.random.default_rng(seed)
+    lines = rng.uniform(0, 10, (m, 4))
+    k = len(lines[1::3])
+    lines[1::3, :2] = lines[0::3, 2:][:k] + rng.uniform(-0.015, 0.015, (k, 2))
+    ends = lines.reshape(-1, 2)
+    d = np.hypot(*(ends[:, None] - ends[None]).transpose(2, 0, 1))
+    own = np.arange(len(ends)) // 2
+    d[own[:, None] == own[None]] = np.inf
+    assert np.array_equal(_free_ends(lines, END_JOIN_M), ~(d <= END_JOIN_M).any(axis=1).reshape(-1, 2))
 
 
 def test_bad_config_names_the_key() -> None:

@@ -182,14 +182,15 @@ class NavigatorConfig:
     """Plans avoid edges flagged has_stairs."""
     coastal_weight: float = 2.0
     """Coastal navigation (after Roy, Burgard, Fox and Thrun, ICRA 1999; ours): a metre of
-    plan farther than ``coastal_range_m`` from every wall costs 1 + this many metres, so
-    plans keep walls in the camera's range where a detour allows it. The localization
-    matches walls only: across a hall with none within the camera's 4 m it dead-reckons,
-    and the belief that comes out of 20 m of that (0.3-0.4 m wide on a real floor) can
-    match the first far face it sees to a parallel wall behind it (0 = shortest paths)."""
-    coastal_range_m: float = 3.0
-    """A place farther than this from every wall is blind for :attr:`coastal_weight`
-    (under the Kinect's 4 m: a wall at the range's end fills little of the view)."""
+    plan where the camera, facing along it, sees no wall within ``coastal_range_m`` costs
+    1 + this many metres (:func:`autonomy.planner.blind_lengths`), so plans keep walls
+    in view where a detour allows it. The localization matches walls only: across a hall
+    or down a wide corridor's middle it dead-reckons, and the belief that comes out of
+    20 m of that (0.3-0.5 m wide on a real floor) can match the first far face it sees
+    to a parallel wall behind it (0 = shortest paths)."""
+    coastal_range_m: float = 3.5
+    """Walls farther than this are not counted as seen for :attr:`coastal_weight` (FSPF
+    keeps few points of a wall at the Kinect's 4 m)."""
     memory_s: float = 2.0
     """Obstacle memory: sensed points outside the camera's view persist this long (the
     Kinect sees +-29 degrees and nothing closer than 0.8 m, so a person beside or right
@@ -361,7 +362,7 @@ class Navigator:
         self._coastal: dict[tuple[int, int], float] = {}
         """Extra plan cost per edge for its blind metres (:attr:`NavigatorConfig.coastal_weight`)."""
         if self.walls is not None and cfg.coastal_weight > 0:
-            blind = blind_lengths(graph, self.walls, cfg.coastal_range_m)
+            blind = blind_lengths(graph, self.walls, cfg.coastal_range_m, 0.5 * camera.fov_h_rad)
             self._coastal = {k: cfg.coastal_weight * v for k, v in blind.items()}
         self._local = np.zeros((0, 2))
         self._local_centre: np.ndarray | None = None

@@ -14,6 +14,7 @@ import heapq
 import math
 from collections.abc import Collection, Mapping
 
+import numba
 import numpy as np
 
 from autonomy.errors import InputError
@@ -163,33 +164,88 @@ def dijkstra(adj: list[list[tuple[int, float]]], sources: dict[int, float]) -> t
     return dist, parent
 
 
-def blind_lengths(graph: NavGraph, walls: np.ndarray, range_m: float, step_m: float = 0.25) -> dict[tuple[int, int], float]:
-    """Metres of each edge (by :func:`edge_key`; only edges with some) farther than
-    ``range_m`` from every wall, measured at the midpoints of pieces at most ``step_m``
-    long: where a depth camera of that range sees no wall, the localization dead-reckons
-    (the blind stretches of coastal navigation, Roy, Burgard, Fox and Thrun, ICRA 1999)."""
+@numba.njit(cache=True)
+def _blind_kernel(
+    pts: np.ndarray, heading: np.ndarray, walls: np.ndarray, offsets: np.ndarray, idx: np.ndarray,
+    x0: float, y0: float, size: float, nx: int, ny: int, range_m: float, half_fov: float, n_rays: int, out: np.ndarray,
+) -> None:  # pragma: no cover - numba
+    """out[k]: 1 when none of ``n_rays`` rays across +-half_fov about heading[k] from
+    pts[k] meets a wall within ``range_m`` (walls bucketed as :class:`WallIndex`)."""
+    for k in range(pts.shape[0]):
+        px, py = pts[k, 0], pts[k, 1]
+        i0 = max(0, int((px - range_m - x0) / size))
+        i1 = min(nx - 1, int((px + range_m - x0) / size))
+        j0 = max(0, int((py - range_m - y0) / size))
+        j1 = min(ny - 1, int((py + range_m - y0) / size))
+        seen = False
+        for r in range(n_rays):
+            a = heading[k] + (-half_fov + 2.0 * half_fov * r / (n_rays - 1) if n_rays > 1 else 0.0)
+            dx, dy = math.cos(a), math.sin(a)
+            for j in range(j0, j1 + 1):
+                for i in range(i0, i1 + 1):
+                    b = j * nx + i
+                    for t in range(offsets[b], offsets[b + 1]):
+                        w = idx[t]
+                        ex, ey = walls[w, 2] - walls[w, 0], walls[w, 3] - walls[w, 1]
+                        den = dx * ey - dy * ex
+                        if den == 0.0:
+                            continue
+                        ax, ay = walls[w, 0] - px, walls[w, 1] - py
+                        tt = (ax * ey - ay * ex) / den
+                        uu = (ax * dy - ay * dx) / den
+                        if 0.0 <= tt <= range_m and 0.0 <= uu <= 1.0:
+                            seen = True
+                            break
+                    if seen:
+                        break
+                if seen:
+                    break
+            if seen:
+                break
+        out[k] = 0.0 if seen else 1.0
+
+
+def blind_lengths(
+    graph: NavGraph, walls: np.ndarray, range_m: float, half_fov_rad: float, step_m: float = 0.25, rays: int = 9
+) -> dict[tuple[int, int], float]:
+    """Metres of each edge (by :func:`edge_key`; only edges with some) where a camera of
+    that range and half field of view, facing along the edge, sees no wall: ``rays``
+    rays across the view from the midpoints of pieces at most ``step_m`` long, driving
+    either way (the mean of the two). There the localization, which matches walls only,
+    dead-reckons: the blind stretches of coastal navigation (Roy, Burgard, Fox and
+    Thrun, ICRA 1999). A wall beside the path is out of a 57 degree view beyond 1.9 m
+    to the side at 4 m: a corridor 4 m wide is blind down its middle."""
     if not (range_m > 0 and math.isfinite(range_m)):
         raise InputError(f"blind_lengths: range_m: expected a positive number, got {range_m!r}")
-    w = np.asarray(walls, dtype=np.float64).reshape(-1, 4)
+    if not (0 <= half_fov_rad < math.pi):
+        raise InputError(f"blind_lengths: half_fov_rad: expected an angle in [0, pi), got {half_fov_rad!r}")
+    w = np.ascontiguousarray(np.asarray(walls, dtype=np.float64).reshape(-1, 4))
     xy = graph.node_xy()
     keys: list[tuple[int, int]] = []
-    mids: list[np.ndarray] = []
+    pts: list[np.ndarray] = []
+    heads: list[np.ndarray] = []
     piece: list[float] = []
+    counts: list[int] = []
     for e in graph.edges:
         a, b = xy[graph.index_of(e.s0_id)], xy[graph.index_of(e.s1_id)]
         length = float(math.hypot(*(b - a)))
         n = max(1, math.ceil(length / step_m))
-        t = (np.arange(n) + 0.5) / n
+        mid = a + ((np.arange(n) + 0.5) / n)[:, None] * (b - a)
+        h = math.atan2(b[1] - a[1], b[0] - a[0])
         keys.append(edge_key(e.s0_id, e.s1_id))
-        mids.append(a + t[:, None] * (b - a))
+        pts += [mid, mid]
+        heads += [np.full(n, h), np.full(n, h + math.pi)]
         piece.append(length / n)
+        counts.append(2 * n)
     if not keys:
         return {}
-    counts = [len(m) for m in mids]
-    pts = np.vstack(mids)
+    p = np.ascontiguousarray(np.vstack(pts))
+    blind = np.ones(len(p))
     if len(w):
-        clear = WallIndex(w, bucket_m=max(1.0, range_m)).clearances(np.hstack([pts, pts]), range_m)
-    else:
-        clear = np.full(len(pts), range_m)
-    blind = np.add.reduceat((clear >= range_m).astype(np.float64), np.cumsum([0] + counts[:-1]))
-    return {k: float(c * p) for k, c, p in zip(keys, blind, piece, strict=True) if c > 0}
+        ix = WallIndex(w, bucket_m=max(1.0, range_m))
+        _blind_kernel(
+            p, np.concatenate(heads), ix.walls, ix.offsets, ix.idx, ix.x0, ix.y0, ix.bucket_m, ix.nx, ix.ny, float(range_m),
+            float(half_fov_rad), int(rays), blind,
+        )
+    per_edge = np.add.reduceat(blind, np.cumsum([0] + counts[:-1]))
+    return {k: float(0.5 * c * q) for k, c, q in zip(keys, per_edge, piece, strict=True) if c > 0}

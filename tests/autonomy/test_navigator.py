@@ -639,8 +639,9 @@ def test_a_plan_starting_on_its_first_edge_does_not_double_back() -> None:
 
 
 def _hall() -> tuple[NavGraph, np.ndarray]:
-    """A 24 x 14 m hall: a straight edge across its middle, farther than 3 m from every
-    wall for 18 of its 20 m, and a way round along a wall, 1.5 m from it, 31 m long."""
+    """A 24 x 14 m hall: a straight edge across its middle, where the camera sees no wall
+    for 18.5 of its 20 m either way, and a way round along a wall, 1.5 m from it, 31 m
+    long and never blind."""
     walls = np.array([[0, 0, 24, 0], [24, 0, 24, 14], [24, 14, 0, 14], [0, 14, 0, 0]], float)
     pts = {1: (2.0, 7.0), 2: (22.0, 7.0), 3: (2.0, 1.5), 4: (22.0, 1.5)}
     nodes = tuple(NavNode(id=i, x=x, y=y) for i, (x, y) in pts.items())
@@ -653,13 +654,13 @@ def test_plans_keep_walls_in_the_cameras_range_where_a_detour_allows() -> None:
     start = np.array([2.0, 7.0, 0.0])
     nav = Navigator(graph, walls=walls)
     nav.set_goal(2, start, 0.0)
-    assert nav.plan_nodes == [1, 3, 4, 2]  # 31 m along the wall, not 18 blind metres
+    assert nav.plan_nodes == [1, 3, 4, 2]  # 31 m along the wall, not 18.5 blind metres
     # Shortest paths without the coastal cost, or without the walls to measure it by.
     for shortest in (Navigator(graph, NavigatorConfig(coastal_weight=0.0), walls=walls), Navigator(graph)):
         shortest.set_goal(2, start, 0.0)
         assert shortest.plan_nodes == [1, 2]
     # A blind metre costs 1 + coastal_weight metres: the 11 m detour pays from a weight of
-    # 11 / 18; at 0.2 the hall is crossed.
+    # 11 / 18.5; at 0.2 the hall is crossed.
     cheap = Navigator(graph, NavigatorConfig(coastal_weight=0.2), walls=walls)
     cheap.set_goal(2, start, 0.0)
     assert cheap.plan_nodes == [1, 2]

@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from autonomy.planner import NoPathError, astar, blind_lengths, edge_key, path_length
+from autonomy.raycast import rays_hit
 from autonomy.errors import InputError
 from autonomy.vectormap import NavEdge, NavGraph, NavNode
 
@@ -77,28 +78,59 @@ def test_astar_with_extra_edge_costs_is_a_cheapest_path(seed: int, n: int) -> No
         assert _cost(g, p, extra) == pytest.approx(dist[a, b])
 
 
-def test_blind_lengths_match_a_fine_brute_force_sampling() -> None:
-    """A 20 x 12 m hall: each edge's metres farther than 3 m from every wall, against
-    the distance to the walls sampled every millimetre."""
-    walls = np.array([[0, 0, 20, 0], [20, 0, 20, 12], [20, 12, 0, 12], [0, 12, 0, 0]], float)
-    xy = np.array([[1, 6], [19, 6], [10, 1], [10, 11], [2.5, 2.5]], float)
-    edges = [(0, 1), (2, 3), (0, 4), (4, 2), (1, 3)]
+def _blind_reference(g: NavGraph, walls: np.ndarray, range_m: float, half_fov: float, step_m: float, rays: int) -> dict:
+    """Brute force: every ray against every wall with :func:`autonomy.raycast.rays_hit`."""
+    out = {}
+    xy = g.node_xy()
+    for e in g.edges:
+        a, b = xy[g.index_of(e.s0_id)], xy[g.index_of(e.s1_id)]
+        length = float(np.hypot(*(b - a)))
+        n = max(1, math.ceil(length / step_m))
+        h = math.atan2(*(b - a)[::-1])
+        blind = 0
+        for k in range(n):
+            p = a + (k + 0.5) / n * (b - a)
+            for head in (h, h + math.pi):
+                ang = head + np.linspace(-half_fov, half_fov, rays)
+                _, t = rays_hit(walls, p[0], p[1], np.column_stack([np.cos(ang), np.sin(ang)]))
+                blind += not (t <= range_m).any()
+        if blind:
+            out[edge_key(e.s0_id, e.s1_id)] = 0.5 * blind * length / n
+    return out
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.integers(0, 10**6))
+def test_blind_lengths_match_brute_force_ray_casting(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    walls = np.hstack([rng.uniform(0, 20, (25, 2)), np.zeros((25, 2))])
+    walls[:, 2:] = walls[:, :2] + rng.uniform(-4, 4, (25, 2))
+    xy = rng.uniform(0, 20, (8, 2))
+    edges = [(i, (i + 1) % 8) for i in range(8)] + [(0, 4), (2, 6)]
     g = _graph(xy, edges)
-    got = blind_lengths(g, walls, 3.0, step_m=0.01)
-    for a, b in edges:
-        t = (np.arange(100000) + 0.5) / 100000
-        p = xy[a] + t[:, None] * (xy[b] - xy[a])
-        clear = np.minimum.reduce([p[:, 0], 20 - p[:, 0], p[:, 1], 12 - p[:, 1]])
-        want = float(np.hypot(*(xy[b] - xy[a]))) * float(np.mean(clear >= 3.0))
-        assert got.get(edge_key(10 + a, 10 + b), 0.0) == pytest.approx(want, abs=0.02)
-    assert got[edge_key(10, 11)] == pytest.approx(14.0, abs=0.02)  # x from 3 to 17 at y = 6
-    assert edge_key(10, 14) not in got  # (1, 6) to (2.5, 2.5): never 3 m from the walls
+    got = blind_lengths(g, walls, 3.5, math.radians(28.5), step_m=0.5, rays=9)
+    want = _blind_reference(g, walls, 3.5, math.radians(28.5), 0.5, 9)
+    assert got.keys() == want.keys()
+    for k in want:
+        assert got[k] == pytest.approx(want[k])
+
+
+def test_blind_lengths_of_a_hall() -> None:
+    """A 20 x 12 m hall, a 57 degree view of 3.5 m: down its middle only the end walls
+    are seen, from 3.5 m; 1.5 m from a side wall the wall is always in view."""
+    walls = np.array([[0, 0, 20, 0], [20, 0, 20, 12], [20, 12, 0, 12], [0, 12, 0, 0]], float)
+    g = _graph(np.array([[1, 6], [19, 6], [1, 1.5], [19, 1.5]], float), [(0, 1), (2, 3)])
+    got = blind_lengths(g, walls, 3.5, math.radians(28.5), step_m=0.01)
+    assert got[edge_key(10, 11)] == pytest.approx(18.0 - 2.5, abs=0.02)  # each way blind until 3.5 m from the end wall
+    assert edge_key(12, 13) not in got
 
 
 def test_blind_lengths_reject_a_bad_range() -> None:
     g = _graph(np.array([[0, 0], [1, 0]], float), [(0, 1)])
     with pytest.raises(InputError, match="range_m"):
-        blind_lengths(g, np.zeros((0, 4)), 0.0)
+        blind_lengths(g, np.zeros((0, 4)), 0.0, 0.5)
+    with pytest.raises(InputError, match="half_fov_rad"):
+        blind_lengths(g, np.zeros((0, 4)), 3.0, 4.0)
 
 
 def test_stairs_are_excluded_unless_allowed() -> None:

@@ -1,4 +1,4 @@
-"""A* on navigation graphs against brute-force shortest paths."""
+"""A* on navigation graphs against brute-force shortest paths, and blind lengths against brute-force ray casting."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from autonomy.errors import InputError
 from autonomy.planner import NoPathError, astar, blind_lengths, edge_key, path_length
 from autonomy.raycast import rays_hit
-from autonomy.errors import InputError
 from autonomy.vectormap import NavEdge, NavGraph, NavNode
 
 
@@ -36,13 +36,18 @@ def _floyd(xy: np.ndarray, edges, stairs=frozenset(), extra=None) -> np.ndarray:
     return d
 
 
+def _random_graph(rng: np.random.Generator, n: int) -> tuple[np.ndarray, list[tuple[int, int]]]:
+    """n nodes in a 20 m square and 2n distinct edges among them (fewer when n is small)."""
+    xy = rng.uniform(0, 20, size=(n, 2))
+    pairs = list(itertools.combinations(range(n), 2))
+    return xy, [pairs[i] for i in rng.choice(len(pairs), size=min(len(pairs), 2 * n), replace=False)]
+
+
 @settings(max_examples=40, deadline=None)
 @given(st.integers(0, 10**6), st.integers(3, 12))
 def test_astar_is_a_shortest_path(seed: int, n: int) -> None:
     rng = np.random.default_rng(seed)
-    xy = rng.uniform(0, 20, size=(n, 2))
-    pairs = list(itertools.combinations(range(n), 2))
-    edges = [pairs[i] for i in rng.choice(len(pairs), size=min(len(pairs), 2 * n), replace=False)]
+    xy, edges = _random_graph(rng, n)
     stairs = {int(k) for k in rng.choice(len(edges), size=len(edges) // 5, replace=False)}
     g = _graph(xy, edges, stairs)
     dist = _floyd(xy, edges, stairs)
@@ -64,9 +69,7 @@ def _cost(g: NavGraph, path: list[int], extra: dict) -> float:
 @given(st.integers(0, 10**6), st.integers(3, 12))
 def test_astar_with_extra_edge_costs_is_a_cheapest_path(seed: int, n: int) -> None:
     rng = np.random.default_rng(seed)
-    xy = rng.uniform(0, 20, size=(n, 2))
-    pairs = list(itertools.combinations(range(n), 2))
-    edges = [pairs[i] for i in rng.choice(len(pairs), size=min(len(pairs), 2 * n), replace=False)]
+    xy, edges = _random_graph(rng, n)
     extra = {edge_key(10 + a, 10 + b): float(rng.uniform(0, 30)) for a, b in edges if rng.uniform() < 0.5}
     g = _graph(xy, edges)
     dist = _floyd(xy, edges, extra=extra)

@@ -19,6 +19,7 @@ import numpy as np
 
 from autonomy.errors import InputError
 from autonomy.geometry import WallIndex
+from autonomy.raycast import _segment_hit
 from autonomy.vectormap import NavGraph
 
 
@@ -185,15 +186,7 @@ def _blind_kernel(
                 for i in range(i0, i1 + 1):
                     b = j * nx + i
                     for t in range(offsets[b], offsets[b + 1]):
-                        w = idx[t]
-                        ex, ey = walls[w, 2] - walls[w, 0], walls[w, 3] - walls[w, 1]
-                        den = dx * ey - dy * ex
-                        if den == 0.0:
-                            continue
-                        ax, ay = walls[w, 0] - px, walls[w, 1] - py
-                        tt = (ax * ey - ay * ex) / den
-                        uu = (ax * dy - ay * dx) / den
-                        if 0.0 <= tt <= range_m and 0.0 <= uu <= 1.0:
+                        if _segment_hit(walls, idx[t], px, py, dx, dy, range_m) < range_m:
                             seen = True
                             break
                     if seen:

@@ -113,6 +113,11 @@ class CGRConfig:
     fits them best on the residuals' own scale (:meth:`CGRLocalizer._reweigh`). A few
     points matched to the wrong line (seen past a pillar's corner) then cannot pull the
     belief along a corridor (0 = the squared distances of Eq. 1, one round)."""
+    tail_hold_fraction: float = 0.5
+    """When the samples round the mean matched at least this fraction of the frame's
+    points and the association check left them too few to be scored, the samples away
+    from the mean are not scored either: no update this frame (ours,
+    :meth:`CGRLocalizer._refine`; 0 = the tail is always scored)."""
     share_radius_m: float = 1.0
     """Particles within this distance (and share_angle_rad) of the proposal mean share its
     scene lines and correspondences; others get their own."""
@@ -129,8 +134,10 @@ class CGRConfig:
         require_non_negative(
             self, "cgr.", "alpha1", "alpha2_rad_per_m", "alpha3", "min_translation_std_m", "min_rotation_std_rad",
             "init_std_xy_m", "init_std_theta_rad", "gate_sigmas", "prior_min_xy_m", "prior_min_theta_rad",
-            "degeneracy_max_gain", "robust_scale",
+            "degeneracy_max_gain", "robust_scale", "tail_hold_fraction",
         )
+        if not 0 <= self.tail_hold_fraction <= 1:
+            raise InputError(f"cgr.tail_hold_fraction: expected a number in [0, 1], got {self.tail_hold_fraction!r}")
         if not 0 <= self.consistent_fraction <= 1:
             raise InputError(f"cgr.consistent_fraction: expected a number in [0, 1], got {self.consistent_fraction!r}")
         require_positive(self, "cgr.", "max_gate_m", "trust_region_m", "step_fraction")
@@ -163,6 +170,10 @@ class UpdateStats:
     shared: int = 0
     dropped_points: int = 0
     """Points the association check dropped (their line changed at the refined pose)."""
+    unscored_tail: int = 0
+    """Particles away from the mean left unscored because those round it matched most of
+    the frame's points but the association check left them too few to be scored
+    (:attr:`CGRConfig.tail_hold_fraction`): no update this frame."""
     trusted_directions: int = 3
     """Pose directions the shared correspondences pin down (0-3; the refinement moves
     samples along these only, :attr:`CGRConfig.degeneracy_max_gain`)."""
@@ -363,7 +374,24 @@ class CGRLocalizer:
             sel = np.flatnonzero(share)
             first = np.ascontiguousarray(self.particles[sel])
             refined[sel], lnp0[sel], lnpr[sel] = self._refine_shared(fr, shared_pose, lines, frames_shared, idx_shared, first, m, stats)
-        for i in np.flatnonzero(~share):
+        own = np.flatnonzero(~share)
+        if (
+            len(own) and share.any() and not np.isfinite(lnpr[share]).any()
+            and kept >= cfg.tail_hold_fraction * len(fr.pts) and cfg.tail_hold_fraction > 0
+        ):
+            # The samples round the mean put most of the frame's points on lines, but
+            # too few of them kept their line where the refinement led (the association
+            # check): the frame is ambiguous, not evidence against them, and they are left
+            # unscored. So are the few in the tail: one refined on its own
+            # correspondences would otherwise take every weight from samples that were
+            # not scored at all (a 4 cm sliver of wall 4.8 m away, which a sample 1.2 m
+            # off put on a wall behind it, pulled the belief 1.2 m in one frame). When
+            # the samples round the mean cannot place most points at all (their heading
+            # off after a sharp turn), the tail is scored and may take the belief.
+            stats.unscored_tail = len(own)
+            refined[own], lnp0[own], lnpr[own] = self.particles[own], -np.inf, -np.inf
+            return refined, lnp0, lnpr
+        for i in own:
             refined[i], lnp0[i], lnpr[i] = self._refine_own(fr, self.particles[i], m)
         return refined, lnp0, lnpr
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -371,6 +372,60 @@ def test_association_check_drops_a_box_matched_to_a_pillar_beside_it(seed: int) 
     assert off.last.dropped_points == 0 and math.hypot(*(off.estimate().pose[:2] - true[:2])) > 0.3
 
 
+def _sliver_frame(cfg: CGRConfig) -> tuple[CGRLocalizer, np.ndarray, np.ndarray, np.ndarray]:
+    """A frame of a real floor (GHC2, after 45 s across an atrium with no wall in range):
+    69 points on the last 4 cm of a wall face 4.8 m away, the belief 0.5 m wide. The
+    walls within 9 m, the points and normals (robot frame), the 20 samples and the true
+    pose are stored in ``tests/data/ghc2_sliver_frame.npz``."""
+    from autonomy.raycast import SceneQuery, VisibilityGrid
+    from autonomy.stack import LOCALIZATION_GRID
+    from autonomy.vectormap import VectorMap
+
+    d = np.load(Path(__file__).resolve().parents[1] / "data" / "ghc2_sliver_frame.npz")
+    vm = VectorMap.from_segments(d["segments"])
+    scene = SceneQuery(vm, VisibilityGrid.build(vm, LOCALIZATION_GRID))
+    loc = CGRLocalizer(lambda x, y: scene.scene_lines(x, y)[0], cfg, ObservationConfig(), np.random.default_rng(0))
+    loc.particles = d["particles"].copy()
+    loc.weights = np.full(len(loc.particles), 1.0 / len(loc.particles))
+    return loc, d["points"], d["normals"], d["truth"]
+
+
+def test_a_sliver_only_a_tail_sample_explains_does_not_take_the_belief() -> None:
+    """At the mean the sliver's rays pass the face's end and meet a wall 0.2 m behind
+    it; refined onto that wall, the points lose their line, and the association check
+    leaves the 19 samples round the mean nothing to be scored on. One sample 1.2 m off
+    (and 8 degrees) puts the sliver on another wall and used to take every weight: the
+    belief jumped 1.0 m from the truth in one frame. Now nobody is scored on the frame."""
+    loc, pts, nrm, truth = _sliver_frame(CGRConfig())
+    before = loc.estimate().pose.copy()
+    assert math.hypot(*(before[:2] - truth[:2])) < 0.2
+    loc.update(pts, nrm)
+    assert np.allclose(loc.estimate().pose, before)
+    assert loc.last.shared == 19 and loc.last.unscored_tail == 1 and not loc.last.observation
+    # The rule off: the tail sample takes the belief, 1 m from the truth.
+    off, pts, nrm, truth = _sliver_frame(CGRConfig(tail_hold_fraction=0.0))
+    off.update(pts, nrm)
+    assert off.last.observation and off.last.unscored_tail == 0
+    assert math.hypot(*(off.estimate().pose[:2] - truth[:2])) > 0.9 and off.estimate().std_xy_m < 0.05
+
+
+def test_the_tail_is_scored_when_the_samples_round_the_mean_place_few_points() -> None:
+    """Nineteen samples round the mean put a face 6 m ahead 1.1 m beyond the only wall,
+    past the gate; one sample 1.2 m behind puts it on the wall. The samples round the
+    mean cannot place the frame at all (as when their heading is off after a sharp
+    turn), so the frame is evidence against them and the tail sample takes the belief."""
+    wall = np.array([[4.8, -5.0, 4.8, 5.0]])
+    pts = np.column_stack([np.full(40, 6.0), np.linspace(-0.2, 0.2, 40)])
+    nrm = np.tile([-1.0, 0.0], (40, 1))
+    loc = CGRLocalizer(lambda x, y: wall, CGRConfig(), ObservationConfig(), np.random.default_rng(0))
+    bulk = np.column_stack([0.02 * np.random.default_rng(1).standard_normal((19, 2)), np.zeros(19)])
+    loc.particles = np.vstack([bulk, [[-1.2, 0.0, 0.0]]])
+    loc.weights = np.full(20, 1.0 / 20)
+    loc.update(pts, nrm)
+    assert loc.last.shared == 19 and loc.last.unscored_tail == 0 and loc.last.observation
+    assert loc.estimate().pose[0] == pytest.approx(-1.2, abs=0.05)
+
+
 def test_association_check_keeps_a_well_posed_observation() -> None:
     """A room seen from 8 cm and 1 degree off: every correspondence holds at the refined
     pose, nothing is dropped, and the refinement lands on the true pose."""
@@ -388,6 +443,8 @@ def test_association_check_keeps_a_well_posed_observation() -> None:
 def test_consistent_fraction_is_a_fraction() -> None:
     with pytest.raises(InputError, match="cgr.consistent_fraction"):
         CGRConfig(consistent_fraction=1.5)
+    with pytest.raises(InputError, match="cgr.tail_hold_fraction"):
+        CGRConfig(tail_hold_fraction=2.0)
 
 
 def test_refinement_prior_holds_the_heading_on_one_small_face() -> None:

@@ -115,9 +115,10 @@ class CGRConfig:
     belief along a corridor (0 = the squared distances of Eq. 1, one round)."""
     tail_hold_fraction: float = 0.5
     """When the samples round the mean matched at least this fraction of the frame's
-    points and the association check left them too few to be scored, the samples away
-    from the mean are not scored either: no update this frame (ours,
-    :meth:`CGRLocalizer._refine`; 0 = the tail is always scored)."""
+    points yet none of them could be scored (the association check dropped the points,
+    or fewer than observation.min_points were matched), the samples away from the mean
+    are not scored either: no update this frame (ours, :meth:`CGRLocalizer._refine`;
+    0 = the tail is always scored)."""
     share_radius_m: float = 1.0
     """Particles within this distance (and share_angle_rad) of the proposal mean share its
     scene lines and correspondences; others get their own."""
@@ -172,8 +173,8 @@ class UpdateStats:
     """Points the association check dropped (their line changed at the refined pose)."""
     unscored_tail: int = 0
     """Particles away from the mean left unscored because those round it matched most of
-    the frame's points but the association check left them too few to be scored
-    (:attr:`CGRConfig.tail_hold_fraction`): no update this frame."""
+    the frame's points but could not be scored (:attr:`CGRConfig.tail_hold_fraction`):
+    no update this frame."""
     trusted_directions: int = 3
     """Pose directions the shared correspondences pin down (0-3; the refinement moves
     samples along these only, :attr:`CGRConfig.degeneracy_max_gain`)."""
@@ -376,18 +377,19 @@ class CGRLocalizer:
             refined[sel], lnp0[sel], lnpr[sel] = self._refine_shared(fr, shared_pose, lines, frames_shared, idx_shared, first, m, stats)
         own = np.flatnonzero(~share)
         if (
-            len(own) and share.any() and not np.isfinite(lnpr[share]).any()
-            and kept >= cfg.tail_hold_fraction * len(fr.pts) and cfg.tail_hold_fraction > 0
+            cfg.tail_hold_fraction > 0 and len(own) and share.any()
+            and kept >= cfg.tail_hold_fraction * len(fr.pts) and not np.isfinite(lnpr[share]).any()
         ):
-            # The samples round the mean put most of the frame's points on lines, but
-            # too few of them kept their line where the refinement led (the association
-            # check): the frame is ambiguous, not evidence against them, and they are left
-            # unscored. So are the few in the tail: one refined on its own
-            # correspondences would otherwise take every weight from samples that were
-            # not scored at all (a 4 cm sliver of wall 4.8 m away, which a sample 1.2 m
-            # off put on a wall behind it, pulled the belief 1.2 m in one frame). When
-            # the samples round the mean cannot place most points at all (their heading
-            # off after a sharp turn), the tail is scored and may take the belief.
+            # The samples round the mean put most of the frame's points on lines, yet
+            # none of them was scored (the association check dropped the points where
+            # the refinement led, or fewer than min_points were matched): the frame is
+            # ambiguous, not evidence against them. So the few in the tail are not
+            # scored either: one refined on its own correspondences would otherwise take
+            # every weight from samples that were not scored at all (a 4 cm sliver of
+            # wall 4.8 m away, which a sample 1.2 m off put on a wall behind it, pulled
+            # the belief 1.2 m in one frame). When the samples round the mean cannot
+            # place most points at all (their heading off after a sharp turn), the tail
+            # is scored and may take the belief.
             stats.unscored_tail = len(own)
             refined[own], lnp0[own], lnpr[own] = self.particles[own], -np.inf, -np.inf
             return refined, lnp0, lnpr

@@ -50,6 +50,7 @@ from autonomy.observation import (
     robust_weights,
     trusted_directions,
 )
+from autonomy.raycast import rays_hit
 
 SceneLinesFn = Callable[[float, float], np.ndarray]
 
@@ -114,11 +115,12 @@ class CGRConfig:
     points matched to the wrong line (seen past a pillar's corner) then cannot pull the
     belief along a corridor (0 = the squared distances of Eq. 1, one round)."""
     tail_hold_fraction: float = 0.5
-    """When the samples round the mean matched at least this fraction of the frame's
-    points yet none of them could be scored (the association check dropped the points,
-    or fewer than observation.min_points were matched), the samples away from the mean
-    are not scored either: no update this frame (ours, :meth:`CGRLocalizer._refine`;
-    0 = the tail is always scored)."""
+    """When the samples round the mean account for at least this fraction of the frame's
+    points, matched to lines or lying in front of the walls along their rays (clutter the
+    map does not hold), yet none of them could be scored (the association check dropped
+    the points, or fewer than observation.min_points were matched), the samples away
+    from the mean are not scored either: no update this frame (ours,
+    :meth:`CGRLocalizer._refine`; 0 = the tail is always scored)."""
     share_radius_m: float = 1.0
     """Particles within this distance (and share_angle_rad) of the proposal mean share its
     scene lines and correspondences; others get their own."""
@@ -172,9 +174,9 @@ class UpdateStats:
     dropped_points: int = 0
     """Points the association check dropped (their line changed at the refined pose)."""
     unscored_tail: int = 0
-    """Particles away from the mean left unscored because those round it matched most of
-    the frame's points but could not be scored (:attr:`CGRConfig.tail_hold_fraction`):
-    no update this frame."""
+    """Particles away from the mean left unscored because those round it accounted for
+    most of the frame's points but could not be scored
+    (:attr:`CGRConfig.tail_hold_fraction`): no update this frame."""
     trusted_directions: int = 3
     """Pose directions the shared correspondences pin down (0-3; the refinement moves
     samples along these only, :attr:`CGRConfig.degeneracy_max_gain`)."""
@@ -361,6 +363,7 @@ class CGRLocalizer:
         cfg, n = self.cfg, self.cfg.n_particles
         idx_shared = np.empty(len(fr.pts), dtype=np.int64)
         kept = correspond(lines, shared_pose, fr.pts, fr.nrm, fr.use_n, fr.cos_max, fr.gate, idx_shared)
+        matched = idx_shared >= 0  # the association check changes idx_shared in place
         frames_shared = line_frames(lines, shared_pose[0], shared_pose[1])
         stats.used_points = int(kept)
         lnp0 = np.empty(n)
@@ -377,25 +380,48 @@ class CGRLocalizer:
             refined[sel], lnp0[sel], lnpr[sel] = self._refine_shared(fr, shared_pose, lines, frames_shared, idx_shared, first, m, stats)
         own = np.flatnonzero(~share)
         if (
-            cfg.tail_hold_fraction > 0 and len(own) and share.any()
-            and kept >= cfg.tail_hold_fraction * len(fr.pts) and not np.isfinite(lnpr[share]).any()
+            cfg.tail_hold_fraction > 0 and len(own) and share.any() and not np.isfinite(lnpr[share]).any()
+            and self._accounted(fr, shared_pose, lines, matched, kept) >= cfg.tail_hold_fraction * len(fr.pts)
         ):
-            # The samples round the mean put most of the frame's points on lines, yet
-            # none of them was scored (the association check dropped the points where
-            # the refinement led, or fewer than min_points were matched): the frame is
-            # ambiguous, not evidence against them. So the few in the tail are not
-            # scored either: one refined on its own correspondences would otherwise take
-            # every weight from samples that were not scored at all (a 4 cm sliver of
-            # wall 4.8 m away, which a sample 1.2 m off put on a wall behind it, pulled
-            # the belief 1.2 m in one frame). When the samples round the mean cannot
-            # place most points at all (their heading off after a sharp turn), the tail
-            # is scored and may take the belief.
+            # The samples round the mean account for most of the frame's points (on
+            # lines, or in front of the walls as clutter), yet none of them was scored
+            # (the association check dropped the points where the refinement led, or
+            # fewer than min_points were matched): the frame is ambiguous, not evidence
+            # against them. So the few in the tail are not scored either: one refined on
+            # its own correspondences would otherwise take every weight from samples that
+            # were not scored at all (a 4 cm sliver of wall 4.8 m away, which a sample
+            # 1.2 m off put on a wall behind it, pulled the belief 1.2 m in one frame; a
+            # piece of furniture in an atrium, 2 m short of any wall from the mean, which
+            # a sample 1.2 m off put on a wall, pulled it 1.4 m). When the samples round
+            # the mean see most points through the walls (their heading off after a
+            # sharp turn), the tail is scored and may take the belief.
             stats.unscored_tail = len(own)
             refined[own], lnp0[own], lnpr[own] = self.particles[own], -np.inf, -np.inf
             return refined, lnp0, lnpr
         for i in own:
             refined[i], lnp0[i], lnpr[i] = self._refine_own(fr, self.particles[i], m)
         return refined, lnp0, lnpr
+
+    def _accounted(self, fr: _Frame, pose: np.ndarray, lines: np.ndarray, matched: np.ndarray, kept: int) -> int:
+        """How many of the frame's points ``pose`` accounts for: those matched to a line
+        (``matched``, ``kept`` of them) and, when those are too few for
+        ``tail_hold_fraction``, those whose ray from ``pose`` meets no wall or meets its
+        first wall more than the gate beyond the point: clutter the map does not hold
+        (furniture, people), which the map explains as well as a wall would. Points the
+        walls hide (the first wall along the ray more than the gate short of the point)
+        and points turned away from their line are not accounted for."""
+        n = len(fr.pts)
+        if kept >= self.cfg.tail_hold_fraction * n:
+            return kept
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        q = np.column_stack([c * fr.pts[:, 0] - s * fr.pts[:, 1], s * fr.pts[:, 0] + c * fr.pts[:, 1]])
+        r = np.hypot(q[:, 0], q[:, 1])
+        ok = r > 0.0
+        dirs = np.zeros_like(q)
+        dirs[ok] = q[ok] / r[ok, None]
+        hit, t = rays_hit(lines, float(pose[0]), float(pose[1]), dirs)
+        clutter = ok & ~matched & ((hit < 0) | (t > r + fr.gate))
+        return kept + int(clutter.sum())
 
     def _refine_shared(
         self,

@@ -372,22 +372,26 @@ def test_association_check_drops_a_box_matched_to_a_pillar_beside_it(seed: int) 
     assert off.last.dropped_points == 0 and math.hypot(*(off.estimate().pose[:2] - true[:2])) > 0.3
 
 
-def _sliver_frame(cfg: CGRConfig) -> tuple[CGRLocalizer, np.ndarray, np.ndarray, np.ndarray]:
-    """A frame of a real floor (GHC2, after 45 s across an atrium with no wall in range):
-    69 points on the last 4 cm of a wall face 4.8 m away, the belief 0.5 m wide. The
-    walls within 9 m, the points and normals (robot frame), the 20 samples and the true
-    pose are stored in ``tests/data/ghc2_sliver_frame.npz``."""
+def _real_frame(name: str, cfg: CGRConfig) -> tuple[CGRLocalizer, np.ndarray, np.ndarray, np.ndarray]:
+    """A frame of a real floor stored in ``tests/data/NAME.npz``: the walls within 9 m,
+    the points and normals (robot frame), the 20 samples and the true pose."""
     from autonomy.raycast import SceneQuery, VisibilityGrid
     from autonomy.stack import LOCALIZATION_GRID
     from autonomy.vectormap import VectorMap
 
-    d = np.load(Path(__file__).resolve().parents[1] / "data" / "ghc2_sliver_frame.npz")
+    d = np.load(Path(__file__).resolve().parents[1] / "data" / f"{name}.npz")
     vm = VectorMap.from_segments(d["segments"])
     scene = SceneQuery(vm, VisibilityGrid.build(vm, LOCALIZATION_GRID))
     loc = CGRLocalizer(lambda x, y: scene.scene_lines(x, y)[0], cfg, ObservationConfig(), np.random.default_rng(0))
     loc.particles = d["particles"].copy()
     loc.weights = np.full(len(loc.particles), 1.0 / len(loc.particles))
     return loc, d["points"], d["normals"], d["truth"]
+
+
+def _sliver_frame(cfg: CGRConfig) -> tuple[CGRLocalizer, np.ndarray, np.ndarray, np.ndarray]:
+    """GHC2, after 45 s across an atrium with no wall in range: 69 points on the last
+    4 cm of a wall face 4.8 m away, the belief 0.5 m wide."""
+    return _real_frame("ghc2_sliver_frame", cfg)
 
 
 def test_a_sliver_only_a_tail_sample_explains_does_not_take_the_belief() -> None:
@@ -409,10 +413,28 @@ def test_a_sliver_only_a_tail_sample_explains_does_not_take_the_belief() -> None
     assert math.hypot(*(off.estimate().pose[:2] - truth[:2])) > 0.9 and off.estimate().std_xy_m < 0.05
 
 
+def test_furniture_only_a_tail_sample_puts_on_a_wall_does_not_take_the_belief() -> None:
+    """GHC2, after 30 s across the atrium seeing only furniture: the belief is 0.73 m wide
+    and 0.43 m off; 149 points on a piece of furniture 3.4 m ahead, 1.9 m from any wall at
+    the true pose. From the mean their rays meet walls 2 m behind them, so the 15 samples
+    round it match nothing; one of the 5 samples 1.2 m away puts them on a wall and used
+    to take every weight, 0.99 m from the truth. Clutter in front of the walls is no
+    evidence against the samples round the mean: nobody is scored on the frame."""
+    loc, pts, nrm, truth = _real_frame("ghc2_atrium_furniture_frame", CGRConfig())
+    before = loc.estimate().pose.copy()
+    assert 0.4 < math.hypot(*(before[:2] - truth[:2])) < 0.45
+    loc.update(pts, nrm)
+    assert np.allclose(loc.estimate().pose, before)
+    assert loc.last.used_points == 0 and loc.last.shared == 15 and loc.last.unscored_tail == 5 and not loc.last.observation
+    off, pts, nrm, truth = _real_frame("ghc2_atrium_furniture_frame", CGRConfig(tail_hold_fraction=0.0))
+    off.update(pts, nrm)
+    assert off.last.observation and math.hypot(*(off.estimate().pose[:2] - truth[:2])) > 0.95
+
+
 def test_the_tail_is_scored_when_the_samples_round_the_mean_place_few_points() -> None:
-    """Nineteen samples round the mean put a face 6 m ahead 1.1 m beyond the only wall,
+    """Nineteen samples round the mean see a face 6 m ahead 1.1 m beyond the only wall,
     past the gate; one sample 1.2 m behind puts it on the wall. The samples round the
-    mean cannot place the frame at all (as when their heading is off after a sharp
+    mean see the frame through the wall (as when their heading is off after a sharp
     turn), so the frame is evidence against them and the tail sample takes the belief."""
     wall = np.array([[4.8, -5.0, 4.8, 5.0]])
     pts = np.column_stack([np.full(40, 6.0), np.linspace(-0.2, 0.2, 40)])
@@ -424,6 +446,24 @@ def test_the_tail_is_scored_when_the_samples_round_the_mean_place_few_points() -
     loc.update(pts, nrm)
     assert loc.last.shared == 19 and loc.last.unscored_tail == 0 and loc.last.observation
     assert loc.estimate().pose[0] == pytest.approx(-1.2, abs=0.05)
+
+
+def test_the_tail_is_not_scored_on_clutter_in_front_of_the_walls() -> None:
+    """The same wall, the face 3 m ahead: from the mean it lies 1.8 m in front of the
+    wall (furniture the map does not hold), which one sample 1.8 m ahead puts on the
+    wall. The samples round the mean account for the frame as clutter, so the tail
+    sample does not take the belief on it."""
+    wall = np.array([[4.8, -5.0, 4.8, 5.0]])
+    pts = np.column_stack([np.full(40, 3.0), np.linspace(-0.2, 0.2, 40)])
+    nrm = np.tile([-1.0, 0.0], (40, 1))
+    bulk = np.column_stack([0.02 * np.random.default_rng(1).standard_normal((19, 2)), np.zeros(19)])
+    for hold, x in ((0.5, 0.0), (0.0, 1.8)):
+        loc = CGRLocalizer(lambda x, y: wall, CGRConfig(tail_hold_fraction=hold), ObservationConfig(), np.random.default_rng(0))
+        loc.particles = np.vstack([bulk, [[1.8, 0.0, 0.0]]])
+        loc.weights = np.full(20, 1.0 / 20)
+        loc.update(pts, nrm)
+        assert loc.last.unscored_tail == (1 if hold else 0)
+        assert loc.estimate().pose[0] == pytest.approx(x, abs=0.1)
 
 
 def test_association_check_keeps_a_well_posed_observation() -> None:

@@ -30,7 +30,7 @@ import numpy as np
 from autonomy.active_localization import ActiveLocalizationConfig, drive_value
 from autonomy.avoidance import AvoidanceConfig, obstacle_points, open_path_lengths
 from autonomy.camera import DepthCamera, frame_checks
-from autonomy.cgr import CGRConfig, CGRLocalizer
+from autonomy.cgr import CGRConfig, CGRLocalizer, UpdateStats
 from autonomy.errors import InputError, require_non_negative, require_positive
 from autonomy.floor_rays import floor_rays
 from autonomy.freespace import FreeSpaceConfig, build_free_space
@@ -328,6 +328,7 @@ class RobotStack:
         self._fresh = False
         self._t = 0.0
         self._cgr_lines: np.ndarray | None = None
+        self._cgr_stats: UpdateStats | None = None
         self.last_search = None
         self._correction: tuple[float, float] | None = None
 
@@ -481,6 +482,7 @@ class RobotStack:
             self._t = float(t)
         moved = False
         self._cgr_lines = None
+        self._cgr_stats = None
         self._correction = None
         self._view_agree = math.nan
         if increment is not None:
@@ -516,7 +518,7 @@ class RobotStack:
                 predicted = compose_pose(self.pose, inc)
                 self.localizer.predict(inc)
                 if self.perception is not None and self._fresh:
-                    self.localizer.update(self.perception.points_2d, self.perception.normals_2d)
+                    self._cgr_stats = self.localizer.update(self.perception.points_2d, self.perception.normals_2d)
                     self._cgr_lines = self.localizer.last_lines
                 self._read_estimate()
                 # How far the update moved the belief beyond the odometry (the jump test).
@@ -550,6 +552,12 @@ class RobotStack:
         """How far this frame's localizer update moved the belief beyond the odometry's
         prediction (world x, y; None: no update this frame)."""
         return self._correction
+
+    @property
+    def cgr_stats(self) -> UpdateStats | None:
+        """What CGR's update did on this frame (None: no update, the frame was refused or
+        the robot is relocalizing)."""
+        return self._cgr_stats
 
     @property
     def health_sample(self) -> HealthSample | None:

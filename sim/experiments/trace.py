@@ -3,7 +3,8 @@
 A long run's report says that something happened at 3,971 s; the trace says how, frame
 by frame: the true pose beside the belief and the odometry, the error, the health
 monitor's averages and verdict, the localizer's spread and its correction beyond the
-odometry, the navigator's state and command, and what the stack made of the frame. A
+odometry, what CGR's update did (points matched, samples shared, held or dropped),
+the navigator's state and command, and what the stack made of the frame. A
 run is seeded and the closed loop deterministic, so the same seed with a window round
 that moment (and ``mission.max_duration_s`` at its end, to stop there) replays it:
 
@@ -13,6 +14,7 @@ that moment (and ``mission.max_duration_s`` at its end, to stop there) replays i
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -64,6 +66,8 @@ def trace_record(t: float, truth: np.ndarray, stack, nav) -> str:
         "desired_deg": _num(math.degrees(nav.desired_rad), 2),
         "theta_star_deg": _num(math.degrees(nav.theta_star_rad), 2),
     }
+    if stack.cgr_stats is not None:
+        rec["cgr"] = dataclasses.asdict(stack.cgr_stats)
     h = stack.health_sample
     if h is not None:
         rec["monitor"] = {

@@ -386,6 +386,10 @@ def test_the_trace_window_writes_each_of_its_frames_as_the_run_saw_it(tmp_path: 
         assert r["health"] in ("ok", "blind", "lost", "relocalizing") and r["nav_state"] and len(r["command"]) == 3
         assert r["points_2d"] >= 0 and "explained_fast" in r["monitor"]
     assert any(r["points_2d"] > 0 for r in rows)
+    # CGR's update on each frame it ran: the points it was given and what it did with them.
+    updated = [r for r in rows if "cgr" in r]
+    assert updated and all(r["cgr"]["points"] == r["points_2d"] for r in updated)
+    assert {"used_points", "shared", "dropped_points", "unscored_tail", "observation"} <= set(updated[0]["cgr"])
 
 
 @pytest.mark.parametrize("window", ["[2.0, 1.0]", "[1.0]", "[-1.0, 2.0]", "[1.0, nan]"])

@@ -1,6 +1,6 @@
 """Pinhole depth-camera model: intrinsics, back-projection, and the robot mount.
 
-Frames (DESIGN.md, REP-103): the robot frame is x forward, y left, z up, origin on the
+Frames (docs/architecture.md, REP-103): the robot frame is x forward, y left, z up, origin on the
 floor under the base centre. The camera *optical* frame is x right, y down, z forward.
 Depth images are planar depth (distance along the optical axis) in float32 metres, with
 0.0 marking invalid pixels.
@@ -28,7 +28,7 @@ ROBOT_FROM_OPTICAL_LEVEL = np.array(
 class CameraIntrinsics:
     """Pinhole intrinsics of a depth image.
 
-    The Kinect v1 depth camera is 640 x 480 with square pixels and f ~ 580 px (DESIGN.md).
+    The Kinect v1 depth camera is 640 x 480 with square pixels and f ~ 580 px (docs/architecture.md).
     With square pixels that gives a 57.8 x 44.9 degree field of view, the closest honest
     reading of the data sheet's 57 x 43 degrees.
     """
@@ -82,7 +82,7 @@ class CameraIntrinsics:
 
 @dataclass(frozen=True)
 class CameraMount:
-    """Where the camera sits on the robot (CoBot-style defaults from DESIGN.md)."""
+    """Where the camera sits on the robot (CoBot-style defaults, docs/architecture.md)."""
 
     height_m: float = 0.7
     """Optical centre height above the floor."""

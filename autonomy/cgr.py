@@ -23,7 +23,7 @@ A particle filter over (x, y, theta). Each frame (IV-C, steps 1-4):
 With r = 0 this is plain Monte Carlo localization (MCL), kept as a baseline. The pose
 estimate is the mean position and the circular-mean heading, with their spread.
 
-Motion noise (DESIGN.md, the original code): for an increment of translation tr and
+Motion noise (the original code, docs/architecture.md): for an increment of translation tr and
 rotation rot, the translation noise is alpha3 * tr per axis and the rotation noise
 alpha1 * |rot| + alpha2 * tr. Degenerate frames (too few usable points, all weights 0 or
 NaN) skip the observation: the filter goes on on odometry alone.
@@ -60,7 +60,7 @@ ROBUST_SIGMA_PER_MAD = 1.4826
 
 @dataclass(frozen=True)
 class CGRConfig:
-    """CGR parameters; defaults from the paper and the original code (DESIGN.md)."""
+    """CGR parameters; defaults from the paper and the original code (docs/architecture.md)."""
 
     n_particles: int = 20
     """Number of particles."""

@@ -1,7 +1,7 @@
 """Physical constants of the robot and its depth camera, each written once.
 
 The configuration dataclasses take their defaults from here (the papers' robot: a
-CoBot-style round base with a Kinect v1, DESIGN.md).
+CoBot-style round base with a Kinect v1, docs/architecture.md).
 """
 
 ROBOT_RADIUS_M = 0.3

@@ -34,7 +34,7 @@ from autonomy.constants import KINECT_FOCAL_PX
 from autonomy.errors import InputError, require_int, require_positive
 
 REFERENCE_FX_PX = KINECT_FOCAL_PX
-"""Focal length (px) that ``min_run_px`` is given for (the Kinect v1, DESIGN.md)."""
+"""Focal length (px) that ``min_run_px`` is given for (the Kinect v1, docs/architecture.md)."""
 
 
 @dataclass(frozen=True)

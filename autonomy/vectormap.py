@@ -1,6 +1,6 @@
 """Vector maps (walls as 2D line segments) and navigation graphs, with their file formats.
 
-Formats (CoBot / UT AMRL, DESIGN.md):
+Formats (CoBot / UT AMRL, docs/architecture.md):
 
 - Text vector map (``*.vectormap.txt``, ``*_vector.txt``, any ``.txt``): one wall per
   line, ``x1, y1, x2, y2`` in metres. Commas with optional spaces, or plain whitespace.

@@ -1,4 +1,4 @@
-"""The package layers: lower layers never import higher ones (DESIGN.md's data path).
+"""The package layers: lower layers never import higher ones (docs/architecture.md).
 
 autonomy/ is what runs on the robot (no mujoco, sim or rerun); sim/simulator/ is the
 simulated site; sim/envs/ and sim/experiments/ use it (the env never the experiments);

@@ -10,7 +10,7 @@ Terms (each switchable in :class:`KinectNoiseConfig`), applied in this order:
    blurs depth edges.
 4. Axial noise (same paper): Gaussian sigma_z(z, theta) added to z, per pixel in the
    independent model; in the correlated model (the default) partly as a smooth field.
-5. Disparity quantisation: d = f b / z in 1/8 px steps (Kinect v1, DESIGN.md), after the
+5. Disparity quantisation: d = f b / z in 1/8 px steps (Kinect v1, docs/architecture.md), after the
    fixed disparity pattern (default on) is added to d.
 6. Range cut [min_range_m, max_range_m] on the measured depth.
 7. Dropouts rising linearly with theta between 70 and 85 degrees, plus an optional
@@ -95,7 +95,7 @@ THETA_MAX_RAD = math.radians(89.0)
 
 @dataclass(frozen=True)
 class KinectNoiseConfig:
-    """Parameters of the Kinect v1 noise model (Nguyen, Izadi & Lovell 2012; DESIGN.md)."""
+    """Parameters of the Kinect v1 noise model (Nguyen, Izadi & Lovell 2012; docs/architecture.md)."""
 
     axial: bool = True
     """Add Gaussian axial noise sigma_z(z, theta)."""
@@ -258,7 +258,7 @@ def lateral_sigma_px(theta, cfg: KinectNoiseConfig | None = None) -> np.ndarray:
 def depth_step_m(z, cfg: KinectNoiseConfig | None = None) -> np.ndarray:
     """Depth spacing of the disparity grid at z, to first order z^2 / (subpixel f b).
 
-    2.9 mm at 1 m and 46 mm at 4 m for the Kinect v1 defaults (DESIGN.md).
+    2.9 mm at 1 m and 46 mm at 4 m for the Kinect v1 defaults (docs/architecture.md).
     """
     c = cfg or KinectNoiseConfig()
     z = np.asarray(z, dtype=np.float64)

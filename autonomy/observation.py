@@ -310,8 +310,15 @@ def loglik_grad_m(m, n_used, pose, inv_2fs2, out):  # pragma: no cover - numba
 def jacobi_eigh3(a, vecs):  # pragma: no cover - numba
     """Eigenvalues (returned, (3,)) and unit eigenvectors (the columns of ``vecs``) of a
     symmetric 3 x 3 matrix by cyclic Jacobi rotations (no LAPACK: numba's eigh needs
-    SciPy). Converges quadratically; 12 sweeps reach machine precision."""
-    b = a.copy()
+    SciPy). Converges quadratically; 12 sweeps reach machine precision. The matrix is
+    first scaled by a power of two (exact) to a largest entry in [0.5, 1): the squared
+    entries of a matrix of 1e-160 would underflow and read as already diagonal."""
+    big = 0.0
+    for i in range(3):
+        for j in range(3):
+            big = max(big, abs(a[i, j]))
+    e = math.frexp(big)[1] if big > 0.0 and math.isfinite(big) else 0
+    b = a * math.ldexp(1.0, -e)
     for i in range(3):
         for j in range(3):
             vecs[i, j] = 1.0 if i == j else 0.0
@@ -340,7 +347,7 @@ def jacobi_eigh3(a, vecs):  # pragma: no cover - numba
                     vkp, vkq = vecs[k, p], vecs[k, q]
                     vecs[k, p] = c * vkp - s * vkq
                     vecs[k, q] = s * vkp + c * vkq
-    return np.array([b[0, 0], b[1, 1], b[2, 2]])
+    return np.array([b[0, 0], b[1, 1], b[2, 2]]) * math.ldexp(1.0, e)
 
 
 @numba.njit(cache=True)

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from autonomy.cgr import CGRConfig, CGRLocalizer
@@ -26,6 +26,7 @@ from tests.autonomy.test_localization import observe
     st.lists(st.floats(-1e3, 1e3, allow_nan=False), min_size=6, max_size=6),
     st.lists(st.floats(-6, 6), min_size=3, max_size=3),
 )
+@example([0.0, 0.0, 1.9308228994945364e-168, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0])  # squares underflow
 def test_jacobi_eigh3_matches_lapack(entries: list[float], log_scale: list[float]) -> None:
     a = np.array([[entries[0], entries[1], entries[2]], [entries[1], entries[3], entries[4]], [entries[2], entries[4], entries[5]]])
     d = np.diag(10.0 ** np.array(log_scale))

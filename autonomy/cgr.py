@@ -407,9 +407,10 @@ class CGRLocalizer:
         (``matched``, ``kept`` of them) and, when those are too few for
         ``tail_hold_fraction``, those whose ray from ``pose`` meets no wall or meets its
         first wall more than the gate beyond the point: clutter the map does not hold
-        (furniture, people), which the map explains as well as a wall would. Points the
-        walls hide (the first wall along the ray more than the gate short of the point)
-        and points turned away from their line are not accounted for."""
+        (furniture, people), which the map allows there though it cannot place it. Points
+        the walls would hide (the first wall along the ray more than the gate short of the
+        point) and points turned away from their line are not accounted for. Rays start
+        at the robot's centre, as :func:`autonomy.observation.correspond`'s do."""
         n = len(fr.pts)
         if kept >= self.cfg.tail_hold_fraction * n:
             return kept

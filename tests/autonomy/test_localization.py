@@ -431,7 +431,7 @@ def test_furniture_only_a_tail_sample_puts_on_a_wall_does_not_take_the_belief() 
     assert off.last.observation and math.hypot(*(off.estimate().pose[:2] - truth[:2])) > 0.95
 
 
-def test_the_tail_is_scored_when_the_samples_round_the_mean_place_few_points() -> None:
+def test_the_tail_is_scored_when_the_samples_round_the_mean_see_the_frame_through_the_walls() -> None:
     """Nineteen samples round the mean see a face 6 m ahead 1.1 m beyond the only wall,
     past the gate; one sample 1.2 m behind puts it on the wall. The samples round the
     mean see the frame through the wall (as when their heading is off after a sharp

@@ -39,7 +39,7 @@ from typing import NamedTuple
 import numpy as np
 
 from autonomy.errors import InputError, require_int, require_non_negative, require_positive
-from autonomy.geometry import wrap_angles
+from autonomy.geometry import points_from_frame, wrap_angles
 from autonomy.observation import (
     ObservationConfig,
     correspond,
@@ -414,8 +414,7 @@ class CGRLocalizer:
         n = len(fr.pts)
         if kept >= self.cfg.tail_hold_fraction * n:
             return kept
-        c, s = math.cos(pose[2]), math.sin(pose[2])
-        q = np.column_stack([c * fr.pts[:, 0] - s * fr.pts[:, 1], s * fr.pts[:, 0] + c * fr.pts[:, 1]])
+        q = points_from_frame(pose, fr.pts) - pose[:2]  # the rays, world frame
         r = np.hypot(q[:, 0], q[:, 1])
         ok = r > 0.0
         dirs = np.zeros_like(q)

@@ -216,6 +216,8 @@ COLUMNS: tuple[tuple[str, str, int | None], ...] = (
     ("error_mean_cm", "err mean cm", 1),
     ("error_p95_cm", "err p95 cm", 1),
     ("error_max_cm", "err max cm", 1),
+    ("blind_pct", "blind %", 0),
+    ("blind_stretch_max_m", "longest blind m", 1),
     ("realtime_factor", "RTF", 2),
     ("rss_start_mb", "RSS start MB", 0),
     ("rss_end_mb", "RSS end MB", 0),
@@ -225,7 +227,7 @@ COLUMNS: tuple[tuple[str, str, int | None], ...] = (
 #: Counts the total row adds up.
 SUMS = ("distance_m", "contacts", "resets", "truth_resets", "lost_alarms", "false_alarms", "waypoint_timeouts")
 #: Per-run figures whose total is the worst run's (a p95 or a peak does not add up).
-WORST = ("error_p95_cm", "error_max_cm", "rss_start_mb", "rss_end_mb", "frame_ms_start", "frame_ms_end")
+WORST = ("error_p95_cm", "error_max_cm", "blind_stretch_max_m", "rss_start_mb", "rss_end_mb", "frame_ms_start", "frame_ms_end")
 
 
 def _cm(m: float | None) -> float | None:
@@ -256,6 +258,8 @@ def table_row(result: dict) -> dict:
         "error_mean_cm": _cm(m.get("loc_error_mean_m")),
         "error_p95_cm": _cm(m.get("loc_error_p95_m")),
         "error_max_cm": _cm(m.get("loc_error_max_m")),
+        "blind_pct": None if m.get("blind_share") is None else round(100.0 * m["blind_share"], 1),
+        "blind_stretch_max_m": m.get("blind_stretch_max_m"),
         "realtime_factor": m["realtime_factor"],
         "rss_start_mb": r.get("rss_start_mb"),
         "rss_end_mb": r.get("rss_end_mb"),
@@ -266,7 +270,8 @@ def table_row(result: dict) -> dict:
 
 def total_row(rows: list[dict]) -> dict:
     """The total row: counts and distance summed; the error mean weighted by frames; the
-    p95, max, memory and frame times the worst run's; the real-time factor as all
+    p95, max, longest blind stretch, memory and frame times the worst run's; the blind
+    share weighted by distance; the real-time factor as all
     simulated time over all wall time. A column no run has stays None."""
     def present(key: str) -> list[dict]:
         return [r for r in rows if r.get(key) is not None]
@@ -281,6 +286,9 @@ def total_row(rows: list[dict]) -> dict:
     have = present("error_mean_cm")
     weight = sum(r["frames"] for r in have)
     out["error_mean_cm"] = round(sum(r["error_mean_cm"] * r["frames"] for r in have) / weight, 2) if have and weight else None
+    have = [r for r in present("blind_pct") if r.get("distance_m")]
+    metres = sum(r["distance_m"] for r in have)
+    out["blind_pct"] = round(sum(r["blind_pct"] * r["distance_m"] for r in have) / metres, 1) if have and metres else None
     wall = out["wall_time_s"] or 0.0
     out["realtime_factor"] = round(out["duration_s"] / wall, 4) if rows and wall > 0 else None
     km = (out["distance_m"] or 0.0) / 1000.0

@@ -174,6 +174,15 @@ class Run:
     """Failures ended by re-initialising at the true pose (the robot did not recover itself)."""
     health_frames: dict[str, int] = field(default_factory=dict)
     """Frames spent in each of the stack's health states."""
+    tracked_m: float = 0.0
+    """Metres driven while CGR tracked the belief (not relocalizing) ..."""
+    blind_m: float = 0.0
+    """... of them without an observation update: the belief dead-reckoned (no wall in
+    view, or too few points matched)."""
+    blind_stretch_m: float = 0.0
+    """Metres driven since CGR's last observation update (or relocalization) ..."""
+    blind_stretch_max_m: float = 0.0
+    """... and the longest such stretch of the run."""
     faults: FaultInjector | None = None
     """The fault injector when the scenario has faults."""
     crash: dict | None = None
@@ -455,7 +464,9 @@ def tick(run: Run, recorder) -> bool:
     check_localization(run, frame)
     if in_window(run.scn.report.trace_s, frame.t):
         run.trace.append(trace_record(frame.t, frame.pose, stack, nav))
-    run.distance_m += float(np.hypot(*(frame.pose[:2] - pose[:2])))
+    step_m = float(np.hypot(*(frame.pose[:2] - pose[:2])))
+    run.distance_m += step_m
+    note_blind(run, step_m)
     run.truth.append(frame.pose)
     run.times.append(frame.t)
     run.frames += 1
@@ -591,6 +602,26 @@ def check_localization(run: Run, frame: SimFrame) -> None:
         open_.update(end_t=round(t, 3), ended_by="truth")
         run.truth_resets += 1
         stack.relocalize(frame.pose)
+
+
+def note_blind(run: Run, step_m: float) -> None:
+    """Account the frame's ``step_m`` metres to the blind driving figures: metres CGR
+    tracked without an observation update, and the longest such stretch. Where the floor
+    shows the camera no wall for metres on end, the belief dead-reckons and its error
+    grows with the odometry's (a degree of heading costs 17 cm over 10 m)."""
+    stack = run.stack
+    if stack.localizer is None or stack.relocalizing:
+        # The search, not CGR, holds the belief; what it accepts is a fix.
+        run.blind_stretch_m = 0.0
+        return
+    run.tracked_m += step_m
+    stats = stack.cgr_stats  # None on a refused frame: dead reckoning as well
+    if stats is not None and stats.observation:
+        run.blind_stretch_m = 0.0
+        return
+    run.blind_m += step_m
+    run.blind_stretch_m += step_m
+    run.blind_stretch_max_m = max(run.blind_stretch_max_m, run.blind_stretch_m)
 
 
 # --------------------------------------------------------------------------- recording
@@ -860,6 +891,8 @@ def run_metrics(run: Run, wall_s: float) -> dict:
                 "loc_error_p95_m": round(float(np.percentile(e, 95)), 4),
                 "loc_error_max_m": round(float(e.max()), 4),
                 "loc_heading_error_mean_deg": round(math.degrees(float(np.mean(run.heading_errors))), 3),
+                "blind_share": round(run.blind_m / run.tracked_m, 4) if run.tracked_m > 0 else None,
+                "blind_stretch_max_m": round(run.blind_stretch_max_m, 2),
             }
         )
     if run.fspf_counts:

@@ -35,7 +35,7 @@ def result(name: str, seed: int, **m) -> dict:
         "distance_m": 100.0, "duration_s": 200.0, "wall_time_s": 100.0, "frames": 6000, "collisions": 1,
         "collision_incidents": 1, "resets": 0, "truth_resets_needed": 0, "lost_alarms": 1, "lost_false_alarms": 0,
         "waypoints_reached": 4, "loc_error_mean_m": 0.05, "loc_error_p95_m": 0.1, "loc_error_max_m": 0.3,
-        "realtime_factor": 2.0,
+        "realtime_factor": 2.0, "blind_share": 0.2, "blind_stretch_max_m": 6.0,
     }
     metrics.update(m)
     res = {"rss_start_mb": 500.0, "rss_end_mb": 510.0, "frame_ms_start": 20.0, "frame_ms_end": 21.0}
@@ -46,18 +46,20 @@ def test_rows_and_total_as_computed_by_hand() -> None:
     a = result("A", 1)
     b = result("B", 1, distance_m=300.0, duration_s=600.0, wall_time_s=400.0, frames=18000, collisions=3, resets=2,
                truth_resets_needed=1, lost_alarms=3, lost_false_alarms=2, loc_error_mean_m=0.09, loc_error_p95_m=0.4,
-               loc_error_max_m=1.5, realtime_factor=1.5)
+               loc_error_max_m=1.5, realtime_factor=1.5, blind_share=0.6, blind_stretch_max_m=25.5)
     b["resources"] = {"rss_start_mb": 480.0, "rss_end_mb": 530.0, "frame_ms_start": 25.0, "frame_ms_end": 19.0}
     b["waypoint_timeouts"] = 2
     rows = [rf.table_row(a), rf.table_row(b)]
     assert (rows[1]["contacts"], rows[1]["resets"], rows[1]["truth_resets"], rows[1]["false_alarms"]) == (3, 2, 1, 2)
     assert (rows[1]["error_mean_cm"], rows[1]["error_p95_cm"], rows[1]["error_max_cm"]) == (9.0, 40.0, 150.0)
+    assert (rows[1]["blind_pct"], rows[1]["blind_stretch_max_m"]) == (60.0, 25.5)
     t = rf.total_row(rows)
     assert t["runs"] == 2 and t["distance_m"] == 400.0 and t["contacts"] == 4 and t["resets"] == 2
     assert t["truth_resets"] == 1 and t["lost_alarms"] == 4 and t["false_alarms"] == 2 and t["waypoint_timeouts"] == 3
     # Error mean weighted by frames: (5 cm x 6000 + 9 cm x 18000) / 24000 = 8 cm.
     assert t["error_mean_cm"] == 8.0
-    assert (t["error_p95_cm"], t["error_max_cm"]) == (40.0, 150.0)  # the worst run's
+    assert (t["error_p95_cm"], t["error_max_cm"], t["blind_stretch_max_m"]) == (40.0, 150.0, 25.5)  # the worst run's
+    assert t["blind_pct"] == 50.0  # weighted by distance: (20 % x 100 m + 60 % x 300 m) / 400 m
     assert t["realtime_factor"] == 800.0 / 500.0  # all simulated time over all wall time
     assert (t["rss_start_mb"], t["rss_end_mb"], t["frame_ms_start"], t["frame_ms_end"]) == (500.0, 530.0, 25.0, 21.0)
     assert t["resets_per_km"] == 5.0  # 2 resets in 0.4 km
@@ -65,7 +67,7 @@ def test_rows_and_total_as_computed_by_hand() -> None:
     assert len(md) == 2 + 3
     assert md[0].startswith("| map | seed | distance m | contacts | resets |")
     assert md[3].split("|")[1:6] == [" B ", " 1 ", " 300.0 ", " 3 ", " 2 "]
-    assert md[4].startswith("| **total** (2 runs) |  | 400.0 | 4 | 2 | 1 | 4 | 2 | 3 | 8.0 | 40.0 | 150.0 | 1.60 |")
+    assert md[4].startswith("| **total** (2 runs) |  | 400.0 | 4 | 2 | 1 | 4 | 2 | 3 | 8.0 | 40.0 | 150.0 | 50 | 25.5 | 1.60 |")
 
 
 def test_a_run_without_a_figure_shows_a_dash_and_the_total_skips_it() -> None:

@@ -438,3 +438,27 @@ def test_a_system_error_without_an_interrupt_is_a_crash(tmp_path: Path, monkeypa
     with pytest.raises(RunCrashed, match="SystemError"):
         run_scenario(_short_demo(["mission.max_duration_s=1.0"]), tmp_path, seed=1, progress=False)
     assert "ValueError: bad array" in (tmp_path / "crash.txt").read_text()
+
+
+def test_blind_driving_counts_the_metres_cgr_dead_reckoned_and_the_longest_stretch() -> None:
+    from types import SimpleNamespace
+
+    from autonomy.cgr import UpdateStats
+    from sim.experiments.runner import note_blind
+
+    seen, unseen = UpdateStats(observation=True), UpdateStats(observation=False)
+    stack = SimpleNamespace(localizer=object(), relocalizing=False, cgr_stats=None)
+    run = SimpleNamespace(stack=stack, tracked_m=0.0, blind_m=0.0, blind_stretch_m=0.0, blind_stretch_max_m=0.0)
+    # (what CGR did, relocalizing, metres): 1 m seen, 3 m blind (a refused frame among
+    # them), 1 m seen, 2 m blind, 4 m relocalizing (the search's, not CGR's), 2.5 m blind.
+    frames = [(seen, False, 1.0), (unseen, False, 1.0), (None, False, 1.0), (unseen, False, 1.0), (seen, False, 1.0),
+              (unseen, False, 2.0), (None, True, 4.0), (unseen, False, 2.5)]
+    for stats, reloc, metres in frames:
+        stack.cgr_stats, stack.relocalizing = stats, reloc
+        note_blind(run, metres)
+    assert run.tracked_m == 9.5 and run.blind_m == 7.5
+    assert run.blind_stretch_max_m == 3.0 and run.blind_stretch_m == 2.5
+    # No localizer (a ground-truth follower): nothing counted.
+    stack.localizer = None
+    note_blind(run, 5.0)
+    assert run.tracked_m == 9.5

@@ -2,5 +2,5 @@
 
 Pure numpy + numba. Never imports ``mujoco``, ``sim`` or ``rerun``: inputs and outputs
 are arrays and frozen dataclasses (depth images in metres, odometry increments, a
-:class:`autonomy.vectormap.VectorMap`).
+:class:`autonomy.maps.vectormap.VectorMap`).
 """

@@ -27,15 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from autonomy.active_localization import ActiveLocalizationConfig, drive_value
-from autonomy.avoidance import AvoidanceConfig, obstacle_points, open_path_lengths
-from autonomy.camera import DepthCamera, frame_checks
-from autonomy.cgr import CGRConfig, CGRLocalizer, UpdateStats
-from autonomy.errors import InputError, require_non_negative, require_positive
-from autonomy.floor_rays import floor_rays
-from autonomy.freespace import FreeSpaceConfig, build_free_space
-from autonomy.fspf import FSPFConfig, FSPFResult, fspf
-from autonomy.geometry import (
+from autonomy.common.errors import InputError, require_non_negative, require_positive
+from autonomy.common.geometry import (
     compose_pose,
     points_from_frame,
     points_in_frame,
@@ -45,18 +38,25 @@ from autonomy.geometry import (
     wrap_angle,
     wrap_angles,
 )
-from autonomy.health import HealthConfig, HealthMonitor, HealthSample, explain_points
-from autonomy.missing_walls import MissingWallsConfig, missing_walls
-from autonomy.mount_check import MountCheck, MountCheckConfig
-from autonomy.navigator import NavCommand, Navigator, NavigatorConfig
-from autonomy.nearfield import NearField, line_points_indexed
-from autonomy.observation import ObservationConfig, correspond
-from autonomy.planner import NoPathError
-from autonomy.raycast import SceneQuery, VisibilityGridConfig, load_or_build
-from autonomy.relocalization import GlobalLocalizer, Mode, RelocalizationConfig, Scan
-from autonomy.straight_runs import on_straight_runs
-from autonomy.vectormap import NavGraph, VectorMap
-from autonomy.view_check import ViewCheck, ViewCheckConfig
+from autonomy.localization.active_localization import ActiveLocalizationConfig, drive_value
+from autonomy.localization.cgr import CGRConfig, CGRLocalizer, UpdateStats
+from autonomy.localization.health import HealthConfig, HealthMonitor, HealthSample, explain_points
+from autonomy.localization.missing_walls import MissingWallsConfig, missing_walls
+from autonomy.localization.observation import ObservationConfig, correspond
+from autonomy.localization.relocalization import GlobalLocalizer, Mode, RelocalizationConfig, Scan
+from autonomy.localization.straight_runs import on_straight_runs
+from autonomy.localization.view_check import ViewCheck, ViewCheckConfig
+from autonomy.maps.freespace import FreeSpaceConfig, build_free_space
+from autonomy.maps.planner import NoPathError
+from autonomy.maps.raycast import SceneQuery, VisibilityGridConfig, load_or_build
+from autonomy.maps.vectormap import NavGraph, VectorMap
+from autonomy.navigation.avoidance import AvoidanceConfig, obstacle_points, open_path_lengths
+from autonomy.navigation.navigator import NavCommand, Navigator, NavigatorConfig
+from autonomy.perception.camera import DepthCamera, frame_checks
+from autonomy.perception.floor_rays import floor_rays
+from autonomy.perception.fspf import FSPFConfig, FSPFResult, fspf
+from autonomy.perception.mount_check import MountCheck, MountCheckConfig
+from autonomy.perception.nearfield import NearField, line_points_indexed
 
 #: The visibility grid the stack localizes with: 0.5 m cells, scene lines to 6 m (the
 #: Kinect sees 4 m; the margin keeps lines a refined particle may reach).
@@ -121,7 +121,7 @@ class LocalizationConfig:
 @dataclass(frozen=True)
 class RecoveryConfig:
     """Lost detection and global relocalization (ours; the papers' operator re-localized
-    the robot by hand): :mod:`autonomy.health`, :mod:`autonomy.relocalization`."""
+    the robot by hand): :mod:`autonomy.localization.health`, :mod:`autonomy.localization.relocalization`."""
 
     enabled: bool = True
     """Watch the localization's health and relocalize globally when lost."""
@@ -131,15 +131,15 @@ class RecoveryConfig:
     """Scan, search and decision."""
     check_mount: bool = True
     """Watch the floor for a tilted camera mount and correct the mount FSPF uses
-    (:mod:`autonomy.mount_check`)."""
+    (:mod:`autonomy.perception.mount_check`)."""
     mount_check: MountCheckConfig = field(default_factory=MountCheckConfig)
     """The mount self-check's parameters."""
     view: ViewCheckConfig = field(default_factory=ViewCheckConfig)
-    """The check of each view against the odometry (:mod:`autonomy.view_check`), which
+    """The check of each view against the odometry (:mod:`autonomy.localization.view_check`), which
     tells the health monitor that the robot was carried."""
     missing: MissingWallsConfig = field(default_factory=MissingWallsConfig)
     """Which pixels expect a mapped wall, for the health monitor's missing-wall test
-    (:mod:`autonomy.missing_walls`)."""
+    (:mod:`autonomy.localization.missing_walls`)."""
     restart_std_xy_m: float = 0.15
     """CGR restarts around an accepted mode with this position spread ..."""
     restart_std_theta_rad: float = math.radians(4.0)
@@ -161,7 +161,7 @@ class RecoveryConfig:
     """... or how long it may take (a drive that is blocked looks round again and then
     tries another place)."""
     active: ActiveLocalizationConfig = field(default_factory=ActiveLocalizationConfig)
-    """Which exploring drive tells the modes apart (:mod:`autonomy.active_localization`)."""
+    """Which exploring drive tells the modes apart (:mod:`autonomy.localization.active_localization`)."""
 
     def __post_init__(self) -> None:
         require_non_negative(self, "recovery.", "restart_std_xy_m", "restart_std_theta_rad", "settle_s")
@@ -281,7 +281,7 @@ class RobotStack:
         self._view_agree = math.nan
         self._missing = (0, 0, 0)
         """The last checked frame's pixels expecting a mapped wall, those of them that
-        returned a depth, and those that saw past the wall (:mod:`autonomy.missing_walls`)."""
+        returned a depth, and those that saw past the wall (:mod:`autonomy.localization.missing_walls`)."""
         self._global: GlobalLocalizer | None = None
         self.odom = np.zeros(3)
         """Dead reckoning from the odometry alone (the relocalization's scan frame)."""
@@ -475,8 +475,8 @@ class RobotStack:
         reckoning. ``increment`` None: no motion since the last frame (the first one).
 
         ``t`` (seconds) drives the recovery: the health monitor's averages, the lost test
-        and, while lost, the relocalization (:mod:`autonomy.health`,
-        :mod:`autonomy.relocalization`). Without it the recovery waits."""
+        and, while lost, the relocalization (:mod:`autonomy.localization.health`,
+        :mod:`autonomy.localization.relocalization`). Without it the recovery waits."""
         t0 = time.perf_counter()
         if t is not None:
             self._t = float(t)
@@ -744,7 +744,7 @@ class RobotStack:
         relative to it now: the scan's points, and the near field's. With the ``pose`` of
         the mode a drive is planned on, the near field's points whose sight line a wall
         of that mode's map explains are left out, as the navigator leaves out this
-        frame's (:meth:`autonomy.navigator.Navigator.near_points`): the map's wall counts
+        frame's (:meth:`autonomy.navigation.navigator.Navigator.near_points`): the map's wall counts
         there already, where it stands, whereas the sight line's points lie anywhere
         from the robot's edge to the camera's minimum range, and kept from a look round
         beside a wall they ring the robot (a robot put down in an office by its door
@@ -862,7 +862,7 @@ class RobotStack:
     def _lacks_walls(self, t: float) -> bool:
         """Whether the scan is too small to search (``min_scan_points``) or holds too
         little wall (``min_wall_points`` of its points on straight runs at least
-        ``min_wall_m`` long, :func:`autonomy.straight_runs.on_straight_runs`; counted at
+        ``min_wall_m`` long, :func:`autonomy.localization.straight_runs.on_straight_runs`; counted at
         most every ``WALL_COUNT_EVERY_S`` while it grows)."""
         rc = self.cfg.recovery.relocalization
         n = len(self.scan.points)
@@ -932,7 +932,7 @@ class RobotStack:
         """A navigation-graph node ``explore_m`` to twice that from the pose, among those
         not tried yet in this relocalization, whose plan's first ``explore_check_m`` the
         scan's points of the last ``SEEN_KEEP_S`` show clear: the one whose drive tells the most modes apart
-        (:func:`autonomy.active_localization.drive_value`), the one most nearly ahead (the
+        (:func:`autonomy.localization.active_localization.drive_value`), the one most nearly ahead (the
         robot goes on the way it faces) among equals.
 
         The plan is made on the best mode's map, and only to nodes it can set out to from
@@ -1015,7 +1015,7 @@ class RobotStack:
 
         A goal that the place the robot was started at (:meth:`reset`; unknown there,
         the first goal) has no path to is the user's mistake:
-        :class:`autonomy.planner.NoPathError`. One that only the belief has no path to
+        :class:`autonomy.maps.planner.NoPathError`. One that only the belief has no path to
         (a wrong belief in a part of the graph cut off from the goal) is the robot's:
         the plan starts at the nearest node that reaches the goal, and the localization
         recovers the belief (:meth:`Navigator.set_goal`)."""

@@ -68,7 +68,13 @@ def bench_scans(results: dict, quick: bool) -> None:
 
 def _bench_scan_kinds(results: dict, frames: list[np.ndarray], kcfg, rep: int) -> None:
     """KR, KS and KC scans of a frame, each with its down-projection to 2D points."""
-    from autonomy.scans import ScanConfig, complete_scan, raster_scan, sampling_scan, scan_points
+    from autonomy.localization.scans import (
+        ScanConfig,
+        complete_scan,
+        raster_scan,
+        sampling_scan,
+        scan_points,
+    )
 
     intr, mount, scfg = kcfg.intrinsics, kcfg.mount, ScanConfig()
     it = iter(range(10**9))
@@ -87,9 +93,9 @@ def _bench_scan_kinds(results: dict, frames: list[np.ndarray], kcfg, rep: int) -
 
 def _bench_replay_frames(results: dict, frames: list[np.ndarray], poses: list[np.ndarray], bp, kcfg, rep: int) -> None:
     """One replay frame per approach: its points, then CGR predict, update and estimate."""
-    from autonomy.cgr import CGRLocalizer
-    from autonomy.raycast import SceneQuery, load_or_build
-    from autonomy.scans import ScanConfig, complete_scan, raster_scan
+    from autonomy.localization.cgr import CGRLocalizer
+    from autonomy.localization.scans import ScanConfig, complete_scan, raster_scan
+    from autonomy.maps.raycast import SceneQuery, load_or_build
     from autonomy.stack import LOCALIZATION_GRID
     from sim.simulator.blueprints import ASSETS_DIR
 
@@ -109,8 +115,8 @@ class _ReplayFrame:
     """Each call replays the next frame (the log restarts after its last) with one approach."""
 
     def __init__(self, approach: str, loc, frames: list[np.ndarray], poses: list[np.ndarray], cached: dict, kcfg) -> None:
-        from autonomy.fspf import FSPFConfig
-        from autonomy.scans import ScanConfig
+        from autonomy.localization.scans import ScanConfig
+        from autonomy.perception.fspf import FSPFConfig
 
         self.approach, self.loc, self.frames, self.poses, self.cached = approach, loc, frames, poses, cached
         self.intr, self.mount = kcfg.intrinsics, kcfg.mount
@@ -120,8 +126,8 @@ class _ReplayFrame:
 
     def points(self, i: int) -> tuple[np.ndarray, np.ndarray | None]:
         """Frame ``i``'s 2D points (and normals, from FSPF) for the localizer."""
-        from autonomy.fspf import fspf, project_to_floor
-        from autonomy.scans import drop_floor, sampling_scan, scan_points
+        from autonomy.localization.scans import drop_floor, sampling_scan, scan_points
+        from autonomy.perception.fspf import fspf, project_to_floor
 
         f, intr, mount, scfg = self.frames[i], self.intr, self.mount, self.scfg
         if self.approach == "fspf":

@@ -44,7 +44,7 @@ def bench_open3d(results: dict[str, Result], quick: bool) -> None:
         return
     from planes_bench import corridor_frames
 
-    from autonomy.fspf import FSPFConfig, fspf
+    from autonomy.perception.fspf import FSPFConfig, fspf
     from autonomy.planes import RansacConfig, depth_to_cloud, ransac_planes
 
     depths, poses, intr = corridor_frames(8)

@@ -1,6 +1,6 @@
 """Recovery benchmarks: the health check of one frame, the view check and the missing-wall
-count of one frame, and one global relocalization search (autonomy.health,
-autonomy.view_check, autonomy.missing_walls, autonomy.relocalization)."""
+count of one frame, and one global relocalization search (autonomy.localization.health,
+autonomy.localization.view_check, autonomy.localization.missing_walls, autonomy.localization.relocalization)."""
 
 from __future__ import annotations
 
@@ -10,15 +10,15 @@ import sys
 import numpy as np
 from common import Result, entry, timeit
 
-from autonomy.camera import DepthCamera
-from autonomy.freespace import FreeSpaceConfig, build_free_space
-from autonomy.geometry import compose_pose
-from autonomy.health import HealthConfig, explain_points
-from autonomy.missing_walls import MissingWallsConfig, missing_walls
-from autonomy.raycast import SceneQuery, VisibilityGrid, rays_hit
-from autonomy.relocalization import GlobalLocalizer, Scan
+from autonomy.common.geometry import compose_pose
+from autonomy.localization.health import HealthConfig, explain_points
+from autonomy.localization.missing_walls import MissingWallsConfig, missing_walls
+from autonomy.localization.relocalization import GlobalLocalizer, Scan
+from autonomy.localization.view_check import ViewCheck, ViewCheckConfig
+from autonomy.maps.freespace import FreeSpaceConfig, build_free_space
+from autonomy.maps.raycast import SceneQuery, VisibilityGrid, rays_hit
+from autonomy.perception.camera import DepthCamera
 from autonomy.stack import LOCALIZATION_GRID
-from autonomy.view_check import ViewCheck, ViewCheckConfig
 from sim.simulator import blueprints
 from sim.simulator.blueprints import ASSETS_DIR
 from sim.simulator.map_depth import MapDepth

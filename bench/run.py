@@ -24,8 +24,8 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from autonomy.fspf import FSPFConfig, fspf  # noqa: E402
-from autonomy.vectormap import load_vectormap, save_vectormap  # noqa: E402
+from autonomy.maps.vectormap import load_vectormap, save_vectormap  # noqa: E402
+from autonomy.perception.fspf import FSPFConfig, fspf  # noqa: E402
 from sim.simulator import blueprints  # noqa: E402
 from sim.simulator.actors import Furniture  # noqa: E402
 from sim.simulator.blueprints import ASSETS_DIR  # noqa: E402
@@ -88,8 +88,8 @@ def bench_campus_graph(results: dict[str, Result]) -> None:
 
 def bench_map_graph(results: dict[str, Result], quick: bool, vm) -> None:
     """The automatic navigation graph of the large floor, with its quality measures."""
-    from autonomy.graph_builder import build_navgraph
-    from autonomy.graph_quality import graph_quality
+    from autonomy.maps.graph_builder import build_navgraph
+    from autonomy.maps.graph_quality import graph_quality
 
     results["map_graph_9000"] = entry(timeit(lambda: build_navgraph(vm), 1 if quick else 3), target=10_000.0)
     gb = build_navgraph(vm)
@@ -103,9 +103,9 @@ def bench_map_graph(results: dict[str, Result], quick: bool, vm) -> None:
 
 def bench_localization(results: dict[str, Result], quick: bool) -> None:
     """Scene lines and CGR on the 100 x 100 m generated map (10,499 segments)."""
-    from autonomy.cgr import CGRConfig, CGRLocalizer
-    from autonomy.observation import ObservationConfig
-    from autonomy.raycast import SceneQuery, VisibilityGrid, rays_hit
+    from autonomy.localization.cgr import CGRConfig, CGRLocalizer
+    from autonomy.localization.observation import ObservationConfig
+    from autonomy.maps.raycast import SceneQuery, VisibilityGrid, rays_hit
     from autonomy.stack import LOCALIZATION_GRID
 
     bp = blueprints.generate_building(blueprints.BuildingConfig.large(), 0)
@@ -183,7 +183,7 @@ def _real_floor_paths() -> tuple[Path, Path]:
 
 
 def _real_floor_graph():
-    from autonomy.vectormap import load_navgraph
+    from autonomy.maps.vectormap import load_navgraph
 
     return load_navgraph(_real_floor_paths()[1])
 
@@ -223,15 +223,15 @@ def _stack_frame_samples(vm, graph, frames: list[np.ndarray], poses: list[np.nda
     and the odometry stay continuous and the stack keeps tracking: a jump back to the
     first frame is a jump in view, which the lost detector rightly takes for a lost robot,
     and the stack would be timed relocalizing instead. Raises if it leaves tracking."""
-    from autonomy.geometry import relative_pose
-    from autonomy.raycast import SceneQuery, VisibilityGrid
+    from autonomy.common.geometry import relative_pose
+    from autonomy.maps.raycast import SceneQuery, VisibilityGrid
     from autonomy.stack import LOCALIZATION_GRID, RobotStack, StackConfig
 
     scene = SceneQuery(vm, VisibilityGrid.build(vm, LOCALIZATION_GRID))
     stack = RobotStack(vm, graph, StackConfig(camera=cfg.depth_camera()), rng=np.random.default_rng(0), scene=scene)
     stack.reset(poses[0])
     # The goal: the last node of the part of the graph the robot starts in.
-    from autonomy.planner import parts
+    from autonomy.maps.planner import parts
 
     label = parts(graph)
     xy = graph.node_xy()

@@ -13,7 +13,7 @@ import sys
 import threading
 from pathlib import Path
 
-from autonomy.errors import InputError
+from autonomy.common.errors import InputError
 
 #: Packages of the ``rl`` extra that policy-research commands import on demand.
 RL_PACKAGES = frozenset({"torch", "stable_baselines3", "triton"})
@@ -40,8 +40,8 @@ def _map_arg(text: str) -> Path:
 
 
 def _graph_config(args: argparse.Namespace):
-    from autonomy.freespace import FreeSpaceConfig
-    from autonomy.graph_builder import GraphBuildConfig
+    from autonomy.maps.freespace import FreeSpaceConfig
+    from autonomy.maps.graph_builder import GraphBuildConfig
 
     if not (math.isfinite(args.robot_radius) and args.robot_radius > 0):
         raise InputError(f"--robot-radius: expected a positive number of metres, got {args.robot_radius!r}")
@@ -64,8 +64,8 @@ def _free_space_lines(fs, how: str) -> list[str]:
 def cmd_map_check(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from autonomy.graph_builder import build_navgraph
-    from autonomy.vectormap import load_vectormap_checked
+    from autonomy.maps.graph_builder import build_navgraph
+    from autonomy.maps.vectormap import load_vectormap_checked
 
     path = _map_arg(args.file)
     vm, findings = load_vectormap_checked(path)
@@ -101,9 +101,9 @@ def cmd_map_graph(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from autonomy.graph_builder import build_navgraph, graph_key, with_key
-    from autonomy.graph_quality import graph_quality
-    from autonomy.vectormap import format_navgraph_json, load_vectormap
+    from autonomy.maps.graph_builder import build_navgraph, graph_key, with_key
+    from autonomy.maps.graph_quality import graph_quality
+    from autonomy.maps.vectormap import format_navgraph_json, load_vectormap
 
     cfg = _graph_config(args)
     src = _map_arg(args.file)
@@ -132,7 +132,7 @@ def cmd_map_graph(args: argparse.Namespace) -> int:
               "(the largest is where missions and env episodes run)")
     graphs = [("generated", gb.graph)] if args.quality or args.compare else []
     if args.compare:
-        from autonomy.vectormap import load_navgraph
+        from autonomy.maps.vectormap import load_navgraph
 
         graphs.append((str(args.compare), load_navgraph(args.compare)))
     for label, g in graphs:
@@ -149,7 +149,7 @@ def cmd_map_graph(args: argparse.Namespace) -> int:
 
 
 def cmd_map_convert(args: argparse.Namespace) -> int:
-    from autonomy.vectormap import load_vectormap, save_vectormap
+    from autonomy.maps.vectormap import load_vectormap, save_vectormap
 
     if not (math.isfinite(args.scale) and args.scale > 0):
         raise InputError(f"--scale: expected a positive factor (0.001 for millimetres), got {args.scale!r}")
@@ -160,7 +160,7 @@ def cmd_map_convert(args: argparse.Namespace) -> int:
 
 
 def cmd_map_render(args: argparse.Namespace) -> int:
-    from autonomy.vectormap import load_navgraph, load_vectormap
+    from autonomy.maps.vectormap import load_navgraph, load_vectormap
     from sim.viz.maps import render_map
 
     vm = load_vectormap(args.file)
@@ -184,7 +184,7 @@ def _parse_pose(text: str) -> tuple[float, float, float]:
 def cmd_snapshot(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from autonomy.vectormap import load_vectormap
+    from autonomy.maps.vectormap import load_vectormap
     from sim.simulator.kinect import KinectCamera, KinectConfig
     from sim.simulator.world import build_world
 
@@ -314,7 +314,7 @@ def cmd_scenarios(args: argparse.Namespace) -> int:
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
-    from autonomy.files import output_path
+    from autonomy.common.files import output_path
     from sim.rl.evaluate import compare, comparison_table
     from sim.rl.policies import make_policy
     from sim.rl.splits import get_split
@@ -339,7 +339,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 
 def cmd_demos_record(args: argparse.Namespace) -> int:
-    from autonomy.files import output_path
+    from autonomy.common.files import output_path
     from sim.rl.demos import record_demonstrations
     from sim.rl.splits import get_split
 
@@ -365,7 +365,7 @@ def cmd_demos_record(args: argparse.Namespace) -> int:
 
 
 def cmd_demos_bc(args: argparse.Namespace) -> int:
-    from autonomy.files import output_path
+    from autonomy.common.files import output_path
     from sim.rl.demos import load_demonstrations
 
     demos = load_demonstrations(args.file)  # a bad file fails before torch is imported
@@ -399,7 +399,7 @@ def cmd_demos_bc(args: argparse.Namespace) -> int:
 
 
 def cmd_train_ppo(args: argparse.Namespace) -> int:
-    from autonomy.files import output_path
+    from autonomy.common.files import output_path
 
     ints = (("--steps", "total_steps", 1), ("--n-envs", "n_envs", 1), ("--seed", "seed", 0),
             ("--eval-episodes", "eval_episodes", 0), ("--checkpoint-every", "checkpoint_every", 1),

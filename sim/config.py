@@ -1,7 +1,7 @@
 """Strict conversion of TOML tables into frozen dataclasses.
 
 Every key must be a field, every value must have the field's type; anything else is an
-:class:`~autonomy.errors.InputError` whose one line names the file, the dotted key and
+:class:`~autonomy.common.errors.InputError` whose one line names the file, the dotted key and
 what was expected. ``--set key.sub=value`` overrides go through the same checks.
 """
 
@@ -14,7 +14,7 @@ import types
 import typing
 from typing import Any
 
-from autonomy.errors import InputError
+from autonomy.common.errors import InputError
 
 
 def _type_name(tp: Any) -> str:

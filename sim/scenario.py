@@ -13,11 +13,11 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from autonomy.avoidance import AvoidanceConfig
-from autonomy.errors import InputError
-from autonomy.fspf import FSPFConfig
-from autonomy.navigator import NavigatorConfig
-from autonomy.nearfield import NearField
+from autonomy.common.errors import InputError
+from autonomy.navigation.avoidance import AvoidanceConfig
+from autonomy.navigation.navigator import NavigatorConfig
+from autonomy.perception.fspf import FSPFConfig
+from autonomy.perception.nearfield import NearField
 from autonomy.stack import LocalizationConfig as StackLocalizationConfig
 from autonomy.stack import RecoveryConfig, StackConfig
 from sim.config import apply_overrides, from_dict, read_toml
@@ -60,7 +60,7 @@ class MapConfig:
     """With ``vectormap``: where the robot may be. ``closed``: only what the walls enclose
     (a building); ``open``: everything within the walls' convex hull (a parking lot, a
     yard: walls that enclose no inside); ``auto``: open when the walls are sparse or
-    enclose almost nothing (:mod:`autonomy.freespace`). The graph made from the walls and
+    enclose almost nothing (:mod:`autonomy.maps.freespace`). The graph made from the walls and
     the places of random furniture follow it."""
 
     def __post_init__(self) -> None:
@@ -78,7 +78,7 @@ class MapConfig:
 
     @property
     def open_map(self) -> bool | None:
-        """``free_space`` as :attr:`autonomy.freespace.FreeSpaceConfig.open_map`."""
+        """``free_space`` as :attr:`autonomy.maps.freespace.FreeSpaceConfig.open_map`."""
         return {"auto": None, "open": True, "closed": False}[self.free_space]
 
     def building_config(self) -> BuildingConfig:

@@ -23,8 +23,8 @@ def warm_up(verbose: bool = True) -> float:
     import gymnasium as gym
 
     import sim  # noqa: F401  (registers DepthNav-v0)
-    from autonomy.graph_builder import build_navgraph
-    from autonomy.graph_quality import graph_quality
+    from autonomy.maps.graph_builder import build_navgraph
+    from autonomy.maps.graph_quality import graph_quality
     from sim.experiments.runner import run_scenario
     from sim.scenario import SCENARIOS_DIR, load_scenario
     from sim.simulator import blueprints

@@ -9,7 +9,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import numpy as np
 import pytest
 
-from autonomy.vectormap import VectorMap
+from autonomy.maps.vectormap import VectorMap
 
 
 def box_room(w: float = 10.0, h: float = 6.0) -> VectorMap:
@@ -35,9 +35,9 @@ def points_along(a, b, step: float = 0.05) -> np.ndarray:
 
 def one_wall_depth(camera, wall_x: float) -> np.ndarray:
     """Exact planar depth (float32 m, 0 outside the camera's range) of the floor and the
-    plane x = wall_x, seen by ``camera`` (an ``autonomy.camera.DepthCamera``) from the
+    plane x = wall_x, seen by ``camera`` (an ``autonomy.perception.camera.DepthCamera``) from the
     origin facing +x: each pixel's ray through the mount, in closed form."""
-    from autonomy.camera import pixel_rays
+    from autonomy.perception.camera import pixel_rays
 
     d = pixel_rays(camera.intrinsics).reshape(-1, 3) @ camera.mount.rotation().T  # robot frame, per unit of depth
     t = camera.mount.translation()

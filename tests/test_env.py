@@ -15,7 +15,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import sim  # noqa: F401  (registers DepthNav-v0)
-from autonomy.errors import InputError
+from autonomy.common.errors import InputError
 from sim.envs.depthnav import DepthNavEnv, EnvConfig
 from sim.envs.geometry import GeodesicField, KCScanner
 from sim.scenario import SCENARIOS_DIR, LocalizationConfig

@@ -14,8 +14,24 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
+#: autonomy/'s sub-packages from the bottom up: each may import only those before it,
+#: except that localization and navigation, side by side, never import each other, and
+#: planes (the mapping experiments' plane extraction) sits beside them on perception.
+AUTONOMY_LAYERS = ("common", "maps", "perception", "localization", "navigation", "planes", "stack")
+_SIDE_BY_SIDE = {"localization": ("navigation",), "navigation": ("localization",), "planes": ("localization", "navigation")}
+
+
+def _autonomy_forbidden() -> dict[str, tuple[str, ...]]:
+    out = {}
+    for i, layer in enumerate(AUTONOMY_LAYERS[:-1]):
+        above = AUTONOMY_LAYERS[i + 1 :]
+        out[f"autonomy/{layer}"] = tuple(f"autonomy.{a}" for a in (*above, *_SIDE_BY_SIDE.get(layer, ())))
+    return out
+
+
 #: Package folder -> module prefixes none of its files may import.
 FORBIDDEN = {
+    **_autonomy_forbidden(),
     "autonomy": ("sim", "mujoco", "rerun"),
     "sim/simulator": ("sim.envs", "sim.experiments", "sim.viz", "sim.cli", "sim.scenario", "rerun"),
     "sim/envs": ("sim.experiments", "sim.cli", "rerun"),
@@ -50,3 +66,40 @@ def test_the_layer_check_sees_imports() -> None:
     """The check itself: it finds the imports a file does make."""
     mods = imported_modules(ROOT / "sim" / "experiments" / "runner.py")
     assert "autonomy.stack" in mods and "sim.simulator.step" in mods
+
+
+def test_every_module_of_autonomy_is_in_a_layer() -> None:
+    """A module left at the package's top (or a new sub-package) has no layer rule."""
+    top = {p.stem for p in (ROOT / "autonomy").glob("*.py")} - {"__init__"}
+    subs = {p.name for p in (ROOT / "autonomy").iterdir() if (p / "__init__.py").exists()}
+    assert top == {"stack"} and subs == set(AUTONOMY_LAYERS) - {"stack"}
+
+
+def test_autonomy_has_no_import_circle() -> None:
+    """No module of autonomy/ imports, through others, itself (imports at any depth in a
+    file count: a function-local import closes a circle as surely)."""
+    modules = {}
+    for path in (ROOT / "autonomy").rglob("*.py"):
+        rel = path.relative_to(ROOT).with_suffix("")
+        name = ".".join(rel.parts[:-1] if rel.name == "__init__" else rel.parts)
+        modules[name] = path
+    graph = {m: {i for i in imported_modules(p) if i in modules and i != m} for m, p in modules.items()}
+    # A package's __init__ re-exporting its modules is not a circle through them.
+    graph = {m: {i for i in deps if not m.startswith(i + ".")} for m, deps in graph.items()}
+    done: set[str] = set()
+
+    def visit(m: str, stack: list[str]) -> list[str] | None:
+        if m in stack:
+            return [*stack[stack.index(m) :], m]
+        if m in done:
+            return None
+        for n in sorted(graph[m]):
+            found = visit(n, [*stack, m])
+            if found:
+                return found
+        done.add(m)
+        return None
+
+    for m in sorted(graph):
+        circle = visit(m, [])
+        assert circle is None, " -> ".join(circle)

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from autonomy.errors import InputError
+from autonomy.common.errors import InputError
 from sim.cli import main
 from sim.experiments.kinds import load_experiment
 from sim.experiments.mapping import (

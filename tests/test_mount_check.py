@@ -14,10 +14,15 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from autonomy.camera import CameraIntrinsics, CameraMount
-from autonomy.errors import InputError
-from autonomy.fspf import FSPFConfig, fspf
-from autonomy.mount_check import MountCheck, MountCheckConfig, TiltedCameraMount, floor_fit
+from autonomy.common.errors import InputError
+from autonomy.perception.camera import CameraIntrinsics, CameraMount
+from autonomy.perception.fspf import FSPFConfig, fspf
+from autonomy.perception.mount_check import (
+    MountCheck,
+    MountCheckConfig,
+    TiltedCameraMount,
+    floor_fit,
+)
 from sim.simulator.kinect_noise import KinectNoiseConfig, apply_kinect_noise
 from tests.helpers import GL
 
@@ -183,7 +188,7 @@ def test_no_floor_no_evidence() -> None:
 
 def test_nan_and_empty_plane_points_are_no_evidence() -> None:
     """A broken frame's NaN points and an empty FSPF result change nothing."""
-    from autonomy.fspf import FSPFResult
+    from autonomy.perception.fspf import FSPFResult
 
     check = MountCheck(NOMINAL)
     res = fspf(render(SCENES[0], NOMINAL.pitch_down_rad, 0.0), INTR, FSPFConfig(), seed=1, mount=NOMINAL)

@@ -13,12 +13,12 @@ import math
 import numpy as np
 import pytest
 
-from autonomy.camera import KINECT_V1
-from autonomy.errors import InputError
-from autonomy.geometry import wrap_angles
-from autonomy.navigator import Navigator, NavigatorConfig, in_camera_view, wall_points
-from autonomy.planner import NoPathError, astar, edge_key
-from autonomy.vectormap import NavEdge, NavGraph, NavNode
+from autonomy.common.errors import InputError
+from autonomy.common.geometry import wrap_angles
+from autonomy.maps.planner import NoPathError, astar, edge_key
+from autonomy.maps.vectormap import NavEdge, NavGraph, NavNode
+from autonomy.navigation.navigator import Navigator, NavigatorConfig, in_camera_view, wall_points
+from autonomy.perception.camera import KINECT_V1
 
 RATE_HZ = 30.0
 ROBOT_R = 0.3

@@ -15,8 +15,9 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from autonomy.camera import CameraIntrinsics, backproject
-from autonomy.errors import InputError
+from autonomy.common.errors import InputError
+from autonomy.common.rng import seed_state
+from autonomy.perception.camera import CameraIntrinsics, backproject
 from autonomy.planes import (
     HoughConfig,
     Plane,
@@ -37,7 +38,6 @@ from autonomy.planes import (
     to_plane_coords,
 )
 from autonomy.planes import hough as hough_mod
-from autonomy.rng import seed_state
 
 DETECTORS = {
     "ransac": lambda pts, seed=0, **kw: ransac_planes(pts, RansacConfig(**kw), seed),

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from autonomy.errors import InputError
+from autonomy.common.errors import InputError
 from autonomy.planes import (
     OctreeConfig,
     Plane,
@@ -234,7 +234,7 @@ def test_patches_and_mesh_export(tmp_path) -> None:
 
 
 def test_register_planes_moves_detections_to_the_world() -> None:
-    from autonomy.camera import ROBOT_FROM_OPTICAL_LEVEL
+    from autonomy.perception.camera import ROBOT_FROM_OPTICAL_LEVEL
 
     rng = np.random.default_rng(0)
     # Camera 0.8 m up looking to the robot's right; robot at (5, 3) facing +y, so the

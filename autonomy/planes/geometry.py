@@ -18,11 +18,11 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from autonomy.camera import CameraIntrinsics
-from autonomy.errors import InputError
-from autonomy.fspf import smallest_eigvec3
+from autonomy.common.errors import InputError
+from autonomy.common.rng import randbelow
+from autonomy.perception.camera import CameraIntrinsics
+from autonomy.perception.fspf import smallest_eigvec3
 from autonomy.planes.boundary import plane_hull
-from autonomy.rng import randbelow
 
 
 @dataclass(frozen=True, eq=False)
@@ -112,7 +112,7 @@ def fit_plane_indexed(pts, idx, n):  # pragma: no cover - numba
 
     The normal is the right singular vector of the smallest singular value of the
     centred points (Section II-B2, Eq. 5), i.e. the smallest eigenvector of their
-    scatter matrix, by the closed form of :func:`autonomy.fspf.smallest_eigvec3`.
+    scatter matrix, by the closed form of :func:`autonomy.perception.fspf.smallest_eigvec3`.
     The normal is oriented so that rho >= 0.
     """
     c = np.zeros(3)

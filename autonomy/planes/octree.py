@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from autonomy.errors import InputError, require_positive
+from autonomy.common.errors import InputError, require_positive
 from autonomy.planes.boundary import fan_triangles, hull_2d, lift_hull, to_plane_coords
 from autonomy.planes.geometry import Plane
 

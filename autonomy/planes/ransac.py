@@ -33,7 +33,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from autonomy.errors import InputError, require_int, require_positive
+from autonomy.common.errors import InputError, require_int, require_positive
+from autonomy.common.rng import randbelow, seed_state
 from autonomy.planes.geometry import (
     Plane,
     PlaneDetection,
@@ -43,7 +44,6 @@ from autonomy.planes.geometry import (
     refit_plane,
     take_inliers,
 )
-from autonomy.rng import randbelow, seed_state
 
 
 @dataclass(frozen=True)

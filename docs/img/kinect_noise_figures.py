@@ -20,8 +20,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-from autonomy.camera import CameraIntrinsics, pixel_rays  # noqa: E402
-from autonomy.fspf import FSPFConfig, fspf  # noqa: E402
+from autonomy.perception.camera import CameraIntrinsics, pixel_rays  # noqa: E402
+from autonomy.perception.fspf import FSPFConfig, fspf  # noqa: E402
 from sim.simulator.kinect_noise import KinectNoiseConfig, apply_kinect_noise  # noqa: E402
 
 INTR = CameraIntrinsics()

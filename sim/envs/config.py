@@ -2,7 +2,7 @@
 
 Every field has a one-line doc; ``gymnasium.make("DepthNav-v0", **fields)`` and
 :meth:`EnvConfig.from_scenario` both go through the same type and range checks, so a
-mistake is a one-line :class:`autonomy.errors.InputError` naming the argument.
+mistake is a one-line :class:`autonomy.common.errors.InputError` naming the argument.
 """
 
 from __future__ import annotations
@@ -16,10 +16,10 @@ from typing import Any
 
 import numpy as np
 
-from autonomy.avoidance import AvoidanceConfig
-from autonomy.errors import InputError
-from autonomy.fspf import FSPFConfig
-from autonomy.navigator import NavigatorConfig
+from autonomy.common.errors import InputError
+from autonomy.navigation.avoidance import AvoidanceConfig
+from autonomy.navigation.navigator import NavigatorConfig
+from autonomy.perception.fspf import FSPFConfig
 from autonomy.stack import StackConfig
 from sim.scenario import LocalizationConfig, load_scenario
 from sim.simulator import blueprints

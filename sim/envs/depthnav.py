@@ -22,9 +22,9 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from autonomy.camera import CameraIntrinsics
-from autonomy.errors import InputError
-from autonomy.geometry import wrap_angle
+from autonomy.common.errors import InputError
+from autonomy.common.geometry import wrap_angle
+from autonomy.perception.camera import CameraIntrinsics
 from autonomy.stack import RobotStack
 from sim.envs.config import EnvConfig
 from sim.envs.geometry import GeodesicField, KCScanner

@@ -18,10 +18,10 @@ import math
 import numba
 import numpy as np
 
-from autonomy.camera import CameraIntrinsics, CameraMount, pixel_rays
-from autonomy.geometry import segments_cross_nb
-from autonomy.planner import adjacency, dijkstra
-from autonomy.vectormap import NavGraph
+from autonomy.common.geometry import segments_cross_nb
+from autonomy.maps.planner import adjacency, dijkstra
+from autonomy.maps.vectormap import NavGraph
+from autonomy.perception.camera import CameraIntrinsics, CameraMount, pixel_rays
 
 
 @numba.njit(cache=True, inline="always")

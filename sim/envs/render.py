@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from autonomy.vectormap import NavGraph, VectorMap
+from autonomy.maps.vectormap import NavGraph, VectorMap
 
 BACKGROUND = (250, 250, 247)
 WALL = (40, 40, 45)

@@ -14,10 +14,10 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from autonomy.errors import InputError
-from autonomy.planner import adjacency
-from autonomy.raycast import SceneQuery, VisibilityGrid, load_or_build
-from autonomy.vectormap import load_navgraph, load_vectormap
+from autonomy.common.errors import InputError
+from autonomy.maps.planner import adjacency
+from autonomy.maps.raycast import SceneQuery, VisibilityGrid, load_or_build
+from autonomy.maps.vectormap import load_navgraph, load_vectormap
 from sim.envs.config import EnvConfig
 from sim.simulator import blueprints
 from sim.simulator.actors import PARK_XY, Furniture, PeopleController, Person, parked_person

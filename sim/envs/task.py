@@ -12,10 +12,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from autonomy.errors import InputError
-from autonomy.fspf import FSPFResult
-from autonomy.geometry import relative_pose
-from autonomy.planner import dijkstra
+from autonomy.common.errors import InputError
+from autonomy.common.geometry import relative_pose
+from autonomy.maps.planner import dijkstra
+from autonomy.perception.fspf import FSPFResult
 from sim.envs.config import EnvConfig
 from sim.envs.site import Site
 

@@ -21,9 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from autonomy.constants import ROBOT_RADIUS_M
-from autonomy.errors import InputError
-from autonomy.geometry import rectangle_corners
+from autonomy.common.constants import ROBOT_RADIUS_M
+from autonomy.common.errors import InputError
+from autonomy.common.geometry import rectangle_corners
 
 __all__ = ["FlightRecorder", "footprints", "render_incidents", "starts_incident", "undrawn_bodies"]
 

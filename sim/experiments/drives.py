@@ -36,13 +36,13 @@ from pathlib import Path
 
 import numpy as np
 
-from autonomy.avoidance import AvoidanceConfig
-from autonomy.camera import CameraIntrinsics, CameraMount
-from autonomy.errors import InputError
-from autonomy.files import atomic_path
-from autonomy.fspf import FSPFConfig
-from autonomy.geometry import relative_pose
-from autonomy.navigator import NavigatorConfig
+from autonomy.common.errors import InputError
+from autonomy.common.files import atomic_path
+from autonomy.common.geometry import relative_pose
+from autonomy.navigation.avoidance import AvoidanceConfig
+from autonomy.navigation.navigator import NavigatorConfig
+from autonomy.perception.camera import CameraIntrinsics, CameraMount
+from autonomy.perception.fspf import FSPFConfig
 from sim.config import to_dict
 from sim.simulator.actors import Furniture, Person
 from sim.simulator.kinect import KinectConfig
@@ -435,7 +435,7 @@ def _write_log(cfg: RecordingConfig, path: Path, rec: _Recording, nodes: list[in
     del depth
     rec.depth = None  # close the memory map before the file is truncated
     _truncate_npy(rec.tmp, n)
-    # Not autonomy.files.atomic_path: the working copy, recorded into since the start (its
+    # Not autonomy.common.files.atomic_path: the working copy, recorded into since the start (its
     # temporary removed by ensure_log on failure), goes into place before the log does.
     os.replace(rec.tmp, _working_copy(path))
     os.replace(tmp, path)

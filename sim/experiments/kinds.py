@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from autonomy.errors import InputError
+from autonomy.common.errors import InputError
 from sim.config import apply_overrides, from_dict, read_toml
 
 #: kind → module that defines ``EXPERIMENTS[kind]``.

@@ -3,7 +3,7 @@
 One drive (:mod:`sim.experiments.drives`) is recorded once; each trial replays it offline with one
 approach and one seed: per frame, the observation is made from the stored depth frame
 (FSPF's plane-filtered points, or a laser scan simulated by KR / KS / KC,
-:mod:`autonomy.scans`), CGR predicts with the recorded odometry plus 20% multiplicative
+:mod:`autonomy.localization.scans`), CGR predicts with the recorded odometry plus 20% multiplicative
 noise and updates with the observation, and the estimate is compared with the recorded
 truth. Nothing is rendered again. A replay fails if its error ever reaches 1 m.
 
@@ -34,14 +34,11 @@ from typing import Any
 
 import numpy as np
 
-from autonomy.camera import DepthCamera
-from autonomy.cgr import CGRConfig, CGRLocalizer
-from autonomy.errors import InputError
-from autonomy.files import atomic_write
-from autonomy.fspf import FSPFConfig, project_to_floor
-from autonomy.observation import ObservationConfig
-from autonomy.raycast import SceneQuery, VisibilityGridConfig, load_or_build
-from autonomy.scans import (
+from autonomy.common.errors import InputError
+from autonomy.common.files import atomic_write
+from autonomy.localization.cgr import CGRConfig, CGRLocalizer
+from autonomy.localization.observation import ObservationConfig
+from autonomy.localization.scans import (
     ScanConfig,
     complete_scan,
     drop_floor,
@@ -49,6 +46,9 @@ from autonomy.scans import (
     sampling_scan,
     scan_points,
 )
+from autonomy.maps.raycast import SceneQuery, VisibilityGridConfig, load_or_build
+from autonomy.perception.camera import DepthCamera
+from autonomy.perception.fspf import FSPFConfig, project_to_floor
 from autonomy.stack import LOCALIZATION_GRID, LocalizationConfig, RobotStack, StackConfig
 from sim.config import to_dict
 from sim.experiments.drives import DriveLog, RecordingConfig, ensure_log, load_log

@@ -36,9 +36,9 @@ from typing import Any
 
 import numpy as np
 
-from autonomy.camera import CameraIntrinsics
-from autonomy.errors import InputError, require_int, require_positive
-from autonomy.geometry import point_segment_distance, wrap_angle
+from autonomy.common.errors import InputError, require_int, require_positive
+from autonomy.common.geometry import point_segment_distance, wrap_angle
+from autonomy.perception.camera import CameraIntrinsics
 from autonomy.planes import (
     HoughConfig,
     OctreeConfig,

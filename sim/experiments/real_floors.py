@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from autonomy.errors import InputError
+from autonomy.common.errors import InputError
 from sim.experiments.kinds import Experiment
 from sim.scenario import MapConfig, Scenario
 
@@ -87,7 +87,7 @@ class RealFloorsConfig(Scenario):
             if not path.is_file():
                 raise InputError(f"benchmark.maps[{i}]: file not found: {path}")
         # The near field depends on the camera, its mount and the sensor's range.
-        from autonomy.nearfield import NearField
+        from autonomy.perception.nearfield import NearField
 
         cam = self.kinect.depth_camera()
         NearField(cam.intrinsics, cam.mount, cam.min_range_m, self.avoidance.robot_radius_m, self.avoidance.near_field)

@@ -26,9 +26,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from autonomy.errors import InputError
-from autonomy.geometry import compose_pose, relative_pose
-from autonomy.raycast import SceneQuery, load_or_build
+from autonomy.common.errors import InputError
+from autonomy.common.geometry import compose_pose, relative_pose
+from autonomy.maps.raycast import SceneQuery, load_or_build
 from autonomy.stack import LOCALIZATION_GRID, RobotStack, StackConfig
 from sim.simulator.actors import Furniture
 from sim.simulator.blueprints import load_blueprint

@@ -23,11 +23,11 @@ from pathlib import Path
 
 import numpy as np
 
-from autonomy.geometry import wrap_angle
-from autonomy.navigator import NavCommand, in_camera_view
-from autonomy.planner import path_points
+from autonomy.common.geometry import wrap_angle
+from autonomy.maps.planner import path_points
+from autonomy.maps.vectormap import load_navgraph, load_vectormap
+from autonomy.navigation.navigator import NavCommand, in_camera_view
 from autonomy.stack import RobotStack
-from autonomy.vectormap import load_navgraph, load_vectormap
 from sim.config import to_dict
 from sim.experiments.blackbox import (
     INCIDENT_GAP_S,
@@ -682,7 +682,7 @@ HEALTH_CODES = {"ok": 0.0, "blind": 1.0, "lost": 2.0, "relocalizing": 3.0}
 
 
 def health_scalars(stack: RobotStack) -> dict[str, float]:
-    """The health signal for the recording's timeline (autonomy.health)."""
+    """The health signal for the recording's timeline (autonomy.localization.health)."""
     h = stack.health_sample
     if h is None:
         return {}

@@ -42,8 +42,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from autonomy.errors import InputError
-from autonomy.files import atomic_write_text
+from autonomy.common.errors import InputError
+from autonomy.common.files import atomic_write_text
 from sim.config import to_dict
 from sim.experiments.kinds import KINDS, Experiment, experiment, load_experiment
 

@@ -17,9 +17,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from autonomy.errors import InputError
-from autonomy.graph_builder import graph_components
-from autonomy.vectormap import NavGraph
+from autonomy.common.errors import InputError
+from autonomy.maps.graph_builder import graph_components
+from autonomy.maps.vectormap import NavGraph
 from sim.scenario import MissionConfig
 
 #: A waypoint counts as reached when the true position is this much beyond the

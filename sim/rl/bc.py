@@ -28,8 +28,8 @@ import numpy as np
 import torch
 from torch import nn
 
-from autonomy.errors import InputError
-from autonomy.files import atomic_write, atomic_write_text, output_path
+from autonomy.common.errors import InputError
+from autonomy.common.files import atomic_write, atomic_write_text, output_path
 from sim.rl.demos import Demonstrations
 from sim.rl.sb3 import FORMAT as SB3_FORMAT
 from sim.rl.sb3 import MODEL_FILE as SB3_MODEL_FILE

@@ -38,8 +38,8 @@ from typing import Any
 
 import numpy as np
 
-from autonomy.errors import InputError
-from autonomy.files import atomic_write, output_path
+from autonomy.common.errors import InputError
+from autonomy.common.files import atomic_write, output_path
 
 FORMAT = "depthnav-demonstrations"
 VERSION = 1

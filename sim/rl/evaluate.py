@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from autonomy.files import atomic_write_text, output_path
+from autonomy.common.files import atomic_write_text, output_path
 from sim.rl.policies import Policy, make_policy
 from sim.rl.splits import BENCHMARK_TASK, TASK_KEYS, EpisodeSpec, Split, episode_specs, get_split
 
@@ -405,7 +405,7 @@ def _evaluate(
 
 # -- helpers -------------------------------------------------------------------------------
 def write_json(path: str | Path, doc: Any) -> Path:
-    """Write JSON atomically (:func:`autonomy.files.atomic_write_text`), making the
+    """Write JSON atomically (:func:`autonomy.common.files.atomic_write_text`), making the
     directory."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

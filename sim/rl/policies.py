@@ -8,7 +8,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from autonomy.errors import InputError
+from autonomy.common.errors import InputError
 
 
 @runtime_checkable

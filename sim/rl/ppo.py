@@ -35,8 +35,8 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecNormalize
 
-from autonomy.errors import InputError
-from autonomy.files import atomic_write, atomic_write_text, output_path
+from autonomy.common.errors import InputError
+from autonomy.common.files import atomic_write, atomic_write_text, output_path
 from sim.rl.sb3 import (
     FORMAT,
     FORMAT_VERSION,

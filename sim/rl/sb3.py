@@ -20,7 +20,7 @@ import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.base_class import BaseAlgorithm
 
-from autonomy.errors import InputError
+from autonomy.common.errors import InputError
 
 MODEL_FILE = "model.zip"
 POLICY_FILE = "policy.json"

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from autonomy.errors import InputError
+from autonomy.common.errors import InputError
 
 #: EnvConfig keyword arguments of the benchmark task (the building comes from the split).
 #: Goals 3-12 m away along the navigation graph, 1000 steps (33 s at 30 Hz, enough for

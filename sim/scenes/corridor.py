@@ -17,9 +17,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from autonomy.camera import ROBOT_FROM_OPTICAL_LEVEL, CameraIntrinsics, CameraMount
-from autonomy.errors import InputError, require_positive
-from autonomy.vectormap import VectorMap
+from autonomy.common.errors import InputError, require_positive
+from autonomy.maps.vectormap import VectorMap
+from autonomy.perception.camera import ROBOT_FROM_OPTICAL_LEVEL, CameraIntrinsics, CameraMount
 from sim.simulator.robot import RobotConfig
 from sim.simulator.world import (
     KINECT_CAMERA,

@@ -21,8 +21,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from autonomy.camera import CameraIntrinsics
-from autonomy.errors import InputError, require_positive
+from autonomy.common.errors import InputError, require_positive
+from autonomy.perception.camera import CameraIntrinsics
 from sim.scenes.rigs import (
     Rig,
     add_box,

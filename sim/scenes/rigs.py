@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from autonomy.camera import CameraIntrinsics
+from autonomy.perception.camera import CameraIntrinsics
 from sim.simulator.kinect import KinectCamera, KinectConfig
 from sim.simulator.world import KINECT_CAMERA, optical_quat, set_depth_rendering
 

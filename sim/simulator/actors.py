@@ -12,9 +12,9 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from autonomy.constants import ROBOT_RADIUS_M
-from autonomy.errors import InputError
-from autonomy.geometry import point_segment_distance, rectangle_corners
+from autonomy.common.constants import ROBOT_RADIUS_M
+from autonomy.common.errors import InputError
+from autonomy.common.geometry import point_segment_distance, rectangle_corners
 from sim.simulator.robot import COLL_PEOPLE, COLL_ROBOT, COLL_STATIC
 
 FURNITURE_KINDS = ("table", "chair", "box", "cabinet")
@@ -176,7 +176,7 @@ def add_people(spec: mujoco.MjSpec, people: tuple[Person, ...]) -> None:
 
 def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
     """Distance from point p to segment a-b (2D): the scalar form of
-    :func:`autonomy.geometry.point_segment_distance` for the people's per-step checks (a few per person
+    :func:`autonomy.common.geometry.point_segment_distance` for the people's per-step checks (a few per person
     and frame, where building (N, 4) arrays cost more than the arithmetic)."""
     d = b - a
     L2 = float(d @ d)

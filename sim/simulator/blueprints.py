@@ -1,7 +1,7 @@
 """Office-building blueprints: a vector map of thin walls, a matching nav graph, and zones.
 
 A :class:`Blueprint` is what the simulator builds a world from: walls as 2D segments
-(:class:`autonomy.vectormap.VectorMap`), a UT AMRL-style navigation graph, and the boxes
+(:class:`autonomy.maps.vectormap.VectorMap`), a UT AMRL-style navigation graph, and the boxes
 of the offices, open areas (atria) and corridors, so scenarios can place furniture and
 people.
 
@@ -32,9 +32,9 @@ from typing import Any
 
 import numpy as np
 
-from autonomy.errors import InputError
-from autonomy.geometry import WallIndex, segment_distances
-from autonomy.vectormap import (
+from autonomy.common.errors import InputError
+from autonomy.common.geometry import WallIndex, segment_distances
+from autonomy.maps.vectormap import (
     MapFormatError,
     NavEdge,
     NavGraph,

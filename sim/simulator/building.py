@@ -5,7 +5,7 @@ same functions here, so a scenario and an env episode drawn from the same seed f
 populate a building the same way.
 
 A map given by its walls alone gets its navigation graph from
-:func:`autonomy.graph_builder.load_or_build_navgraph` (:func:`navgraph_from_walls`), and
+:func:`autonomy.maps.graph_builder.load_or_build_navgraph` (:func:`navgraph_from_walls`), and
 random furniture goes anywhere in the free space where the map has no zones (open areas
 or rooms). Such a graph can have several connected components (a room without a door
 is one of its own): starts, goals, waypoints and people's routes come from the largest
@@ -22,14 +22,14 @@ from pathlib import Path
 
 import numpy as np
 
-from autonomy.avoidance import AvoidanceConfig
-from autonomy.constants import ROBOT_RADIUS_M
-from autonomy.errors import InputError
-from autonomy.freespace import FreeSpace, FreeSpaceConfig, build_free_space
-from autonomy.geometry import point_segment_distance
-from autonomy.graph_builder import GraphBuildConfig, cached_navgraph, graph_components
-from autonomy.planner import astar, path_points
-from autonomy.vectormap import NavGraph, VectorMap
+from autonomy.common.constants import ROBOT_RADIUS_M
+from autonomy.common.errors import InputError
+from autonomy.common.geometry import point_segment_distance
+from autonomy.maps.freespace import FreeSpace, FreeSpaceConfig, build_free_space
+from autonomy.maps.graph_builder import GraphBuildConfig, cached_navgraph, graph_components
+from autonomy.maps.planner import astar, path_points
+from autonomy.maps.vectormap import NavGraph, VectorMap
+from autonomy.navigation.avoidance import AvoidanceConfig
 from sim.simulator.actors import Furniture, Person
 
 #: Kinds of random furniture, drawn uniformly.
@@ -61,7 +61,7 @@ class Building:
     map_path: Path | None = None
     open_map: bool | None = None
     """Whether the map is open (its free space the walls' convex hull), closed, or None:
-    told from the walls (:attr:`autonomy.freespace.FreeSpaceConfig.open_map`)."""
+    told from the walls (:attr:`autonomy.maps.freespace.FreeSpaceConfig.open_map`)."""
     _free: dict[float, FreeSpace] = field(default_factory=dict, init=False, repr=False, compare=False)
     _main: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
 
@@ -86,7 +86,7 @@ class Building:
 
     def free_spot(self, rng: np.random.Generator, clearance_m: float, robot_radius_m: float) -> np.ndarray | None:
         """A point uniform over the largest free region at least ``clearance_m`` from every
-        wall (:meth:`autonomy.freespace.FreeSpace.sample`); None when there is no such place."""
+        wall (:meth:`autonomy.maps.freespace.FreeSpace.sample`); None when there is no such place."""
         try:
             return self.free_space(robot_radius_m).sample(rng, 1, clearance_m)[0]
         except InputError:
@@ -125,7 +125,7 @@ def navgraph_from_walls(
     narrower passage is one the avoidance will not let the robot through (Eq. 3-4 block
     it), and an edge through it would hold the robot at its mouth until the leg times
     out. ``open_map``: the map is open, closed, or (None) told from the walls
-    (:attr:`autonomy.freespace.FreeSpaceConfig.open_map`). When made rather than read
+    (:attr:`autonomy.maps.freespace.FreeSpaceConfig.open_map`). When made rather than read
     from the cache, one line on stderr (unless ``quiet``) says so and where it is kept."""
     cfg = GraphBuildConfig(
         free_space=FreeSpaceConfig(robot_radius_m=avoidance.robot_radius_m, open_map=open_map), margin_m=avoidance.safety_margin_m

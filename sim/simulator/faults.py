@@ -46,17 +46,17 @@ from dataclasses import dataclass, fields, replace
 import mujoco
 import numpy as np
 
-from autonomy.errors import InputError, require_int, require_non_negative, require_positive
-from autonomy.geometry import (
+from autonomy.common.errors import InputError, require_int, require_non_negative, require_positive
+from autonomy.common.geometry import (
     compose_pose,
     crosses_any,
     point_segment_distance,
     point_segment_projection,
     segment_distances,
 )
-from autonomy.graph_builder import graph_components
-from autonomy.planner import adjacency, astar, dijkstra, path_points
-from autonomy.vectormap import NavGraph
+from autonomy.maps.graph_builder import graph_components
+from autonomy.maps.planner import adjacency, astar, dijkstra, path_points
+from autonomy.maps.vectormap import NavGraph
 from sim.simulator.actors import PARK_XY, Furniture, Person, parked_person
 from sim.simulator.building import Building, random_people
 from sim.simulator.robot import Odometry

@@ -23,8 +23,8 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from autonomy.errors import InputError
-from autonomy.geometry import WallIndex
+from autonomy.common.errors import InputError
+from autonomy.common.geometry import WallIndex
 
 __all__ = ["Irregularity", "Piece", "Door", "irregular_walls"]
 

@@ -22,8 +22,8 @@ import mujoco
 import numba
 import numpy as np
 
-from autonomy.camera import CameraIntrinsics, CameraMount, DepthCamera, pixel_rays
-from autonomy.errors import InputError
+from autonomy.common.errors import InputError
+from autonomy.perception.camera import CameraIntrinsics, CameraMount, DepthCamera, pixel_rays
 from sim.simulator.kinect_noise import KinectNoiseConfig, apply_kinect_noise
 from sim.simulator.robot import ROBOT_GEOM_GROUP
 

@@ -85,9 +85,9 @@ from statistics import NormalDist
 import numba
 import numpy as np
 
-from autonomy.camera import CameraIntrinsics
-from autonomy.constants import KINECT_FOCAL_PX, KINECT_MAX_RANGE_M, KINECT_MIN_RANGE_M
-from autonomy.errors import InputError
+from autonomy.common.constants import KINECT_FOCAL_PX, KINECT_MAX_RANGE_M, KINECT_MIN_RANGE_M
+from autonomy.common.errors import InputError
+from autonomy.perception.camera import CameraIntrinsics
 
 #: Incidence angles are clamped below this in the closed forms (both blow up at pi/2).
 THETA_MAX_RAD = math.radians(89.0)

@@ -16,8 +16,8 @@ import math
 
 import numpy as np
 
-from autonomy.camera import DepthCamera, pixel_rays
-from autonomy.raycast import SceneQuery, rays_hit
+from autonomy.maps.raycast import SceneQuery, rays_hit
+from autonomy.perception.camera import DepthCamera, pixel_rays
 
 TABLE_BEARINGS = 8192
 """Bearings ray-cast per frame, spread evenly over the image's horizontal field."""

@@ -39,8 +39,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from autonomy.camera import CameraIntrinsics
-from autonomy.errors import InputError
+from autonomy.common.errors import InputError
+from autonomy.perception.camera import CameraIntrinsics
 
 _HEADER = struct.Struct("<I")
 

@@ -15,10 +15,10 @@ from dataclasses import dataclass, replace
 import mujoco
 import numpy as np
 
-from autonomy.avoidance import AvoidanceConfig
-from autonomy.constants import ROBOT_RADIUS_M
-from autonomy.errors import InputError
-from autonomy.geometry import compose_pose, relative_pose, wrap_angle
+from autonomy.common.constants import ROBOT_RADIUS_M
+from autonomy.common.errors import InputError
+from autonomy.common.geometry import compose_pose, relative_pose, wrap_angle
+from autonomy.navigation.avoidance import AvoidanceConfig
 
 #: Collision bits. Robot collides with static world and people; static world and people
 #: do not test each other (both are kinematic), and nothing tests the floor.

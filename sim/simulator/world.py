@@ -19,9 +19,9 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
-from autonomy.camera import CameraIntrinsics, CameraMount
-from autonomy.errors import InputError
-from autonomy.vectormap import VectorMap
+from autonomy.common.errors import InputError
+from autonomy.maps.vectormap import VectorMap
+from autonomy.perception.camera import CameraIntrinsics, CameraMount
 from sim.simulator.actors import Furniture, PeopleController, Person, add_furniture, add_people
 from sim.simulator.robot import (
     COLL_ROBOT,

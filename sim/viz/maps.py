@@ -18,8 +18,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
-from autonomy.errors import InputError  # noqa: E402
-from autonomy.vectormap import NavGraph, VectorMap  # noqa: E402
+from autonomy.common.errors import InputError  # noqa: E402
+from autonomy.maps.vectormap import NavGraph, VectorMap  # noqa: E402
 
 __all__ = ["render_map"]
 

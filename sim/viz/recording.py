@@ -16,7 +16,7 @@ Entity layout (timelines ``sim_time`` in seconds and ``frame``):
 - ``world/robot/avoidance/{fan,chosen,desired,margin}`` open path lengths (Eq. 4) as a
   fan, theta* (Eq. 5), the carrot direction and the robot's safety radius;
   ``world/robot/avoidance/near_field`` the sight lines where the camera fails to see the
-  near floor (something closer than its minimum range, autonomy/nearfield.py).
+  near floor (something closer than its minimum range, autonomy/perception/nearfield.py).
 - ``metrics/...`` scalars over time (speed, per-stage CPU ms, ...).
 - ``world/plane_map/<name>/{patches,leaves,normals}`` an octree plane map (mapping
   experiments): plane patches as one mesh coloured by normal direction, the occupied
@@ -39,9 +39,9 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from autonomy.camera import CameraIntrinsics, CameraMount
-from autonomy.errors import InputError
-from autonomy.vectormap import NavGraph, VectorMap
+from autonomy.common.errors import InputError
+from autonomy.maps.vectormap import NavGraph, VectorMap
+from autonomy.perception.camera import CameraIntrinsics, CameraMount
 
 TRUTH_COLOR = (40, 170, 60)
 ESTIMATE_COLOR = (230, 90, 30)
@@ -356,7 +356,7 @@ class Recorder:
         )
 
     def log_near_field(self, lines: np.ndarray) -> None:
-        """The near field's blocked sight lines (robot frame, autonomy/nearfield.py): where
+        """The near field's blocked sight lines (robot frame, autonomy/perception/nearfield.py): where
         the camera fails to see the floor right in front, something closer than its range."""
         seg = np.asarray(lines, dtype=np.float32).reshape(-1, 4)
         strips = np.zeros((len(seg), 2, 3), dtype=np.float32)

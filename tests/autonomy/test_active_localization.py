@@ -10,14 +10,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from autonomy.active_localization import (
+from autonomy.common.errors import InputError
+from autonomy.localization.active_localization import (
     ActiveLocalizationConfig,
     drive_value,
     predicted_ranges,
     view_poses,
 )
-from autonomy.errors import InputError
-from autonomy.raycast import scene_lines
+from autonomy.maps.raycast import scene_lines
 
 FOV = math.radians(57.0)
 

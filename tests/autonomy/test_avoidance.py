@@ -11,7 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from autonomy.avoidance import (
+from autonomy.common.errors import InputError
+from autonomy.navigation.avoidance import (
     AvoidanceConfig,
     AvoidanceResult,
     candidate_angles,
@@ -19,7 +20,6 @@ from autonomy.avoidance import (
     obstacle_points,
     open_path_lengths,
 )
-from autonomy.errors import InputError
 
 
 def _reference_lengths(points: np.ndarray, angles: np.ndarray, r: float, max_range: float) -> np.ndarray:

@@ -9,7 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from autonomy.camera import (
+from autonomy.common.errors import InputError
+from autonomy.perception.camera import (
     CameraIntrinsics,
     CameraMount,
     DepthCamera,
@@ -18,7 +19,6 @@ from autonomy.camera import (
     pixel_rays,
     transform_points,
 )
-from autonomy.errors import InputError
 
 
 def test_backproject_matches_pinhole_closed_form() -> None:

@@ -12,11 +12,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from autonomy.errors import InputError
-from autonomy.navigator import Navigator
-from autonomy.planner import NoPathError, parts
+from autonomy.common.errors import InputError
+from autonomy.maps.planner import NoPathError, parts
+from autonomy.maps.vectormap import NavEdge, NavGraph, NavNode, VectorMap
+from autonomy.navigation.navigator import Navigator
 from autonomy.stack import RobotStack, StackConfig
-from autonomy.vectormap import NavEdge, NavGraph, NavNode, VectorMap
 from tests.helpers import box_segments
 
 ROOM = (0, 1)

@@ -10,8 +10,8 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from autonomy.cgr import CGRConfig, CGRLocalizer
-from autonomy.observation import (
+from autonomy.localization.cgr import CGRConfig, CGRLocalizer
+from autonomy.localization.observation import (
     ObservationConfig,
     correspond,
     jacobi_eigh3,

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import pytest
 
-from autonomy.errors import InputError, require_int, require_non_negative, require_positive
+from autonomy.common.errors import InputError, require_int, require_non_negative, require_positive
 
 
 @dataclass

@@ -9,7 +9,7 @@ import stat
 import numpy as np
 import pytest
 
-from autonomy.files import atomic_path, atomic_write, atomic_write_text
+from autonomy.common.files import atomic_path, atomic_write, atomic_write_text
 
 
 def _names(d) -> list[str]:
@@ -95,8 +95,8 @@ def test_mode_is_that_of_a_plain_new_file(tmp_path, umask) -> None:
 
 
 def test_output_path_makes_the_directory_and_refuses_what_cannot_be_written(tmp_path) -> None:
-    from autonomy.errors import InputError
-    from autonomy.files import output_path
+    from autonomy.common.errors import InputError
+    from autonomy.common.files import output_path
 
     assert output_path(tmp_path / "a" / "b.json") == tmp_path / "a" / "b.json" and (tmp_path / "a").is_dir()
     assert output_path(tmp_path / "run", directory=True).is_dir()

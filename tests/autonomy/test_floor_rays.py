@@ -9,10 +9,10 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from autonomy.camera import CameraIntrinsics, DepthCamera, pixel_rays, transform_points
-from autonomy.floor_rays import floor_rays
-from autonomy.geometry import crosses_any, points_from_frame
-from autonomy.raycast import SceneQuery
+from autonomy.common.geometry import crosses_any, points_from_frame
+from autonomy.maps.raycast import SceneQuery
+from autonomy.perception.camera import CameraIntrinsics, DepthCamera, pixel_rays, transform_points
+from autonomy.perception.floor_rays import floor_rays
 from sim.simulator.blueprints import load_blueprint
 from sim.simulator.map_depth import MapDepth
 

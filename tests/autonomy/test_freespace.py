@@ -9,8 +9,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from autonomy.errors import InputError
-from autonomy.freespace import (
+from autonomy.common.errors import InputError
+from autonomy.common.geometry import point_segment_distance
+from autonomy.maps.freespace import (
     FreeSpaceConfig,
     _edt,
     build_free_space,
@@ -20,7 +21,6 @@ from autonomy.freespace import (
     label_components,
     polygon_area,
 )
-from autonomy.geometry import point_segment_distance
 from sim.simulator import blueprints
 from tests.helpers import box_segments, segments_map
 

@@ -9,9 +9,9 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from autonomy.camera import CameraIntrinsics, CameraMount, pixel_rays
-from autonomy.errors import InputError
-from autonomy.fspf import FSPFConfig, fspf, fspf_reference
+from autonomy.common.errors import InputError
+from autonomy.perception.camera import CameraIntrinsics, CameraMount, pixel_rays
+from autonomy.perception.fspf import FSPFConfig, fspf, fspf_reference
 
 INTR = CameraIntrinsics()
 RAYS = pixel_rays(INTR)  # optical-frame rays with unit z
@@ -220,7 +220,7 @@ def test_bad_arguments() -> None:
     st.sampled_from(["random", "planar", "repeated"]),
 )
 def test_smallest_eigvec3_matches_lapack(vals, kind) -> None:
-    from autonomy.fspf import smallest_eigvec3
+    from autonomy.perception.fspf import smallest_eigvec3
 
     m = np.array(vals).reshape(3, 3)
     if kind == "planar":  # covariance of points on a plane: one eigenvalue near 0

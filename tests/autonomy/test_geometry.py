@@ -1,4 +1,4 @@
-"""The shared plane-geometry helpers (autonomy/geometry.py)."""
+"""The shared plane-geometry helpers (autonomy/common/geometry.py)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from autonomy.geometry import (
+from autonomy.common.geometry import (
     compose_pose,
     crosses_any,
     point_segment_distance,

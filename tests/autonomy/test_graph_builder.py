@@ -10,10 +10,10 @@ import json
 import numpy as np
 import pytest
 
-import autonomy.graph_builder as gbmod
-from autonomy.freespace import build_free_space, label_components
-from autonomy.geometry import WallIndex, point_segment_distance, segment_distances
-from autonomy.graph_builder import (
+import autonomy.maps.graph_builder as gbmod
+from autonomy.common.geometry import WallIndex, point_segment_distance, segment_distances
+from autonomy.maps.freespace import build_free_space, label_components
+from autonomy.maps.graph_builder import (
     GraphBuildConfig,
     build_navgraph,
     cached_navgraph,
@@ -21,9 +21,9 @@ from autonomy.graph_builder import (
     load_or_build_navgraph,
     thin,
 )
-from autonomy.graph_quality import coverage, graph_quality, grid_distances
-from autonomy.planner import astar, path_length
-from autonomy.vectormap import load_navgraph, parse_navgraph_json
+from autonomy.maps.graph_quality import coverage, graph_quality, grid_distances
+from autonomy.maps.planner import astar, path_length
+from autonomy.maps.vectormap import load_navgraph, parse_navgraph_json
 from sim.simulator import blueprints
 from tests.helpers import box_segments, segments_map
 
@@ -256,7 +256,7 @@ def test_a_campus_sized_open_map_builds_within_memory(tmp_path):
             w, h = rng.uniform(20, 40), rng.uniform(20, 40)
             rows += box_segments(bx, by, bx + w, by + h, gap=(bx + 5, bx + 6.2))
     path = tmp_path / "campus.vectormap.txt"
-    from autonomy.vectormap import save_vectormap
+    from autonomy.maps.vectormap import save_vectormap
 
     save_vectormap(segments_map(rows), path)
     out = tmp_path / "campus.navigation.json"

@@ -10,9 +10,9 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from autonomy.errors import InputError
-from autonomy.health import HealthConfig, HealthMonitor, explain_points
-from autonomy.raycast import SceneQuery, rays_hit
+from autonomy.common.errors import InputError
+from autonomy.localization.health import HealthConfig, HealthMonitor, explain_points
+from autonomy.maps.raycast import SceneQuery, rays_hit
 from sim.simulator.blueprints import load_blueprint
 
 CFG = HealthConfig()

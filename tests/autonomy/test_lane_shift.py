@@ -9,8 +9,8 @@ import numpy as np
 from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 
-from autonomy.navigator import Navigator, NavigatorConfig
-from autonomy.vectormap import NavEdge, NavGraph, NavNode
+from autonomy.maps.vectormap import NavEdge, NavGraph, NavNode
+from autonomy.navigation.navigator import Navigator, NavigatorConfig
 
 
 def line_graph() -> NavGraph:

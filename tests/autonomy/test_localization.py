@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from autonomy.cgr import CGRConfig, CGRLocalizer, low_variance_resample
-from autonomy.errors import InputError
-from autonomy.observation import (
+from autonomy.common.errors import InputError
+from autonomy.localization.cgr import CGRConfig, CGRLocalizer, low_variance_resample
+from autonomy.localization.observation import (
     ObservationConfig,
     PointCloudModel,
     correspond,
@@ -244,7 +244,7 @@ def test_tracks_a_200_m_loop_with_20_percent_odometry_noise() -> None:
 
 
 def test_moment_matrix_gives_the_same_likelihood_gradient_and_curvature() -> None:
-    from autonomy.observation import loglik_grad_m, moments
+    from autonomy.localization.observation import loglik_grad_m, moments
 
     rng = np.random.default_rng(5)
     segs = room()
@@ -265,7 +265,7 @@ def test_moment_matrix_gives_the_same_likelihood_gradient_and_curvature() -> Non
 
 
 def test_laser_model_converges_without_normals() -> None:
-    from autonomy.observation import expected_ranges, points_from_scan
+    from autonomy.localization.observation import expected_ranges, points_from_scan
 
     segs = room()
     true = np.array([3.5, 2.5, math.radians(40)])
@@ -282,7 +282,7 @@ def test_laser_model_converges_without_normals() -> None:
 
 
 def _refine_once(segs, pose, pts, trust, prior_info=None):
-    from autonomy.observation import NO_PRIOR, moments, refine_all_m
+    from autonomy.localization.observation import NO_PRIOR, moments, refine_all_m
 
     idx = np.empty(len(pts), dtype=np.int64)
     correspond(segs, pose, pts, np.zeros_like(pts), False, -1.0, 0.5, idx)
@@ -323,7 +323,7 @@ def test_refinement_stays_within_its_trust_region() -> None:
 def test_gate_widens_with_the_belief_spread() -> None:
     """The correspondence gate is observation.max_distance_m for a confident belief and
     gate_sigmas x (position spread + range x heading spread) for an uncertain one."""
-    from autonomy.cgr import Estimate
+    from autonomy.localization.cgr import Estimate
 
     loc = CGRLocalizer(lambda x, y: room(), CGRConfig(), ObservationConfig(), np.random.default_rng(0))
     pts = np.array([[3.0, 0.0], [0.0, 3.0]])  # RMS range 3 m
@@ -375,9 +375,9 @@ def test_association_check_drops_a_box_matched_to_a_pillar_beside_it(seed: int) 
 def _real_frame(name: str, cfg: CGRConfig) -> tuple[CGRLocalizer, np.ndarray, np.ndarray, np.ndarray]:
     """A frame of a real floor stored in ``tests/data/NAME.npz``: the walls within 9 m,
     the points and normals (robot frame), the 20 samples and the true pose."""
-    from autonomy.raycast import SceneQuery, VisibilityGrid
+    from autonomy.maps.raycast import SceneQuery, VisibilityGrid
+    from autonomy.maps.vectormap import VectorMap
     from autonomy.stack import LOCALIZATION_GRID
-    from autonomy.vectormap import VectorMap
 
     d = np.load(Path(__file__).resolve().parents[1] / "data" / f"{name}.npz")
     vm = VectorMap.from_segments(d["segments"])

@@ -14,18 +14,18 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from autonomy.errors import InputError
-from autonomy.map_hygiene import (
+from autonomy.common.errors import InputError
+from autonomy.maps.map_hygiene import (
     LOGGER_NAME,
     MAX_LISTED,
     _overlap_pairs,
     _overlapping,
-    check_vectormap,
     clean_segments,
 )
-from autonomy.vectormap import (
+from autonomy.maps.vectormap import (
     MapFormatError,
     VectorMap,
+    check_vectormap,
     format_vectormap_json,
     format_vectormap_text,
     load_vectormap,
@@ -359,7 +359,7 @@ def test_warnings_are_logged_before_an_error(caplog):
 
 def test_without_logging_configured_a_finding_prints_as_one_line():
     code = (
-        "from autonomy.vectormap import parse_vectormap_text\n"
+        "from autonomy.maps.vectormap import parse_vectormap_text\n"
         "parse_vectormap_text('0, 0, 4, 0\\n1, 1, 1, 1\\n0, 0, 0, 3\\n', 'z.txt')\n"
         "import logging; logging.getLogger('depthnav.map').setLevel(logging.ERROR)\n"
         "parse_vectormap_text('0, 0, 4, 0\\n2, 2, 2, 2\\n', 'quiet.txt')\n"

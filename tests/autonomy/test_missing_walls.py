@@ -12,11 +12,16 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from autonomy.camera import DepthCamera, pixel_rays
-from autonomy.errors import InputError
-from autonomy.health import HealthConfig
-from autonomy.missing_walls import END_JOIN_M, MissingWallsConfig, _free_ends, missing_walls
-from autonomy.raycast import SceneQuery, load_or_build
+from autonomy.common.errors import InputError
+from autonomy.localization.health import HealthConfig
+from autonomy.localization.missing_walls import (
+    END_JOIN_M,
+    MissingWallsConfig,
+    _free_ends,
+    missing_walls,
+)
+from autonomy.maps.raycast import SceneQuery, load_or_build
+from autonomy.perception.camera import DepthCamera, pixel_rays
 from autonomy.stack import LOCALIZATION_GRID
 from sim.simulator.blueprints import ASSETS_DIR, load_blueprint
 from sim.simulator.map_depth import MapDepth
@@ -164,7 +169,7 @@ def test_a_small_pose_error_at_a_walls_end_is_no_contradiction() -> None:
     jog's end. From a belief 8 cm to the side the rays beside the jog meet it near its
     end, where the camera saw the floor and the far wall: without the end margin they
     see past a wall; with it those rays expect nothing and the view agrees."""
-    from autonomy.vectormap import VectorMap
+    from autonomy.maps.vectormap import VectorMap
 
     vm = VectorMap([[2.5, 0.3, 2.5, 0.8], [6.5, -3.0, 6.5, 3.0]], name="jog")
     scene = SceneQuery(vm, load_or_build(vm, None, LOCALIZATION_GRID))

@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from autonomy.camera import DepthCamera
-from autonomy.errors import InputError
-from autonomy.geometry import point_segment_distance
-from autonomy.navigator import Navigator, NavigatorConfig, in_camera_view, wall_points
-from autonomy.vectormap import NavEdge, NavGraph, NavNode
+from autonomy.common.errors import InputError
+from autonomy.common.geometry import point_segment_distance
+from autonomy.maps.vectormap import NavEdge, NavGraph, NavNode
+from autonomy.navigation.navigator import Navigator, NavigatorConfig, in_camera_view, wall_points
+from autonomy.perception.camera import DepthCamera
 
 
 def line_graph() -> NavGraph:

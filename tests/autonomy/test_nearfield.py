@@ -1,4 +1,4 @@
-"""Near-field check (autonomy/nearfield.py) on closed-form depth images of a flat floor
+"""Near-field check (autonomy/perception/nearfield.py) on closed-form depth images of a flat floor
 with and without a box standing closer than the camera's minimum range."""
 
 from __future__ import annotations
@@ -10,11 +10,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from autonomy.camera import CameraIntrinsics, CameraMount
-from autonomy.errors import InputError
-from autonomy.navigator import Navigator, NavigatorConfig
-from autonomy.nearfield import NearField, NearFieldConfig, line_points
-from autonomy.vectormap import NavEdge, NavGraph, NavNode
+from autonomy.common.errors import InputError
+from autonomy.maps.vectormap import NavEdge, NavGraph, NavNode
+from autonomy.navigation.navigator import Navigator, NavigatorConfig
+from autonomy.perception.camera import CameraIntrinsics, CameraMount
+from autonomy.perception.nearfield import NearField, NearFieldConfig, line_points
 
 INTR, MOUNT = CameraIntrinsics(), CameraMount()
 MIN_RANGE = 0.8

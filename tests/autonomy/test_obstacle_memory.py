@@ -10,10 +10,16 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from autonomy.camera import DepthCamera
-from autonomy.errors import InputError
-from autonomy.navigator import WALL_STEP_M, Navigator, NavigatorConfig, in_camera_view, wall_points
-from autonomy.vectormap import NavEdge, NavGraph, NavNode
+from autonomy.common.errors import InputError
+from autonomy.maps.vectormap import NavEdge, NavGraph, NavNode
+from autonomy.navigation.navigator import (
+    WALL_STEP_M,
+    Navigator,
+    NavigatorConfig,
+    in_camera_view,
+    wall_points,
+)
+from autonomy.perception.camera import DepthCamera
 
 
 def _graph() -> NavGraph:
@@ -23,7 +29,7 @@ def _graph() -> NavGraph:
 
 
 class ReferenceMemory:
-    """Step 1-3 of autonomy/obstacle_memory.py with numpy set operations."""
+    """Step 1-3 of autonomy/navigation/obstacle_memory.py with numpy set operations."""
 
     def __init__(self, cfg: NavigatorConfig, radius_m: float, walls: np.ndarray | None = None) -> None:
         self.cfg, self.radius_m, self.camera = cfg, radius_m, DepthCamera()

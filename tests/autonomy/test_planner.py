@@ -10,10 +10,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from autonomy.errors import InputError
-from autonomy.planner import NoPathError, astar, blind_lengths, edge_key, path_length
-from autonomy.raycast import rays_hit
-from autonomy.vectormap import NavEdge, NavGraph, NavNode
+from autonomy.common.errors import InputError
+from autonomy.maps.planner import NoPathError, astar, blind_lengths, edge_key, path_length
+from autonomy.maps.raycast import rays_hit
+from autonomy.maps.vectormap import NavEdge, NavGraph, NavNode
 
 
 def _graph(xy: np.ndarray, edges: list[tuple[int, int]], stairs: set[int] = frozenset()) -> NavGraph:
@@ -82,7 +82,7 @@ def test_astar_with_extra_edge_costs_is_a_cheapest_path(seed: int, n: int) -> No
 
 
 def _blind_reference(g: NavGraph, walls: np.ndarray, range_m: float, half_fov: float, step_m: float, rays: int) -> dict:
-    """Brute force: every ray against every wall with :func:`autonomy.raycast.rays_hit`."""
+    """Brute force: every ray against every wall with :func:`autonomy.maps.raycast.rays_hit`."""
     out = {}
     xy = g.node_xy()
     for e in g.edges:
@@ -146,7 +146,7 @@ def test_stairs_are_excluded_unless_allowed() -> None:
 def test_dijkstra_matches_brute_force_relaxation_from_several_sources() -> None:
     import numpy as np
 
-    from autonomy.planner import dijkstra
+    from autonomy.maps.planner import dijkstra
 
     rng = np.random.default_rng(4)
     n = 30

@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from autonomy import raycast as rc
-from autonomy.errors import InputError
-from autonomy.raycast import (
+from autonomy.common.errors import InputError
+from autonomy.maps import raycast as rc
+from autonomy.maps.raycast import (
     SceneQuery,
     VisibilityGrid,
     VisibilityGridConfig,
@@ -18,7 +18,7 @@ from autonomy.raycast import (
     rays_hit,
     scene_lines,
 )
-from autonomy.vectormap import VectorMap
+from autonomy.maps.vectormap import VectorMap
 from sim.simulator.blueprints import BuildingConfig, generate_building, load_blueprint
 
 N_RAYS = 20_000
@@ -383,12 +383,12 @@ def test_ray_hit_against_brute_force():
 
 
 def _indexed_matches_brute_force(lines: np.ndarray, ox: float, oy: float, dirs: np.ndarray, nb: int) -> None:
-    offsets, ids = rc._bearing_index(lines, ox, oy, nb)
+    offsets, ids = rc.bearing_index(lines, ox, oy, nb)
     assert offsets[0] == 0 and np.all(np.diff(offsets) >= 0) and offsets[-1] == len(ids)
     for b in range(nb):
         assert np.all(np.diff(ids[offsets[b] : offsets[b + 1]]) > 0)  # ascending: ties go to the lower id
     for dx, dy in dirs:
-        assert rc._ray_hit_indexed(lines, offsets, ids, ox, oy, dx, dy) == rc._ray_hit_kernel(lines, ox, oy, dx, dy)
+        assert rc.ray_hit_indexed(lines, offsets, ids, ox, oy, dx, dy) == rc.ray_hit_nb(lines, ox, oy, dx, dy)
 
 
 @pytest.mark.parametrize("nb", [1, 7, 512])

@@ -9,13 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from autonomy.avoidance import AvoidanceConfig
-from autonomy.errors import InputError
-from autonomy.freespace import FreeSpaceConfig, build_free_space
-from autonomy.geometry import compose_pose, wrap_angle
-from autonomy.raycast import SceneQuery, rays_hit
-from autonomy.relocalization import GlobalLocalizer, Mode, RelocalizationConfig, Scan
-from autonomy.vectormap import VectorMap
+from autonomy.common.errors import InputError
+from autonomy.common.geometry import compose_pose, wrap_angle
+from autonomy.localization.relocalization import GlobalLocalizer, Mode, RelocalizationConfig, Scan
+from autonomy.maps.freespace import FreeSpaceConfig, build_free_space
+from autonomy.maps.raycast import SceneQuery, rays_hit
+from autonomy.maps.vectormap import VectorMap
+from autonomy.navigation.avoidance import AvoidanceConfig
 from sim.simulator.blueprints import load_blueprint
 
 CELL = 0.05
@@ -557,7 +557,7 @@ def test_a_scan_mostly_of_unmapped_furniture_is_not_accepted_anywhere_wrong(buil
 #: A look round at the atrium's south edge by a robot carried there (the kidnapped
 #: scenario's world on seed 5213, the robot started at the landing place with an unknown
 #: pose): the scan (robot frame, where each point was seen from, when, relative to the
-#: search), the floor points seen (:mod:`autonomy.floor_rays`) and where from, and the
+#: search), the floor points seen (:mod:`autonomy.perception.floor_rays`) and where from, and the
 #: true pose. The scan is the atrium's long south wall 4 m away and the faces of
 #: furniture the map lacks.
 ATRIUM_EDGE = Path(__file__).resolve().parents[1] / "data" / "atrium_edge_scan.npz"

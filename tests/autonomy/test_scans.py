@@ -7,10 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from autonomy.camera import CameraIntrinsics, CameraMount
-from autonomy.errors import InputError
-from autonomy.fspf import FSPFConfig, fspf, project_to_floor
-from autonomy.scans import (
+from autonomy.common.errors import InputError
+from autonomy.localization.scans import (
     ScanConfig,
     complete_scan,
     drop_floor,
@@ -20,6 +18,8 @@ from autonomy.scans import (
     scan_angles,
     scan_points,
 )
+from autonomy.perception.camera import CameraIntrinsics, CameraMount
+from autonomy.perception.fspf import FSPFConfig, fspf, project_to_floor
 
 INTR = CameraIntrinsics()
 MOUNT = CameraMount()

@@ -9,12 +9,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from autonomy.camera import DepthCamera
-from autonomy.errors import InputError
-from autonomy.geometry import compose_pose
-from autonomy.navigator import NavigatorConfig
+from autonomy.common.errors import InputError
+from autonomy.common.geometry import compose_pose
+from autonomy.maps.vectormap import NavEdge, NavGraph, NavNode, VectorMap
+from autonomy.navigation.navigator import NavigatorConfig
+from autonomy.perception.camera import DepthCamera
 from autonomy.stack import LocalizationConfig, RobotStack, StackConfig
-from autonomy.vectormap import NavEdge, NavGraph, NavNode, VectorMap
 from tests.helpers import one_wall_depth
 
 WALL_X = 2.5

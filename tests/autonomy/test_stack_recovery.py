@@ -15,8 +15,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from autonomy.camera import DepthCamera
-from autonomy.geometry import (
+from autonomy.common.geometry import (
     compose_pose,
     point_segment_distance,
     points_from_frame,
@@ -25,9 +24,10 @@ from autonomy.geometry import (
     wrap_angle,
     wrap_angles,
 )
-from autonomy.raycast import SceneQuery, load_or_build
+from autonomy.localization.view_check import ViewCheckConfig
+from autonomy.maps.raycast import SceneQuery, load_or_build
+from autonomy.perception.camera import DepthCamera
 from autonomy.stack import LOCALIZATION_GRID, RecoveryConfig, RobotStack, StackConfig, most_open_way
-from autonomy.view_check import ViewCheckConfig
 from sim.simulator.blueprints import ASSETS_DIR, load_blueprint
 from sim.simulator.map_depth import MapDepth
 from tests.helpers import points_along
@@ -398,7 +398,7 @@ def test_an_unknown_start_pose_is_found_while_still_turning_in_place(found) -> N
 def test_a_mode_is_accepted_only_on_a_search_of_the_whole_map(building, monkeypatch) -> None:
     """Re-scoring sees only the modes kept so far: one that passes the decision there
     brings the next whole-map search forward, and is accepted only if it passes that."""
-    from autonomy.relocalization import GlobalLocalizer
+    from autonomy.localization.relocalization import GlobalLocalizer
 
     calls: list[tuple[str, bool]] = []
     for name in ("search", "rescore"):
@@ -532,7 +532,7 @@ def test_an_exploring_drive_does_not_set_out_into_walls_the_scan_has_seen(buildi
     way out of a room can lead into a wall the robot has seen. With every way blocked,
     the one ahead is tried. A wall seen longer ago no longer counts: dead reckoning has
     moved it since."""
-    from autonomy.geometry import points_in_frame
+    from autonomy.common.geometry import points_in_frame
     from autonomy.stack import SEEN_KEEP_S
 
     stack = make_stack(building, pose=None)
@@ -554,7 +554,7 @@ def test_an_exploring_drive_does_not_set_out_into_walls_the_scan_has_seen(buildi
     stack._explored.clear()
     assert stack._explore_node(pose, SEEN_KEEP_S + 0.1) == ahead
     stack._explored.clear()
-    from autonomy.geometry import polyline_clear
+    from autonomy.common.geometry import polyline_clear
 
     r = stack.cfg.avoidance.robot_radius_m
     assert polyline_clear(points_in_frame(pose, stack.navigator.plan_points(other, pose)), wall, stack.cfg.recovery.explore_check_m, r - 0.05)
@@ -587,9 +587,9 @@ def test_prepare_recovery_loads_the_kernels_the_search_uses() -> None:
 
     code = """
 import numpy as np
-from autonomy.relocalization import _grid_costs, _refine, _through_counts
+from autonomy.localization.relocalization import _grid_costs, _refine, _through_counts
 from autonomy.stack import RobotStack, StackConfig
-from autonomy.straight_runs import _straight_runs, on_straight_runs
+from autonomy.localization.straight_runs import _straight_runs, on_straight_runs
 from sim.simulator.blueprints import load_blueprint
 bp = load_blueprint("corridor_loop")
 stack = RobotStack(bp.vectormap, bp.navgraph, StackConfig(), rng=np.random.default_rng(0))
@@ -779,7 +779,7 @@ def test_a_landing_facing_open_floor_is_noticed_by_the_walls_seen_past(building,
     where the new view returns nothing above the floor it sees, and says lost on the
     first frame. Counting only pixels where both frames returned it compares too few
     points; then the floor seen past the wall the belief still puts beside the robot tells
-    (:mod:`autonomy.missing_walls`); without either, nothing does while the robot stands
+    (:mod:`autonomy.localization.missing_walls`); without either, nothing does while the robot stands
     there (a kidnapped run's robot drove 23 m on such a belief)."""
     scene = building[1]
     rc = RecoveryConfig()

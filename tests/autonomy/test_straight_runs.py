@@ -1,4 +1,4 @@
-"""Points on long straight runs (autonomy/straight_runs.py) against scenes with a known answer."""
+"""Points on long straight runs (autonomy/localization/straight_runs.py) against scenes with a known answer."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from autonomy.errors import InputError
-from autonomy.geometry import points_from_frame
-from autonomy.straight_runs import on_straight_runs
+from autonomy.common.errors import InputError
+from autonomy.common.geometry import points_from_frame
+from autonomy.localization.straight_runs import on_straight_runs
 from tests.helpers import points_along
 
 

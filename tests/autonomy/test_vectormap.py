@@ -11,8 +11,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from autonomy.errors import InputError
-from autonomy.vectormap import (
+from autonomy.common.errors import InputError
+from autonomy.maps.vectormap import (
     MapFormatError,
     NavEdge,
     NavGraph,

@@ -12,20 +12,20 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from autonomy.camera import CameraIntrinsics, DepthCamera, pixel_rays, transform_points
-from autonomy.errors import InputError
-from autonomy.floor_rays import REACH_STRIDE_PX, floor_reach
-from autonomy.geometry import compose_pose, relative_pose
-from autonomy.health import HealthConfig
-from autonomy.raycast import SceneQuery, load_or_build
-from autonomy.stack import LOCALIZATION_GRID
-from autonomy.view_check import (
+from autonomy.common.errors import InputError
+from autonomy.common.geometry import compose_pose, relative_pose
+from autonomy.localization.health import HealthConfig
+from autonomy.localization.view_check import (
     ViewCheck,
     ViewCheckConfig,
     move_points,
     sample_points,
     view_agreement,
 )
+from autonomy.maps.raycast import SceneQuery, load_or_build
+from autonomy.perception.camera import CameraIntrinsics, DepthCamera, pixel_rays, transform_points
+from autonomy.perception.floor_rays import REACH_STRIDE_PX, floor_reach
+from autonomy.stack import LOCALIZATION_GRID
 from sim.simulator.blueprints import ASSETS_DIR, load_blueprint
 from sim.simulator.map_depth import MapDepth
 

@@ -15,7 +15,7 @@ import pytest
 
 torch = pytest.importorskip("torch")  # the rl extra
 
-from autonomy.errors import InputError  # noqa: E402
+from autonomy.common.errors import InputError  # noqa: E402
 from sim.cli import main  # noqa: E402
 from sim.rl.bc import BCPolicy, train_bc  # noqa: E402
 from sim.rl.demos import Demonstrations, load_demonstrations, record_demonstrations  # noqa: E402

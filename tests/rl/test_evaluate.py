@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import sim  # noqa: F401  (registers DepthNav-v0)
-from autonomy.errors import InputError
+from autonomy.common.errors import InputError
 from sim.cli import main
 from sim.rl.evaluate import (
     EpisodeResult,

@@ -15,7 +15,7 @@ import pytest
 import torch
 
 import sim  # noqa: F401  (registers DepthNav-v0)
-from autonomy.errors import InputError
+from autonomy.common.errors import InputError
 from sim.cli import build_parser, main
 from sim.rl.policies import Policy, make_policy
 from sim.rl.ppo import PPOTrainConfig, config_with, resume_config, train_ppo

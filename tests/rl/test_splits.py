@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import sim  # noqa: F401  (registers DepthNav-v0)
-from autonomy.errors import InputError
+from autonomy.common.errors import InputError
 from sim.envs.config import EnvConfig
 from sim.rl.splits import (
     BENCHMARK_TASK,

@@ -9,8 +9,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from autonomy.errors import InputError
-from autonomy.vectormap import MapFormatError, NavGraph
+from autonomy.common.errors import InputError
+from autonomy.maps.vectormap import MapFormatError, NavGraph
 from sim.simulator.blueprints import (
     ASSETS_DIR,
     SHIPPED,

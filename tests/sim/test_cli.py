@@ -41,7 +41,7 @@ def test_map_check_bad_file_exits_2(tmp_path: Path, capsys, content: str, patter
 
 
 def test_map_convert_round_trip(tmp_path: Path, capsys) -> None:
-    from autonomy.vectormap import load_vectormap
+    from autonomy.maps.vectormap import load_vectormap
 
     j = tmp_path / "m.vectormap.json"
     t = tmp_path / "m.vectormap.txt"
@@ -58,7 +58,7 @@ def test_map_render(tmp_path: Path) -> None:
 
 
 def test_snapshot_writes_depth(tmp_path: Path) -> None:
-    from autonomy.vectormap import load_navgraph
+    from autonomy.maps.vectormap import load_navgraph
 
     g = load_navgraph(ASSETS_DIR / "small_floor.navigation.json")
     x, y = g.node_xy()[0]

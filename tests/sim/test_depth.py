@@ -11,8 +11,8 @@ import math
 import numpy as np
 import pytest
 
-from autonomy.camera import CameraIntrinsics, CameraMount
-from autonomy.vectormap import VectorMap
+from autonomy.maps.vectormap import VectorMap
+from autonomy.perception.camera import CameraIntrinsics, CameraMount
 from sim.simulator.kinect import (
     KinectCamera,
     KinectConfig,
@@ -166,7 +166,7 @@ def test_the_far_plane_leaves_the_noisy_frame_in_range_as_it_was() -> None:
 
 
 def test_far_distance_is_checked() -> None:
-    from autonomy.errors import InputError
+    from autonomy.common.errors import InputError
 
     with pytest.raises(InputError, match="kinect.render_far_m"):
         KinectConfig(render_far_m=-1.0)

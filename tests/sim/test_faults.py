@@ -10,11 +10,11 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from autonomy.camera import CameraIntrinsics, CameraMount
-from autonomy.errors import InputError
-from autonomy.geometry import compose_pose, point_segment_distance, relative_pose
-from autonomy.planner import astar, path_points
-from autonomy.vectormap import NavEdge, NavGraph, NavNode
+from autonomy.common.errors import InputError
+from autonomy.common.geometry import compose_pose, point_segment_distance, relative_pose
+from autonomy.maps.planner import astar, path_points
+from autonomy.maps.vectormap import NavEdge, NavGraph, NavNode
+from autonomy.perception.camera import CameraIntrinsics, CameraMount
 from sim.config import from_dict, to_dict
 from sim.simulator import blueprints
 from sim.simulator.actors import PARK_XY, Furniture

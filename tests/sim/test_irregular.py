@@ -11,8 +11,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from autonomy.errors import InputError
-from autonomy.freespace import label_components, rasterise
+from autonomy.common.errors import InputError
+from autonomy.maps.freespace import label_components, rasterise
 from sim.simulator.blueprints import (
     Blueprint,
     BuildingConfig,

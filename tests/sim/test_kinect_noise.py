@@ -9,8 +9,8 @@ from statistics import NormalDist
 import numpy as np
 import pytest
 
-from autonomy.camera import CameraIntrinsics
-from autonomy.errors import InputError
+from autonomy.common.errors import InputError
+from autonomy.perception.camera import CameraIntrinsics
 from sim.simulator import kinect_noise as kn
 from sim.simulator.kinect_noise import (
     KinectNoiseConfig,

@@ -7,9 +7,9 @@ import math
 
 import numpy as np
 
-from autonomy.camera import DepthCamera
-from autonomy.raycast import SceneQuery
-from autonomy.vectormap import VectorMap
+from autonomy.maps.raycast import SceneQuery
+from autonomy.maps.vectormap import VectorMap
+from autonomy.perception.camera import DepthCamera
 from sim.simulator.actors import Furniture
 from sim.simulator.map_depth import MapDepth
 from tests.helpers import one_wall_depth

@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 
-from autonomy.errors import InputError
+from autonomy.common.errors import InputError
 from sim.simulator.blueprints import BuildingConfig, generate_building, small_floor
 from sim.viz.maps import render_map
 

@@ -8,7 +8,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from autonomy.vectormap import NavEdge, NavGraph, NavNode, VectorMap, save_navgraph, save_vectormap
+from autonomy.maps.vectormap import (
+    NavEdge,
+    NavGraph,
+    NavNode,
+    VectorMap,
+    save_navgraph,
+    save_vectormap,
+)
 from sim.experiments.runner import run_scenario
 from sim.scenario import load_scenario
 

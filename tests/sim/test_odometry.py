@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from autonomy.errors import InputError
-from autonomy.geometry import compose_pose, relative_pose
+from autonomy.common.errors import InputError
+from autonomy.common.geometry import compose_pose, relative_pose
 from sim.simulator.robot import Odometry, OdometryConfig
 
 finite = st.floats(-50, 50, allow_nan=False)

@@ -13,12 +13,12 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from autonomy.avoidance import AvoidanceConfig
-from autonomy.errors import InputError
-from autonomy.geometry import point_segment_distance
-from autonomy.graph_builder import graph_components
-from autonomy.planner import adjacency
-from autonomy.vectormap import VectorMap, save_vectormap
+from autonomy.common.errors import InputError
+from autonomy.common.geometry import point_segment_distance
+from autonomy.maps.graph_builder import graph_components
+from autonomy.maps.planner import adjacency
+from autonomy.maps.vectormap import VectorMap, save_vectormap
+from autonomy.navigation.avoidance import AvoidanceConfig
 from sim.experiments.runner import load_building, run_scenario
 from sim.experiments.waypoints import plan_mission
 from sim.scenario import MissionConfig, load_scenario

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from autonomy.geometry import point_segment_distance
+from autonomy.common.geometry import point_segment_distance
 from sim.simulator.actors import PeopleController, Person
 from sim.simulator.blueprints import load_blueprint
 from sim.simulator.world import build_world

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from autonomy.errors import InputError
+from autonomy.common.errors import InputError
 from sim.experiments import real_floors as rf
 from sim.experiments.kinds import load_experiment
 from tests.helpers import GL, err_line

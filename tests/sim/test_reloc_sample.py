@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from autonomy.errors import InputError
+from autonomy.common.errors import InputError
 from sim.cli import main
 from sim.experiments.reloc_sample import parse_region, sample
 

@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from autonomy.camera import CameraIntrinsics
-from autonomy.vectormap import VectorMap
+from autonomy.maps.vectormap import VectorMap
+from autonomy.perception.camera import CameraIntrinsics
 from sim.simulator.kinect import make_depth_backend
 from sim.simulator.world import WorldConfig, build_world
 from tests.helpers import GL
@@ -185,8 +185,8 @@ def test_ctrl_c_during_a_request_waits_for_its_reply() -> None:
         """
         import os, signal, numpy as np
         signal.signal(signal.SIGINT, signal.default_int_handler)  # a test runner's worker may ignore it
-        from autonomy.camera import CameraIntrinsics
-        from autonomy.vectormap import VectorMap
+        from autonomy.perception.camera import CameraIntrinsics
+        from autonomy.maps.vectormap import VectorMap
         from sim.simulator import render_process as rp
         from sim.simulator.world import WorldConfig, build_world
         vm = VectorMap.from_segments(np.array([[0, 0, 8, 0], [8, 0, 8, 5], [8, 5, 0, 5], [0, 5, 0, 0]], dtype=np.float64))

@@ -132,7 +132,7 @@ def test_a_users_mistake_found_on_the_way_is_still_a_one_line_error(
 ) -> None:
     """An InputError raised inside the loop (a waypoint the user's map has no path to)
     keeps the report of what finished and stays the CLI's one-line user error (exit 2)."""
-    from autonomy.planner import NoPathError
+    from autonomy.maps.planner import NoPathError
 
     _fail_at_call(monkeypatch, 10, NoPathError("navigation graph: no path from node 3 to node 9"))
     out = tmp_path / "out"
@@ -394,7 +394,7 @@ def test_the_trace_window_writes_each_of_its_frames_as_the_run_saw_it(tmp_path: 
 
 @pytest.mark.parametrize("window", ["[2.0, 1.0]", "[1.0]", "[-1.0, 2.0]", "[1.0, nan]"])
 def test_a_bad_trace_window_is_a_one_line_error(window: str) -> None:
-    from autonomy.errors import InputError
+    from autonomy.common.errors import InputError
 
     with pytest.raises(InputError, match=r"report\.trace_s(\[1\])?.* expected"):
         _short_demo([f"report.trace_s={window}"])
@@ -443,7 +443,7 @@ def test_a_system_error_without_an_interrupt_is_a_crash(tmp_path: Path, monkeypa
 def test_blind_driving_counts_the_metres_cgr_dead_reckoned_and_the_longest_stretch() -> None:
     from types import SimpleNamespace
 
-    from autonomy.cgr import UpdateStats
+    from autonomy.localization.cgr import UpdateStats
     from sim.experiments.runner import note_blind
 
     seen, unseen = UpdateStats(observation=True), UpdateStats(observation=False)

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from autonomy.errors import InputError
+from autonomy.common.errors import InputError
 from sim.config import apply_overrides, parse_override
 from sim.scenario import SCENARIOS_DIR, Scenario, list_scenarios, load_scenario
 
@@ -130,7 +130,7 @@ def test_the_robot_radius_has_one_source() -> None:
 
 
 def test_an_avoidance_radius_other_than_the_body_is_refused_everywhere() -> None:
-    from autonomy.avoidance import AvoidanceConfig
+    from autonomy.navigation.avoidance import AvoidanceConfig
     from sim.envs.config import EnvConfig
     from sim.simulator.robot import RobotConfig, avoidance_for_body
 

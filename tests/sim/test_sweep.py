@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from autonomy.errors import InputError
+from autonomy.common.errors import InputError
 from sim.experiments import kinds as experiments
 from sim.experiments.sweep import SweepError, read_trials, run_sweep
 from tests.helpers import interrupt

@@ -76,7 +76,7 @@ def test_trajectory_strips_are_bounded(tmp_path: Path) -> None:
 
 
 def test_an_unwritable_recording_path_is_a_one_line_input_error(tmp_path: Path) -> None:
-    from autonomy.errors import InputError
+    from autonomy.common.errors import InputError
     from sim.viz.recording import Recorder
 
     with pytest.raises(InputError, match="expected a file name for the rerun recording, got a directory"):

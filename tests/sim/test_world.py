@@ -8,8 +8,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from autonomy.errors import InputError
-from autonomy.vectormap import VectorMap
+from autonomy.common.errors import InputError
+from autonomy.maps.vectormap import VectorMap
 from sim.simulator.actors import Furniture, Person
 from sim.simulator.world import WorldConfig, build_world
 from tests.helpers import box_room

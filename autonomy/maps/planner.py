@@ -17,10 +17,10 @@ from collections.abc import Collection, Mapping
 import numba
 import numpy as np
 
-from autonomy.errors import InputError
-from autonomy.geometry import WallIndex
-from autonomy.raycast import _segment_hit
-from autonomy.vectormap import NavGraph
+from autonomy.common.errors import InputError
+from autonomy.common.geometry import WallIndex
+from autonomy.maps.raycast import _segment_hit
+from autonomy.maps.vectormap import NavGraph
 
 
 class NoPathError(InputError):

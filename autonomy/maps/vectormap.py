@@ -14,7 +14,7 @@ Formats (CoBot / UT AMRL, docs/architecture.md):
 Every malformed input raises :class:`MapFormatError`, whose one-line message names the
 file, the line (and for JSON the element path, e.g. ``[3].p1.y``) and what was expected.
 
-Loading also checks the walls (:mod:`autonomy.map_hygiene`): zero-length and duplicate
+Loading also checks the walls (:mod:`autonomy.maps.map_hygiene`): zero-length and duplicate
 segments are dropped, overlapping collinear ones reported, and a map whose extent is not a
 building in metres (a millimetre map, say) refused. Each finding is one warning line on the
 ``"depthnav.map"`` logger; ``load_vectormap(path, scale=0.001)`` reads a millimetre map.
@@ -33,8 +33,8 @@ from typing import Any
 
 import numpy as np
 
-from autonomy.errors import InputError
-from autonomy.map_hygiene import Finding, clean_segments, log_findings
+from autonomy.common.errors import InputError
+from autonomy.maps.map_hygiene import Finding, clean_segments, log_findings
 
 __all__ = [
     "MapFormatError",
@@ -49,6 +49,7 @@ __all__ = [
     "load_vectormap",
     "load_vectormap_checked",
     "save_vectormap",
+    "check_vectormap",
     "parse_navgraph_json",
     "format_navgraph_json",
     "load_navgraph",
@@ -249,7 +250,7 @@ def parse_vectormap_text(
 ) -> VectorMap:
     """Parse the text format (one ``x1, y1, x2, y2`` wall per line).
 
-    Coordinates are multiplied by ``scale``, then checked (:mod:`autonomy.map_hygiene`):
+    Coordinates are multiplied by ``scale``, then checked (:mod:`autonomy.maps.map_hygiene`):
     findings are logged as warnings on ``"depthnav.map"``, errors raised as
     :class:`MapFormatError`. ``checks=False`` keeps only what a :class:`VectorMap` needs
     (drops zero-length segments; no duplicate, extent or overlap checks).
@@ -578,7 +579,7 @@ def load_vectormap(path: PathLike, *, scale: float = 1.0, checks: bool = True) -
     """Load a vector map, choosing the format from the suffix (``.txt`` or ``.json``).
 
     Coordinates are multiplied by ``scale`` (0.001 for a map in millimetres), then checked
-    (:mod:`autonomy.map_hygiene`): each finding is logged as one warning line on the
+    (:mod:`autonomy.maps.map_hygiene`): each finding is logged as one warning line on the
     ``"depthnav.map"`` logger; an error raises :class:`MapFormatError`.
     """
     vm, findings = load_vectormap_checked(path, scale=scale, checks=checks)
@@ -870,3 +871,14 @@ def save_navgraph(g: NavGraph, path: PathLike) -> Path:
     p = Path(path)
     p.write_text(format_navgraph_json(g), encoding="utf-8")
     return p
+
+
+def check_vectormap(vm: VectorMap, source: str | None = None) -> list[Finding]:
+    """The findings for a map already in memory (segments named ``[i]``, 0-based).
+
+    Nothing is changed or logged; messages say "would drop". ``source`` defaults to the
+    map's name. A map loaded from a file has had its zero-length and duplicate segments
+    dropped already, so this mostly reports overlaps and the extent.
+    """
+    name = source if source is not None else (vm.name or "vector map")
+    return list(clean_segments(vm.segments, name, applied=False).findings)

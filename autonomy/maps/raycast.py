@@ -54,10 +54,10 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from autonomy.cache import cache_paths
-from autonomy.errors import InputError
-from autonomy.files import atomic_write
-from autonomy.vectormap import VectorMap
+from autonomy.common.cache import cache_paths
+from autonomy.common.errors import InputError
+from autonomy.common.files import atomic_write
+from autonomy.maps.vectormap import VectorMap
 
 __all__ = [
     "scene_lines",
@@ -87,15 +87,14 @@ _GRID_VERSION = 2
 
 
 @numba.njit(cache=True, inline="always")
-def _pseudo_angle(vx: float, vy: float) -> float:
-    """Monotone stand-in for atan2 in [0, 4) (the 'diamond angle'): no trigonometry."""
-    if vy >= 0.0:
-        if vx >= 0.0:
-            return vy / (vx + vy)
-        return 1.0 - vx / (vy - vx)
-    if vx < 0.0:
-        return 2.0 - vy / (-vx - vy)
-    return 3.0 + vx / (vx - vy)
+def _pseudo_angle(x: float, y: float) -> float:
+    """A number in [0, 4) that grows with atan2(y, x) from -pi (the "diamond angle": no
+    trigonometry); opposite directions are 2 apart. (0, 0) gives 0."""
+    a = abs(x) + abs(y)
+    if a == 0.0:
+        return 0.0
+    p = y / a
+    return p + 1.0 if x >= 0.0 else 3.0 - p
 
 
 @numba.njit(cache=True, inline="always")
@@ -631,7 +630,8 @@ def _segment_hit(lines: np.ndarray, i: int, ox: float, oy: float, dx: float, dy:
 
 
 @numba.njit(cache=True)
-def _ray_hit_kernel(lines: np.ndarray, ox: float, oy: float, dx: float, dy: float) -> tuple[int, float]:
+def ray_hit_nb(lines: np.ndarray, ox: float, oy: float, dx: float, dy: float) -> tuple[int, float]:
+    """:func:`ray_hit` inside compiled code (lines already checked): every line tested."""
     best = -1
     tb = np.inf
     for i in range(lines.shape[0]):
@@ -642,19 +642,8 @@ def _ray_hit_kernel(lines: np.ndarray, ox: float, oy: float, dx: float, dy: floa
     return best, tb
 
 
-@numba.njit(cache=True, inline="always")
-def _pseudo_angle(x: float, y: float) -> float:
-    """A number in [0, 4) that grows with atan2(y, x) from -pi (the "diamond angle": no
-    trigonometry); opposite directions are 2 apart. (0, 0) gives 0."""
-    a = abs(x) + abs(y)
-    if a == 0.0:
-        return 0.0
-    p = y / a
-    return p + 1.0 if x >= 0.0 else 3.0 - p
-
-
 @numba.njit(cache=True)
-def _bearing_index(lines: np.ndarray, ox: float, oy: float, nb: int) -> tuple[np.ndarray, np.ndarray]:
+def bearing_index(lines: np.ndarray, ox: float, oy: float, nb: int) -> tuple[np.ndarray, np.ndarray]:
     """The lines each of ``nb`` equal bins of pseudo-angle around (ox, oy) may hold, as
     (offsets (nb + 1,), line ids) in ascending id order per bin: a ray needs testing only
     against its bin's lines. Each line's bins are its endpoints' arc widened by a bin on
@@ -698,11 +687,11 @@ def _bearing_index(lines: np.ndarray, ox: float, oy: float, nb: int) -> tuple[np
 
 
 @numba.njit(cache=True)
-def _ray_hit_indexed(
+def ray_hit_indexed(
     lines: np.ndarray, offsets: np.ndarray, ids: np.ndarray, ox: float, oy: float, dx: float, dy: float
 ) -> tuple[int, float]:
-    """:func:`_ray_hit_kernel` against only the lines of the ray's bin of
-    :func:`_bearing_index` (built at ``ox, oy``): the same answer."""
+    """:func:`ray_hit_nb` against only the lines of the ray's bin of
+    :func:`bearing_index` (built at ``ox, oy``): the same answer."""
     nb = offsets.shape[0] - 1
     b = int(_pseudo_angle(dx, dy) * (nb / 4.0)) % nb
     best = -1
@@ -724,7 +713,7 @@ def _rays_hit_kernel(
     idx = np.empty(k, np.int64)
     ts = np.empty(k)
     for r in range(k):
-        i, t = _ray_hit_kernel(lines, ox, oy, dirs[r, 0], dirs[r, 1])
+        i, t = ray_hit_nb(lines, ox, oy, dirs[r, 0], dirs[r, 1])
         idx[r] = i
         ts[r] = t
     return idx, ts
@@ -736,7 +725,7 @@ def ray_hit(lines: np.ndarray, ox: float, oy: float, dx: float, dy: float) -> tu
     ``t`` is in units of the direction (a distance when it is a unit vector). Lines parallel
     to the ray are not hit.
     """
-    i, t = _ray_hit_kernel(_check_segments(lines), float(ox), float(oy), float(dx), float(dy))
+    i, t = ray_hit_nb(_check_segments(lines), float(ox), float(oy), float(dx), float(dy))
     return int(i), float(t)
 
 

@@ -39,10 +39,10 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from autonomy.constants import KINECT_MAX_RANGE_M, ROBOT_RADIUS_M, SAFETY_MARGIN_M
-from autonomy.errors import InputError
-from autonomy.geometry import wrap_angle
-from autonomy.nearfield import NearFieldConfig
+from autonomy.common.constants import KINECT_MAX_RANGE_M, ROBOT_RADIUS_M, SAFETY_MARGIN_M
+from autonomy.common.errors import InputError
+from autonomy.common.geometry import wrap_angle
+from autonomy.perception.nearfield import NearFieldConfig
 
 
 @dataclass(frozen=True)
@@ -69,7 +69,7 @@ class AvoidanceConfig:
     """a: maximum braking deceleration used for the safe speed."""
     near_field: NearFieldConfig = field(default_factory=NearFieldConfig)
     """Obstacles closer than the camera's minimum range, from the near floor it fails to
-    see (ours, :mod:`autonomy.nearfield`)."""
+    see (ours, :mod:`autonomy.perception.nearfield`)."""
 
     def __post_init__(self) -> None:
         for name in ("robot_radius_m", "max_range_m", "max_decel_mps2", "fov_rad"):

@@ -31,8 +31,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from autonomy.errors import InputError
-from autonomy.geometry import wrap_angle_nb
+from autonomy.common.errors import InputError
+from autonomy.common.geometry import wrap_angle_nb
 
 
 @dataclass(frozen=True)
@@ -569,7 +569,7 @@ def _add_prior(work, pose, centre, info):  # pragma: no cover - numba
 def expected_ranges(lines: np.ndarray, pose: np.ndarray, angles: np.ndarray, max_range_m: float = np.inf) -> np.ndarray:
     """Laser ranges a sensor at ``pose`` would measure along ``angles`` (robot frame) on the
     scene lines; 0 where a ray hits nothing within ``max_range_m`` (no return)."""
-    from autonomy.raycast import rays_hit
+    from autonomy.maps.raycast import rays_hit
 
     a = np.asarray(angles, dtype=np.float64) + float(pose[2])
     idx, t = rays_hit(np.ascontiguousarray(lines, dtype=np.float64).reshape(-1, 4), float(pose[0]), float(pose[1]), np.column_stack([np.cos(a), np.sin(a)]))

@@ -32,9 +32,9 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from autonomy.camera import CameraIntrinsics, CameraMount
-from autonomy.errors import InputError
-from autonomy.rng import MASK64, randint, seed_u64
+from autonomy.common.errors import InputError
+from autonomy.common.rng import MASK64, randint, seed_u64
+from autonomy.perception.camera import CameraIntrinsics, CameraMount
 
 
 @dataclass(frozen=True)
@@ -121,7 +121,7 @@ def project_to_floor(points: np.ndarray, normals: np.ndarray, max_vertical_angle
     return np.ascontiguousarray(points[keep][ok, :2]), n2[ok] / norm[ok, None]
 
 
-# -- random stream: autonomy.rng (shared with the plane kernels) ---------------------
+# -- random stream: autonomy.common.rng (shared with the plane kernels) ---------------------
 
 
 # -- the kernel -------------------------------------------------------------------------

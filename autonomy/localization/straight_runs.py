@@ -1,6 +1,6 @@
 """Points on long straight runs: how much of a scan is wall.
 
-A relocalization's scan (:class:`autonomy.relocalization.Scan`) can hold hundreds of
+A relocalization's scan (:class:`autonomy.localization.relocalization.Scan`) can hold hundreds of
 points and still no wall: in the middle of an open hall the walls lie beyond the
 camera's 4 m, and a look round sees pillars a hand's breadth wide and furniture the map
 lacks. No place explains such a scan clearly, and pillars in rows repeat, so the search
@@ -24,7 +24,7 @@ import math
 import numba
 import numpy as np
 
-from autonomy.errors import InputError
+from autonomy.common.errors import InputError
 
 GAP_M = 0.3
 """Neighbours along a line farther apart than this end a run: a doorway or the space

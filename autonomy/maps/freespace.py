@@ -38,9 +38,9 @@ from dataclasses import dataclass, field, replace
 import numba
 import numpy as np
 
-from autonomy.constants import ROBOT_RADIUS_M
-from autonomy.errors import InputError, require_int, require_positive
-from autonomy.vectormap import VectorMap
+from autonomy.common.constants import ROBOT_RADIUS_M
+from autonomy.common.errors import InputError, require_int, require_positive
+from autonomy.maps.vectormap import VectorMap
 
 __all__ = [
     "FreeSpaceConfig", "FreeSpace", "build_free_space", "rasterise", "grid_distance", "label_components", "MAX_GRID_CELLS",

@@ -18,7 +18,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import BinaryIO
 
-from autonomy.errors import InputError
+from autonomy.common.errors import InputError
 
 
 @contextmanager

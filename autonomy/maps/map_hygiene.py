@@ -16,10 +16,10 @@ map), and returns the rows to keep plus one :class:`Finding` per problem:
   end to end are not an overlap.
 
 Each finding's :attr:`Finding.message` is one line naming the file, the first
-:data:`MAX_LISTED` rows and what was done. The loader in :mod:`autonomy.vectormap` raises
-an error finding as a :class:`~autonomy.vectormap.MapFormatError` and logs the others on
+:data:`MAX_LISTED` rows and what was done. The loader in :mod:`autonomy.maps.vectormap` raises
+an error finding as a :class:`~autonomy.maps.vectormap.MapFormatError` and logs the others on
 the ``"depthnav.map"`` logger (:data:`LOGGER_NAME`), so they print as one line each and
-can be silenced or routed with :mod:`logging`. :func:`check_vectormap` runs the same
+can be silenced or routed with :mod:`logging`. :func:`autonomy.maps.vectormap.check_vectormap` runs the same
 checks on a map already in memory. All checks are vectorised: about 10 ms for 10,000
 segments.
 """
@@ -30,19 +30,15 @@ import logging
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
-
-if TYPE_CHECKING:
-    from autonomy.vectormap import VectorMap
 
 __all__ = [
     "LOGGER_NAME",
     "Finding",
     "Cleaned",
     "clean_segments",
-    "check_vectormap",
     "log_findings",
     "ROUND_M",
     "OVERLAP_DIST_M",
@@ -352,7 +348,7 @@ def clean_segments(
     messages (a line number, ``"[i] (line L)"``; default ``"[i]"``) and ``unit`` what the
     labels count (``"line(s)"``, ``"element(s)"``). Only the first :data:`MAX_LISTED`
     labels of a finding are asked for. ``checks=False`` runs only what a
-    :class:`~autonomy.vectormap.VectorMap` needs (finite; zero-length means exactly zero,
+    :class:`~autonomy.maps.vectormap.VectorMap` needs (finite; zero-length means exactly zero,
     not under :data:`ROUND_M`).
     ``applied=False`` words the messages for a map that is only being checked ("would
     drop"). Nothing is raised for the map's content: errors are findings.
@@ -439,17 +435,6 @@ def clean_segments(
                     )
                 )
     return Cleaned(seg[kept], kept, tuple(findings))
-
-
-def check_vectormap(vm: VectorMap, source: str | None = None) -> list[Finding]:
-    """The findings for a map already in memory (segments named ``[i]``, 0-based).
-
-    Nothing is changed or logged; messages say "would drop". ``source`` defaults to the
-    map's name. A map loaded from a file has had its zero-length and duplicate segments
-    dropped already, so this mostly reports overlaps and the extent.
-    """
-    name = source if source is not None else (vm.name or "vector map")
-    return list(clean_segments(vm.segments, name, applied=False).findings)
 
 
 def log_findings(findings: Iterable[Finding], logger: logging.Logger | None = None) -> None:

@@ -1,7 +1,7 @@
 """Does the view move the way the wheels say? A check of the depth camera against the odometry.
 
 A robot that is carried away (kidnapped) or pushed sees a new view while its wheels
-report no such motion. The map-based tests of :mod:`autonomy.health` notice that only
+report no such motion. The map-based tests of :mod:`autonomy.localization.health` notice that only
 once the short-term averages have fallen for seconds, and for those seconds the
 navigator keeps placing the map's walls beside the robot, where the camera cannot see,
 through a belief that is somewhere else: a robot put down beside a door jamb drove into
@@ -21,7 +21,7 @@ one of them is within ``tol_m + tol_per_m2 z^2`` of its predicted depth z (the K
 axial noise and disparity steps grow with z squared). It **disagrees** too when none of
 them returned anything although z lies well inside the camera's range (``empty_margin_m``
 from either end) and the image column returned the floor at a depth of z or more
-(:func:`autonomy.floor_rays.floor_reach`): the camera would have seen the point there.
+(:func:`autonomy.perception.floor_rays.floor_reach`): the camera would have seen the point there.
 A Kinect pixel returns nothing closer than its minimum range too; the floor seen that
 far rules out a wall or a person that close in the column. The current frame's points
 are compared with the stored image the same way. Points projected outside the image or
@@ -30,7 +30,7 @@ compared. A frame with no valid pixel on the grid (a blackout, a blocked lens) c
 nothing.
 
 The agreement fraction is NaN (no evidence) with fewer than ``min_points`` compared;
-:class:`autonomy.health.HealthMonitor` says lost when it falls below a threshold. Between
+:class:`autonomy.localization.health.HealthMonitor` says lost when it falls below a threshold. Between
 two frames a person walking in front of the camera moves a few centimetres, the robot's
 odometry errs by a fraction of a degree, and a camera tilted by a bump keeps agreeing on
 vertical walls. What the check cannot tell: a landing facing a plain wall at the same
@@ -47,10 +47,10 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from autonomy.camera import CameraIntrinsics, pixel_point_nb
-from autonomy.errors import InputError, require_int, require_non_negative, require_positive
-from autonomy.floor_rays import REACH_STRIDE_PX, floor_reach
-from autonomy.geometry import points_from_frame, relative_pose
+from autonomy.common.errors import InputError, require_int, require_non_negative, require_positive
+from autonomy.common.geometry import points_from_frame, relative_pose
+from autonomy.perception.camera import CameraIntrinsics, pixel_point_nb
+from autonomy.perception.floor_rays import REACH_STRIDE_PX, floor_reach
 
 __all__ = ["ViewCheckConfig", "ViewCheck", "sample_points", "view_agreement", "move_points"]
 
@@ -152,7 +152,7 @@ def _agreement_kernel(pts, rot, trans, depth, reach, reach_su, fx, fy, cx, cy, z
     """(compared, agreeing) of robot-frame ``pts`` against ``depth`` (module docstring);
     ``rot``, ``trans``: robot_from_camera. A point at a depth z in [``empty_lo``,
     ``empty_hi``] whose window returned nothing, in a column that returned the floor at
-    a depth of z or more (``reach``, :func:`autonomy.floor_rays.floor_reach`, one entry
+    a depth of z or more (``reach``, :func:`autonomy.perception.floor_rays.floor_reach`, one entry
     per ``reach_su`` columns), is compared and disagrees."""
     h, w = depth.shape
     n_cmp = 0
@@ -218,7 +218,7 @@ def view_agreement(
     moved into the current robot frame, against the current ``depth`` image. With
     ``empty_margin_m``, a point that far inside the range whose pixels returned nothing,
     in a column of ``depth`` that returned the floor at least as deep, disagrees; without,
-    it is not compared. ``reach``: :func:`autonomy.floor_rays.floor_reach` of ``depth``
+    it is not compared. ``reach``: :func:`autonomy.perception.floor_rays.floor_reach` of ``depth``
     (through ``robot_from_camera``) if already known."""
     p = np.ascontiguousarray(pts, dtype=np.float64).reshape(-1, 3)
     d = np.ascontiguousarray(depth, dtype=np.float32)

@@ -53,9 +53,9 @@ from dataclasses import dataclass, fields
 import numba
 import numpy as np
 
-from autonomy.camera import ROBOT_FROM_OPTICAL_LEVEL, CameraMount
-from autonomy.errors import InputError, require_int, require_positive
-from autonomy.fspf import FSPFResult, smallest_eigvec3
+from autonomy.common.errors import InputError, require_int, require_positive
+from autonomy.perception.camera import ROBOT_FROM_OPTICAL_LEVEL, CameraMount
+from autonomy.perception.fspf import FSPFResult, smallest_eigvec3
 
 
 @dataclass(frozen=True)

@@ -38,10 +38,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from autonomy.avoidance import AvoidanceConfig, AvoidanceResult, choose_direction, eq5_scores
-from autonomy.camera import KINECT_V1, DepthCamera
-from autonomy.errors import InputError, require_non_negative, require_positive
-from autonomy.geometry import (
+from autonomy.common.errors import InputError, require_non_negative, require_positive
+from autonomy.common.geometry import (
     crosses_any,
     point_segment_distance,
     point_segment_projection,
@@ -49,10 +47,17 @@ from autonomy.geometry import (
     wrap_angle,
     wrap_angles,
 )
-from autonomy.nearfield import line_points
-from autonomy.obstacle_memory import update_memory
-from autonomy.planner import NoPathError, astar, blind_lengths, edge_key, parts, path_points
-from autonomy.vectormap import NavGraph
+from autonomy.maps.planner import NoPathError, astar, blind_lengths, edge_key, parts, path_points
+from autonomy.maps.vectormap import NavGraph
+from autonomy.navigation.avoidance import (
+    AvoidanceConfig,
+    AvoidanceResult,
+    choose_direction,
+    eq5_scores,
+)
+from autonomy.navigation.obstacle_memory import update_memory
+from autonomy.perception.camera import KINECT_V1, DepthCamera
+from autonomy.perception.nearfield import line_points
 
 _MEMORY_KEEP_MARGIN_M = 0.5
 """Remembered points are dropped beyond memory_radius_m plus this (the robot moves on)."""
@@ -183,7 +188,7 @@ class NavigatorConfig:
     coastal_weight: float = 2.0
     """Coastal navigation (after Roy, Burgard, Fox and Thrun, ICRA 1999; ours): a metre of
     plan where the camera, facing along it, sees no wall within ``coastal_range_m`` costs
-    1 + this many metres (:func:`autonomy.planner.blind_lengths`), so plans keep walls
+    1 + this many metres (:func:`autonomy.maps.planner.blind_lengths`), so plans keep walls
     in view where a detour allows it. The localization matches walls only: across a hall
     or down a wide corridor's middle it dead-reckons, and the belief that comes out of
     20 m of that (0.3-0.5 m wide on a real floor) can match the first far face it sees
@@ -276,7 +281,7 @@ class NavigatorConfig:
     shadow_m: float = 0.6
     """Each sensed point within ``memory_radius_m`` also marks the space behind it, seen
     from the camera, this deep as occupied until the camera looks there
-    (:mod:`autonomy.obstacle_memory`): the camera sees only an obstacle's near faces, and
+    (:mod:`autonomy.navigation.obstacle_memory`): the camera sees only an obstacle's near faces, and
     a robot rounding it meets the far ones (an unmapped chair's far corner, never seen,
     met the robot's side as it turned round the chair). 0.6 m covers the far side of the
     building's chairs and boxes and most of its tables; 0 = off."""
@@ -355,7 +360,7 @@ class Navigator:
         self.cfg = cfg
         self.avoid = avoid
         self._part = parts(graph, cfg.exclude_stairs)
-        """The connected part of the graph each node (by index) lies in (:func:`autonomy.planner.parts`)."""
+        """The connected part of the graph each node (by index) lies in (:func:`autonomy.maps.planner.parts`)."""
         self.camera = camera
         self.walls = None if walls is None else np.asarray(walls, dtype=np.float64).reshape(-1, 4)
         self._wall_pts = None if self.walls is None else wall_points(self.walls, WALL_STEP_M)
@@ -1270,7 +1275,7 @@ class Navigator:
 
     # -- control -----------------------------------------------------------------------
     def near_points(self, pose: np.ndarray, near_lines: np.ndarray | None) -> np.ndarray:
-        """Points along the near-field sight lines (:mod:`autonomy.nearfield`) that no
+        """Points along the near-field sight lines (:mod:`autonomy.perception.nearfield`) that no
         mapped wall explains, robot frame: a sight line with a map wall within
         ``near_wall_tol_m`` of it is hidden by that wall (a door frame the robot passes
         close to), which ``map_blind_spots_m`` covers already."""
@@ -1294,7 +1299,7 @@ class Navigator:
     ) -> NavCommand:
         """Body-frame velocity for this frame from the pose estimate and sensed obstacles.
 
-        ``near_lines``: this frame's near-field sight lines (:mod:`autonomy.nearfield`),
+        ``near_lines``: this frame's near-field sight lines (:mod:`autonomy.perception.nearfield`),
         obstacles closer than the camera's minimum range; they join the obstacles for this
         frame only (the next frame tells again whether they are still there).
         ``seen``: wall points the robot has seen before, robot frame (the relocalization's

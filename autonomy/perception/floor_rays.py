@@ -1,7 +1,7 @@
 """How far the camera saw the floor: sight lines that no wall crosses.
 
 FSPF keeps the planes the camera sees and leaves out the floor, so the relocalization's
-scan (:mod:`autonomy.relocalization`) holds walls, pillars and furniture, and says
+scan (:mod:`autonomy.localization.relocalization`) holds walls, pillars and furniture, and says
 nothing about where the camera saw far into open space. Yet a floor point seen 4 m away
 says that no wall stands on the sight line to it: walls stand on the floor and reach
 above the camera, so a wall in between would have hidden it (low furniture does not
@@ -10,7 +10,7 @@ a sight line is not where the robot is. In an open hall with furniture the map l
 the furniture's faces fit some office's walls elsewhere better than the hall's few
 walls fit the hall; the office's walls then stand across the sight lines into the hall
 (ours; the scan's sight through walls,
-:meth:`autonomy.relocalization.GlobalLocalizer.scan_through_at`, for the floor).
+:meth:`autonomy.localization.relocalization.GlobalLocalizer.scan_through_at`, for the floor).
 
 Each frame, in every ``stride_u_px``-th image column, the deepest pixel (on every
 ``stride_v_px``-th row from the bottom) whose back-projected point lies on the floor (height within
@@ -26,7 +26,7 @@ import math
 import numba
 import numpy as np
 
-from autonomy.camera import CameraIntrinsics, pixel_point_nb
+from autonomy.perception.camera import CameraIntrinsics, pixel_point_nb
 
 __all__ = ["REACH_STRIDE_PX", "floor_rays", "floor_reach"]
 

@@ -1,6 +1,6 @@
 """Navigation graphs made from the walls alone (UT AMRL ``navigation.json`` format).
 
-1. :func:`~autonomy.freespace.build_free_space` finds the inside regions where the robot fits.
+1. :func:`~autonomy.maps.freespace.build_free_space` finds the inside regions where the robot fits.
 2. The cells at least ``robot radius + margin`` from every wall are thinned to a
    one-cell skeleton (Zhang and Suen, "A fast parallel algorithm for thinning digital
    patterns", CACM 1984), which runs along corridor centre lines, through doorways into
@@ -10,7 +10,7 @@
    irregularities) are pruned.
 4. Each branch becomes straight edges of at most ``max_edge_m`` that stay within
    ``tolerance_m`` of it and keep ``robot radius + margin`` from every wall, checked
-   exactly against the segments (:class:`~autonomy.geometry.WallIndex`).
+   exactly against the segments (:class:`~autonomy.common.geometry.WallIndex`).
 5. Free space farther than ``cover_radius_m`` from every edge (wide halls, open sites)
    gets a square lattice of nodes ``cover_spacing_m`` apart, turned to the walls' main
    direction, joined to its lattice neighbours and to the graph by clear straight edges;
@@ -39,18 +39,18 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from autonomy.cache import cache_paths
-from autonomy.constants import SAFETY_MARGIN_M
-from autonomy.errors import require_positive
-from autonomy.freespace import (
+from autonomy.common.cache import cache_paths
+from autonomy.common.constants import SAFETY_MARGIN_M
+from autonomy.common.errors import require_positive
+from autonomy.common.geometry import WallIndex
+from autonomy.maps.freespace import (
     FreeSpace,
     FreeSpaceConfig,
     build_free_space,
     grid_distance,
     rasterise,
 )
-from autonomy.geometry import WallIndex
-from autonomy.vectormap import (
+from autonomy.maps.vectormap import (
     DEFAULT_MAX_SPEED,
     NavEdge,
     NavGraph,
@@ -916,6 +916,6 @@ def load_or_build_navgraph(
 
 def with_key(text: str, key: str) -> str:
     """A navigation.json text with the generator's cache key as a ``"depthnav"`` entry."""
-    head = '{\n  "depthnav": ' + json.dumps({"generator": "autonomy.graph_builder", "key": key}) + ","
+    head = '{\n  "depthnav": ' + json.dumps({"generator": "autonomy.maps.graph_builder", "key": key}) + ","
     assert text.startswith("{\n")
     return head + text[1:]

@@ -19,11 +19,11 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from autonomy.freespace import FreeSpace
-from autonomy.geometry import WallIndex
-from autonomy.graph_builder import distance_to_segments, graph_components
-from autonomy.planner import adjacency, dijkstra
-from autonomy.vectormap import NavGraph, VectorMap
+from autonomy.common.geometry import WallIndex
+from autonomy.maps.freespace import FreeSpace
+from autonomy.maps.graph_builder import distance_to_segments, graph_components
+from autonomy.maps.planner import adjacency, dijkstra
+from autonomy.maps.vectormap import NavGraph, VectorMap
 
 __all__ = ["GraphQuality", "graph_quality", "grid_distances", "coverage"]
 

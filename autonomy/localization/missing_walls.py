@@ -1,6 +1,6 @@
 """Walls the map puts in the camera's view that the camera sees past.
 
-The map tests of :mod:`autonomy.health` judge FSPF's plane points, which leave out the
+The map tests of :mod:`autonomy.localization.health` judge FSPF's plane points, which leave out the
 floor. In an open hall a robot may see nothing but floor within the camera's range:
 with no plane points there is no evidence, and a belief a few metres away beside a wall
 goes unquestioned while the robot drives on it (a robot put down in an atrium drove
@@ -8,7 +8,7 @@ goes unquestioned while the robot drives on it (a robot put down in an atrium dr
 pixel whose ray, from the belief, meets a mapped wall before the floor should return
 that wall, or something nearer (people and furniture the map does not hold); a return
 from farther away, the floor beyond where the wall should stand, says that the wall is
-not there (ours; the seen-through test of :func:`autonomy.health.explain_points` for
+not there (ours; the seen-through test of :func:`autonomy.localization.health.explain_points` for
 every pixel, floor included).
 
 A pixel that returns nothing says nothing here: the Kinect returns nothing beyond its
@@ -30,7 +30,7 @@ z squared).
 
 The frame's seen-past fraction (of the pixels expecting a wall that returned) is NaN
 (no evidence) with fewer than ``min_returned`` such pixels;
-:class:`autonomy.health.HealthMonitor` says lost when its short-term average stays high.
+:class:`autonomy.localization.health.HealthMonitor` says lost when its short-term average stays high.
 """
 
 from __future__ import annotations
@@ -41,9 +41,9 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from autonomy.camera import CameraIntrinsics
-from autonomy.errors import InputError, require_int, require_non_negative, require_positive
-from autonomy.raycast import _bearing_index, _ray_hit_indexed
+from autonomy.common.errors import InputError, require_int, require_non_negative, require_positive
+from autonomy.maps.raycast import bearing_index, ray_hit_indexed
+from autonomy.perception.camera import CameraIntrinsics
 
 __all__ = ["MissingWallsConfig", "missing_walls"]
 
@@ -99,7 +99,7 @@ def _missing_kernel(depth, lines, px, py, pth, rot, trans, fx, fy, cx, cy, su, s
     oy = py + s * trans[0] + c * trans[1]
     cam_h = trans[2]
     # Each ray is tested only against the lines in its direction.
-    offsets, ids = _bearing_index(lines, ox, oy, BEARING_BINS)
+    offsets, ids = bearing_index(lines, ox, oy, BEARING_BINS)
     free = _free_ends(lines, END_JOIN_M)
     n_exp = 0
     n_ret = 0
@@ -118,7 +118,7 @@ def _missing_kernel(depth, lines, px, py, pth, rot, trans, fx, fy, cx, cy, su, s
                 continue  # the floor comes before any wall that could count: no ray to cast
             dx = (c * rx - s * ry) / hn
             dy = (s * rx + c * ry) / hn
-            bj, t = _ray_hit_indexed(lines, offsets, ids, ox, oy, dx, dy)
+            bj, t = ray_hit_indexed(lines, offsets, ids, ox, oy, dx, dy)
             if bj < 0:
                 continue
             z = t / hn  # planar depth of the wall along this pixel's ray

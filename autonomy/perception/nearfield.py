@@ -19,7 +19,7 @@ the point where the ray reaches the minimum range), so a blocked column yields p
 every ``point_step_m`` along the down-projected sight line from the robot's edge to that
 point; for the image's outer columns, whose sight lines end beside the robot's path, only
 along the part beside the path (see :class:`NearField`). Those points are evidence of one frame only: they are not remembered, and the
-navigator drops those a mapped wall explains (:meth:`autonomy.navigator.Navigator.command`).
+navigator drops those a mapped wall explains (:meth:`autonomy.navigation.navigator.Navigator.command`).
 """
 
 from __future__ import annotations
@@ -29,9 +29,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from autonomy.camera import CameraIntrinsics, CameraMount
-from autonomy.constants import KINECT_FOCAL_PX
-from autonomy.errors import InputError, require_int, require_positive
+from autonomy.common.constants import KINECT_FOCAL_PX
+from autonomy.common.errors import InputError, require_int, require_positive
+from autonomy.perception.camera import CameraIntrinsics, CameraMount
 
 REFERENCE_FX_PX = KINECT_FOCAL_PX
 """Focal length (px) that ``min_run_px`` is given for (the Kinect v1, docs/architecture.md)."""

@@ -40,10 +40,10 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from autonomy.camera import CameraIntrinsics, CameraMount
-from autonomy.errors import InputError
-from autonomy.observation import points_from_scan
-from autonomy.rng import randint, seed_u64
+from autonomy.common.errors import InputError
+from autonomy.common.rng import randint, seed_u64
+from autonomy.localization.observation import points_from_scan
+from autonomy.perception.camera import CameraIntrinsics, CameraMount
 
 APPROACHES = ("fspf", "kr", "ks", "kc")
 """The four approaches of BV2012, Section VI-A (and Figs. 5-7)."""

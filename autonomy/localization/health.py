@@ -37,14 +37,14 @@ or at once when
    place the search chose to one that fits a few frames better (unmapped furniture
    filling the view at the accepted, right, place), or
 5. the camera's view disagreed with the odometry's prediction of it from the last
-   frame (:mod:`autonomy.view_check`: agreement below ``view_agree``) on
+   frame (:mod:`autonomy.localization.view_check`: agreement below ``view_agree``) on
    ``view_frames`` frames in a row: the robot was carried or pushed, and its belief
    went nowhere;
 
 or, for ``hold_s`` of frames with evidence, when
 
 6. the short-term fraction of the pixels expecting a mapped wall within the camera's
-   range that saw past it (:mod:`autonomy.missing_walls`: mostly the floor beyond where
+   range that saw past it (:mod:`autonomy.localization.missing_walls`: mostly the floor beyond where
    the wall should stand) is above ``lost_missing``: the walls the belief puts in view
    are not there, which in an open hall, where the camera sees nothing but floor, is the
    only evidence there is;
@@ -64,8 +64,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from autonomy.errors import require_int, require_non_negative, require_positive
-from autonomy.raycast import _ray_hit_kernel
+from autonomy.common.errors import require_int, require_non_negative, require_positive
+from autonomy.maps.raycast import ray_hit_nb
 
 #: Health states, in the order of severity.
 STATES = ("ok", "blind", "lost")
@@ -117,13 +117,13 @@ class HealthConfig:
     one yet (0 turns the test off)."""
     view_agree: float = 0.3
     """Lost at once when the view agreed with the odometry's prediction of it
-    (:mod:`autonomy.view_check`) less than this ... (0 turns the test off)"""
+    (:mod:`autonomy.localization.view_check`) less than this ... (0 turns the test off)"""
     view_frames: int = 1
     """... on this many frames with evidence in a row (a robot put down elsewhere gives
     one such frame when the view check compares consecutive frames, ``lag_s`` 0)."""
     lost_missing: float = 0.4
     """Lost when the short-term fraction of the pixels expecting a mapped wall that saw
-    past it (:mod:`autonomy.missing_walls`) is above this for ``hold_s`` of frames with
+    past it (:mod:`autonomy.localization.missing_walls`) is above this for ``hold_s`` of frames with
     that evidence (0 turns the test off)."""
     blind_s: float = 0.5
     """Blind when no usable frame has arrived for this long."""
@@ -139,8 +139,8 @@ class HealthConfig:
 def explain_points(lines, pose, pts, explain_m, through_m):  # pragma: no cover - numba
     """Per point (in the frame of ``pose``) at ``pose``: 1 explained, -1 contradicts (seen
     through a wall), 0 neither, against the first of ``lines`` (world frame) hit by its
-    ray from ``pose``'s position (:func:`autonomy.raycast.ray_hit`'s kernel). Give the
-    camera's pose and the points relative to it (:func:`autonomy.geometry.sensor_view`):
+    ray from ``pose``'s position (:func:`autonomy.maps.raycast.ray_hit`'s kernel). Give the
+    camera's pose and the points relative to it (:func:`autonomy.common.geometry.sensor_view`):
     the rays start there. Points whose ray hits no line are neither."""
     x, y, th = pose[0], pose[1], pose[2]
     c, s = math.cos(th), math.sin(th)
@@ -152,7 +152,7 @@ def explain_points(lines, pose, pts, explain_m, through_m):  # pragma: no cover 
         r = math.sqrt(qx * qx + qy * qy)
         if r <= 0.0:
             continue
-        bj, best_t = _ray_hit_kernel(lines, x, y, qx / r, qy / r)
+        bj, best_t = ray_hit_nb(lines, x, y, qx / r, qy / r)
         if bj < 0:
             continue
         if r > best_t + through_m:
@@ -243,9 +243,9 @@ class HealthMonitor:
         frame; fewer than ``min_points``: a frame, but no evidence), the belief's spread,
         the localizer's ``correction`` this frame (world x, y: the belief after the update
         minus the odometry's prediction of it; None: none) and the view's agreement with
-        the odometry (:class:`autonomy.view_check.ViewCheck`; NaN: no evidence) and the
+        the odometry (:class:`autonomy.localization.view_check.ViewCheck`; NaN: no evidence) and the
         fraction of the pixels expecting a mapped wall that saw past it
-        (:func:`autonomy.missing_walls.missing_walls`; NaN: no evidence); returns the
+        (:func:`autonomy.localization.missing_walls.missing_walls`; NaN: no evidence); returns the
         frame's :class:`HealthSample`."""
         cfg = self.cfg
         dt = 0.0 if math.isnan(self.last_t) else max(0.0, t - self.last_t)

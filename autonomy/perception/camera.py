@@ -14,8 +14,8 @@ from dataclasses import dataclass, field, replace
 import numba
 import numpy as np
 
-from autonomy.constants import KINECT_FOCAL_PX, KINECT_MAX_RANGE_M, KINECT_MIN_RANGE_M
-from autonomy.errors import InputError, require_positive
+from autonomy.common.constants import KINECT_FOCAL_PX, KINECT_MAX_RANGE_M, KINECT_MIN_RANGE_M
+from autonomy.common.errors import InputError, require_positive
 
 #: Rotation taking optical-frame vectors (x right, y down, z forward) to a level
 #: robot-style frame (x forward, y left, z up).

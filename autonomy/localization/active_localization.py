@@ -23,9 +23,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from autonomy.errors import InputError, require_positive
-from autonomy.geometry import compose_pose, relative_pose
-from autonomy.raycast import rays_hit
+from autonomy.common.errors import InputError, require_positive
+from autonomy.common.geometry import compose_pose, relative_pose
+from autonomy.maps.raycast import rays_hit
 
 
 @dataclass(frozen=True)

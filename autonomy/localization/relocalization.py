@@ -1,6 +1,6 @@
 """Global relocalization on a vector map: where is the robot when its belief is lost?
 
-When the health monitor (:mod:`autonomy.health`) says lost, or at start-up with no known
+When the health monitor (:mod:`autonomy.localization.health`) says lost, or at start-up with no known
 pose, the robot stops and turns in place, and this module collects what the camera sees
 into a **scan**: the down-projected plane points of every frame, placed through dead
 reckoning (over one turn in place it drifts by about a degree) and thinned to one point
@@ -9,7 +9,7 @@ per ``scan_cell_m`` cell. A panorama is far less ambiguous than one 58 degree fr
 The scan is then matched against the whole map (ours; the papers re-localized by hand):
 
 1. **Coarse search.** Hypotheses on a grid over the map's free space (every
-   ``grid_step_m`` where the robot fits, :class:`autonomy.freespace.FreeSpace`) times
+   ``grid_step_m`` where the robot fits, :class:`autonomy.maps.freespace.FreeSpace`) times
    ``heading_step_deg`` headings; each scores the mean robust cost
    ``min(d^2, c^2) / c^2`` of a subsample of the scan's points, ``d`` the distance from
    the point to the nearest wall, read from the free space's distance transform (a
@@ -27,7 +27,7 @@ The scan is then matched against the whole map (ours; the papers re-localized by
    The likelihood field alone favours places with many walls: a hall's furniture fits
    some office's walls better than the hall's own few. Clutter can only hide walls,
    never show what lies behind them, so sight through walls rules such places out.
-   So does the floor seen far away (:mod:`autonomy.floor_rays`): the score adds
+   So does the floor seen far away (:mod:`autonomy.perception.floor_rays`): the score adds
    ``floor_weight`` times the fraction of the sight lines to it that cross the mode's
    walls, away from their ends (dead reckoning's drift takes sight lines through a door
    across its jambs).
@@ -36,7 +36,7 @@ The scan is then matched against the whole map (ours; the papers re-localized by
 3. **Decision.** The best mode is accepted when it explains the scan
    (score at most ``accept_cost``, or at most ``accept_lead_cost`` and leading every
    other mode by ``accept_lead``), the latest frame does not see through the map's walls
-   from it (:func:`autonomy.health.explain_points` on its visible scene lines), and no
+   from it (:func:`autonomy.localization.health.explain_points` on its visible scene lines), and no
    other mode comes within ``accept_margin`` of its score per point nor within
    ``accept_margin_points`` over the whole scan. Otherwise the modes are kept
    and the robot looks on (a symmetric corridor is resolved by what it sees next, not by
@@ -52,10 +52,10 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from autonomy.errors import require_int, require_non_negative, require_positive
-from autonomy.freespace import FreeSpace
-from autonomy.geometry import points_from_frame, points_in_frame, sensor_view, wrap_angle
-from autonomy.health import explain_points
+from autonomy.common.errors import require_int, require_non_negative, require_positive
+from autonomy.common.geometry import points_from_frame, points_in_frame, sensor_view, wrap_angle
+from autonomy.localization.health import explain_points
+from autonomy.maps.freespace import FreeSpace
 
 
 @dataclass(frozen=True)
@@ -92,7 +92,7 @@ class RelocalizationConfig:
     """No search before the scan has this many points ..."""
     min_wall_m: float = 1.5
     """A wall: a straight run of the scan's points at least this long
-    (:mod:`autonomy.straight_runs`); the faces of the atrium's pillars and of the
+    (:mod:`autonomy.localization.straight_runs`); the faces of the atrium's pillars and of the
     furniture the map lacks are shorter."""
     min_wall_points: int = 40
     """Looked round, the robot drives to find walls while fewer of the scan's points than
@@ -131,7 +131,7 @@ class RelocalizationConfig:
     """Repeat the search this often while undecided (the scan grows)."""
     explain_m: float = 0.15
     """The check of the latest frame from a mode: a point within this of the first wall
-    on its ray is explained ... (as :class:`autonomy.health.HealthConfig`)"""
+    on its ray is explained ... (as :class:`autonomy.localization.health.HealthConfig`)"""
     through_m: float = 0.4
     """... and one this far beyond it is seen through the wall (the scan's points: this
     far along their ray behind a wall it crosses, and ``through_depth_m`` ...)"""
@@ -169,7 +169,7 @@ class RelocalizationConfig:
     what a minute of dead reckoning drifts, not a different place."""
     floor_weight: float = 3.0
     """A mode's score adds this times the fraction of the floor points seen while
-    looking (:mod:`autonomy.floor_rays`) whose sight line crosses one of the mode's
+    looking (:mod:`autonomy.perception.floor_rays`) whose sight line crosses one of the mode's
     walls (0: the floor is not used) ... The floor is seen only
     where no wall stands in between: a kidnapped robot at an open hall's edge, facing
     furniture the map lacks, fit offices elsewhere (0.16) better than its true place
@@ -460,7 +460,7 @@ class Scan:
         self.times = np.zeros(0)
         """When it saw each point (s)."""
         self.floor = np.zeros((0, 2))
-        """Floor points seen (:mod:`autonomy.floor_rays`), one per cell, the newest ..."""
+        """Floor points seen (:mod:`autonomy.perception.floor_rays`), one per cell, the newest ..."""
         self.floor_origins = np.zeros((0, 2))
         """... and where the camera stood when it saw each."""
         self.turned_rad = 0.0
@@ -470,7 +470,7 @@ class Scan:
 
     def add(self, odom_pose: np.ndarray, pts_robot: np.ndarray, t: float, floor_robot: np.ndarray | None = None) -> None:
         """Add one frame's points (robot frame) seen at ``odom_pose`` (dead reckoning) at
-        time ``t``, and the floor points it saw (robot frame, :mod:`autonomy.floor_rays`)."""
+        time ``t``, and the floor points it saw (robot frame, :mod:`autonomy.perception.floor_rays`)."""
         p = np.asarray(odom_pose, dtype=np.float64)
         if self._last is not None:
             self.turned_rad += abs(wrap_angle(float(p[2] - self._last[2])))

@@ -5,7 +5,7 @@ A particle filter over (x, y, theta). Each frame (IV-C, steps 1-4):
 1. the particles move through the motion model of an omnidirectional base driven by
    odometry increments: the first-stage proposal q0;
 2. each sample is refined in r iterations along the gradient of the observation
-   log-likelihood (:func:`autonomy.observation.refine_all_m`) times a Gaussian prior
+   log-likelihood (:func:`autonomy.localization.observation.refine_all_m`) times a Gaussian prior
    around the sample's first-stage pose (:meth:`CGRLocalizer.prior_info`, ours):
    q1 .. qr, within a trust region of its first-stage pose (ours), on correspondences found within a gate that
    widens with the belief's spread (:meth:`CGRLocalizer.gate`, ours), and checked
@@ -38,9 +38,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from autonomy.errors import InputError, require_int, require_non_negative, require_positive
-from autonomy.geometry import points_from_frame, wrap_angles
-from autonomy.observation import (
+from autonomy.common.errors import InputError, require_int, require_non_negative, require_positive
+from autonomy.common.geometry import points_from_frame, wrap_angles
+from autonomy.localization.observation import (
     ObservationConfig,
     correspond,
     line_frames,
@@ -50,7 +50,7 @@ from autonomy.observation import (
     robust_weights,
     trusted_directions,
 )
-from autonomy.raycast import rays_hit
+from autonomy.maps.raycast import rays_hit
 
 SceneLinesFn = Callable[[float, float], np.ndarray]
 
@@ -98,19 +98,19 @@ class CGRConfig:
     this ... (ours; 0 with prior_min_theta_rad = 0: the likelihood alone, unbounded)."""
     prior_min_theta_rad: float = math.radians(2.0)
     """... and this: a few points of one small face cannot turn the heading by degrees
-    in a frame, a wall in view still can (:func:`autonomy.observation.refine_all_m`)."""
+    in a frame, a wall in view still can (:func:`autonomy.localization.observation.refine_all_m`)."""
     degeneracy_max_gain: float = 8.0
     """Degeneracy-aware refinement (after Zhang and Singh, ICRA 2016): a refinement moves
     a sample only along the pose directions whose bias gain (metres of pose error per
     metre of systematic error in the points' distances to their lines) is at most this
-    (:func:`autonomy.observation.trusted_directions`); along the others (a corridor's
+    (:func:`autonomy.localization.observation.trusted_directions`); along the others (a corridor's
     length between walls nearly but not exactly parallel) the sample keeps its motion-
     model pose (0 = every direction)."""
     robust_scale: float = 1.0
     """Robust refinement (ours): each point's term is weighed 1 / (1 + (d / c)^2) by its
     distance d to its line at the proposal mean, c this many times the larger of
     observation.sigma_m and the belief's spread at the points (as the gate widens;
-    :func:`autonomy.observation.robust_weights`), then weighed again at the pose that
+    :func:`autonomy.localization.observation.robust_weights`), then weighed again at the pose that
     fits them best on the residuals' own scale (:meth:`CGRLocalizer._reweigh`). A few
     points matched to the wrong line (seen past a pillar's corner) then cannot pull the
     belief along a corridor (0 = the squared distances of Eq. 1, one round)."""
@@ -410,7 +410,7 @@ class CGRLocalizer:
         (furniture, people), which the map allows there though it cannot place it. Points
         the walls would hide (the first wall along the ray more than the gate short of the
         point) and points turned away from their line are not accounted for. Rays start
-        at the robot's centre, as :func:`autonomy.observation.correspond`'s do."""
+        at the robot's centre, as :func:`autonomy.localization.observation.correspond`'s do."""
         n = len(fr.pts)
         if kept >= self.cfg.tail_hold_fraction * n:
             return kept
@@ -510,7 +510,7 @@ class CGRLocalizer:
         stats: UpdateStats | None,
     ) -> np.ndarray:
         """The projector on the directions this frame's correspondences, weighed by ``w``,
-        pin down (:func:`autonomy.observation.trusted_directions`, ``degeneracy_max_gain``)."""
+        pin down (:func:`autonomy.localization.observation.trusted_directions`, ``degeneracy_max_gain``)."""
         proj = np.empty((3, 3))
         k = trusted_directions(frames, idx, pose, pts, moments_lever(m), self.cfg.degeneracy_max_gain, proj, w)
         if stats is not None:

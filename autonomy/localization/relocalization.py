@@ -73,6 +73,13 @@ class RelocalizationConfig:
     (and of the floor) before the distinct ones are refined. A scan of furniture and one
     long wall at an open hall's edge ranked the true place 1,727th on cost alone (a
     kidnapped run), behind offices whose walls the furniture fits."""
+    cost_seeds: int = 20
+    """... and the best this-many by cost alone are refined as well, unthinned: at a
+    coarse pose, half a grid step and half a heading step off, rays slip past pillars
+    and the ends of walls, so in a hall of pillars the ranking by sight through walls
+    can sink the true place behind open spaces the scan fits loosely; and two seeds a
+    grid step apart can fall into different basins (a doubled wall line), which only
+    the refinement tells apart. 0: the ranked seeds alone."""
     coarse_robust_m: float = 0.5
     """Cost saturation distance c of the coarse search (a coarse hypothesis is up to half
     a grid step and half a heading step off)."""
@@ -201,6 +208,7 @@ class RelocalizationConfig:
         )
         require_int(self, "recovery.relocalization.", "floor_stride_px", minimum=1)
         require_int(self, "recovery.relocalization.", "coarse_seeds", minimum=1)
+        require_int(self, "recovery.relocalization.", "cost_seeds", minimum=0)
         require_positive(self, "recovery.relocalization.", "floor_cell_m")
         require_int(self, "recovery.relocalization.", "coarse_points", minimum=10)
         require_int(self, "recovery.relocalization.", "modes", minimum=1)
@@ -673,10 +681,17 @@ class GlobalLocalizer:
                 crossing = self.scan_through_at(seeds, floor[1][fsub], floor[0][fsub], margin, end_m=cfg.floor_jamb_m)
                 rank = rank + cfg.floor_weight * crossing
             order = np.argsort(rank, kind="stable")
+        by_cost = np.arange(len(seeds))  # the coarse costs' order
         if prior is not None:
             seeds = np.vstack([np.asarray(prior, dtype=np.float64)[None, :], seeds])
             order = np.concatenate([[0], order + 1])
+            by_cost = by_cost + 1
         picked = self._distinct(seeds, order, 2 * cfg.modes)
+        if origins is not None and cfg.cost_seeds > 0:
+            chosen = set(picked)
+            # Not thinned first: two seeds a grid step apart can fall into different
+            # basins (a doubled wall line), and the refinement tells which is the place.
+            picked += [int(i) for i in by_cost[: cfg.cost_seeds] if int(i) not in chosen]
         res = self.rescore(seeds[picked], pts, frame_pts, scene_lines, origins, times, floor)
         return SearchResult(res.modes, res.accepted, res.reason, int(costs.size))
 

@@ -254,10 +254,10 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_reloc_sample(args: argparse.Namespace) -> int:
-    import json
     from dataclasses import asdict
 
     from sim.experiments.reloc_sample import parse_region, sample
+    from sim.experiments.report_file import write_json
 
     region = parse_region(args.region) if args.region else None
 
@@ -274,7 +274,7 @@ def cmd_reloc_sample(args: argparse.Namespace) -> int:
     tail = f", median {times[len(times) // 2]:.1f} s, worst {times[-1]:.1f} s" if times else ""
     print(f"{args.map}: {len(found)} of {len(trials)} unknown starts relocalized within {args.seconds:.0f} s{tail}")
     if args.out:
-        Path(args.out).write_text(json.dumps([asdict(t) for t in trials], indent=2) + "\n", encoding="utf-8")
+        write_json(args.out, [asdict(t) for t in trials])
         print(f"wrote {args.out}")
     return 0
 

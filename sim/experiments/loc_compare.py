@@ -53,6 +53,7 @@ from autonomy.stack import LOCALIZATION_GRID, LocalizationConfig, RobotStack, St
 from sim.config import to_dict
 from sim.experiments.drives import DriveLog, RecordingConfig, ensure_log, load_log
 from sim.experiments.kinds import Experiment
+from sim.experiments.report_file import write_json
 from sim.simulator.robot import OdometryConfig
 
 #: Approaches: the paper's four, and plain MCL on FSPF's points (CGR without refinement)
@@ -418,7 +419,7 @@ def summarize(cfg: LocComparisonConfig, results: list[dict], out_dir: Path) -> d
         "figures": figures,
         "config": {k: v for k, v in _json_cfg(to_dict(cfg)).items() if k != "base_dir"},
     }
-    (out_dir / "report.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    write_json(out_dir / "report.json", report)
     return report
 
 

@@ -23,7 +23,6 @@ the camera and the Hough accumulator's pole points at the ceiling.
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import os
 import platform
@@ -57,6 +56,7 @@ from autonomy.planes import (
 )
 from sim.config import to_dict
 from sim.experiments.kinds import Experiment, crash_block, stopped, write_crash
+from sim.experiments.report_file import write_json
 from sim.scenes.corridor import CorridorScene
 from sim.scenes.cuboid import TABLE_I_VIEWS, ArmView, CuboidScene
 from sim.scenes.wall import WallScene
@@ -297,23 +297,9 @@ def _progress(progress: bool | None, total: int, desc: str):
     return tqdm(total=total, desc=desc, unit="frame", leave=False)
 
 
-def _clean(obj: Any) -> Any:
-    """JSON-safe copy: NaN and infinities become null, numpy scalars plain numbers."""
-    if isinstance(obj, dict):
-        return {k: _clean(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_clean(v) for v in obj]
-    if isinstance(obj, (np.floating, float)):
-        return float(obj) if math.isfinite(float(obj)) else None
-    if isinstance(obj, np.integer):
-        return int(obj)
-    return obj
-
-
 def _write_report(out_dir: Path, report: dict) -> None:
     out_dir.mkdir(parents=True, exist_ok=True)
-    text = json.dumps(_clean(report), indent=2, allow_nan=False) + "\n"
-    (out_dir / "report.json").write_text(text, encoding="utf-8")
+    write_json(out_dir / "report.json", report)
 
 
 def _report(kind: str, cfg: Any, seed: int, metrics: dict, details: dict, interrupted: bool, files: list[str], wall_s: float) -> dict:

@@ -8,7 +8,6 @@ paper's long-run trial counts (distance, resets, collisions).
 
 from __future__ import annotations
 
-import json
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -16,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from sim.experiments.kinds import Experiment
+from sim.experiments.report_file import write_json
 from sim.scenario import Scenario
 
 
@@ -88,7 +88,7 @@ def summarize(cfg: Scenario, results: list[dict], out_dir: Path) -> dict:
         "paper": PAPER_FIGURES.get(cfg.name, {}),
         "seeds": [r["seed"] for r in results],
     }
-    (out_dir / "report.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    write_json(out_dir / "report.json", report)
     return report
 
 

@@ -15,7 +15,6 @@ and written as ``table.md`` and ``table.json`` beside ``report.json``.
 from __future__ import annotations
 
 import dataclasses
-import json
 import os
 import sys
 from dataclasses import dataclass, field
@@ -23,7 +22,9 @@ from pathlib import Path
 from typing import Any
 
 from autonomy.common.errors import InputError
+from autonomy.common.files import atomic_write_text
 from sim.experiments.kinds import Experiment
+from sim.experiments.report_file import write_json
 from sim.scenario import MapConfig, Scenario
 
 KIND = "real_floors"
@@ -321,8 +322,8 @@ def summarize(cfg: RealFloorsConfig, results: list[dict], out_dir: Path) -> dict
     rows = [table_row(r) for r in results]
     total = total_row(rows)
     md = markdown_table(rows, total)
-    (out_dir / "table.md").write_text(md, encoding="utf-8")
-    (out_dir / "table.json").write_text(json.dumps({"rows": rows, "total": total}, indent=2) + "\n", encoding="utf-8")
+    atomic_write_text(out_dir / "table.md", md)
+    write_json(out_dir / "table.json", {"rows": rows, "total": total})
     print(md, end="")
     metrics = {
         "runs": len(rows),
@@ -341,7 +342,7 @@ def summarize(cfg: RealFloorsConfig, results: list[dict], out_dir: Path) -> dict
         "total": total,
         "files": {"table": "table.md", "table_json": "table.json"},
     }
-    (out_dir / "report.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    write_json(out_dir / "report.json", report)
     return report
 
 

@@ -12,7 +12,6 @@ then also writes its traceback to ``crash.txt`` and raises :class:`RunCrashed`.
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import sys
@@ -38,6 +37,7 @@ from sim.experiments.blackbox import (
 from sim.experiments.columns import Column
 from sim.experiments.kinds import crash_block, stopped, write_crash
 from sim.experiments.memory import release_free_memory, resident_mb
+from sim.experiments.report_file import write_json
 from sim.experiments.trace import TRACE_FILE, in_window, trace_record, write_trace
 from sim.experiments.waypoints import Mission, close_leg, follow_plan, plan_mission, start_leg
 from sim.scenario import Scenario
@@ -289,9 +289,7 @@ def run_scenario(
 
 def write_report(path: Path, report: dict) -> None:
     """Write report.json whole or not at all (a kill mid-write leaves the one before)."""
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
-    os.replace(tmp, path)
+    write_json(path, report)
 
 
 def write_checkpoint(run: Run, out: Path, wall: float) -> None:
@@ -961,7 +959,7 @@ def write_outputs(run: Run, out: Path, metrics: dict, rrd: str | Path | None) ->
     assert run.blackbox is not None
     if run.blackbox.incidents:
         files["incidents"] = "incidents.json"
-        (out / files["incidents"]).write_text(json.dumps({"seconds": scn.report.incident_seconds, "incidents": run.blackbox.incidents}) + "\n", encoding="utf-8")
+        write_json(out / files["incidents"], {"seconds": scn.report.incident_seconds, "incidents": run.blackbox.incidents}, indent=None)
         if scn.report.figures:
             render_incidents(run.blackbox.incidents, np.asarray(vm.segments), out / "incidents.png", scn.robot.radius_m, furniture=run.furniture)
             files["incidents_figure"] = "incidents.png"

@@ -46,6 +46,7 @@ from autonomy.common.errors import InputError
 from autonomy.common.files import atomic_write_text
 from sim.config import to_dict
 from sim.experiments.kinds import KINDS, Experiment, experiment, load_experiment
+from sim.experiments.report_file import write_json
 
 ENGINES = ("local", "ray")
 SWEEP_VERSION = 1
@@ -349,7 +350,7 @@ def _finished_trials(sw: _Sweep, resume: bool | str) -> dict[str, dict]:
         done, skipped = read_trials(trials_path, set(sw.ids))
         if skipped:
             _rewrite(trials_path, list(done.values()))
-    meta_path.write_text(json.dumps(meta, indent=2) + "\n", encoding="utf-8")
+    write_json(meta_path, meta)
     return done
 
 
@@ -409,7 +410,7 @@ def _run_pending(
 
 
 def _write_report(out: Path, report: dict) -> dict:
-    (out / "report.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    write_json(out / "report.json", report)
     return report
 
 

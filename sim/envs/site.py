@@ -20,7 +20,14 @@ from autonomy.maps.raycast import SceneQuery, VisibilityGrid, load_or_build
 from autonomy.maps.vectormap import load_navgraph, load_vectormap
 from sim.envs.config import EnvConfig
 from sim.simulator import blueprints
-from sim.simulator.actors import PARK_XY, Furniture, PeopleController, Person, parked_person
+from sim.simulator.actors import (
+    PARK_XY,
+    Furniture,
+    PeopleController,
+    Person,
+    furniture_body,
+    parked_person,
+)
 from sim.simulator.blueprints import ASSETS_DIR
 from sim.simulator.building import (
     FURNITURE_KINDS,
@@ -121,7 +128,7 @@ class Site:
             furniture=tuple(furniture), people=tuple(people),
         )
         bodies = np.array(
-            [mujoco.mj_name2id(world.model, mujoco.mjtObj.mjOBJ_BODY, f"furniture_{i}") for i in range(len(furniture))], dtype=np.int64
+            [mujoco.mj_name2id(world.model, mujoco.mjtObj.mjOBJ_BODY, furniture_body(i)) for i in range(len(furniture))], dtype=np.int64
         )
         query = None
         if cfg.localization.enabled:

@@ -24,6 +24,7 @@ import numpy as np
 from autonomy.common.constants import ROBOT_RADIUS_M
 from autonomy.common.errors import InputError
 from autonomy.common.geometry import rectangle_corners
+from sim.simulator.actors import furniture_body, person_body, person_index
 
 __all__ = ["FlightRecorder", "footprints", "render_incidents", "starts_incident", "undrawn_bodies"]
 
@@ -124,7 +125,7 @@ def footprints(furniture: Sequence = (), boxes: Mapping[str, object] | None = No
     ``(x, y, yaw, dims)`` tuple (dims: length and width, a height may follow), where it
     stands now. Returns dicts with body, label, x, y, yaw and size (length, width)."""
     out = []
-    named = [(f"furniture_{i}", f, i) for i, f in enumerate(furniture)] + [(str(k), f, None) for k, f in (boxes or {}).items()]
+    named = [(furniture_body(i), f, i) for i, f in enumerate(furniture)] + [(str(k), f, None) for k, f in (boxes or {}).items()]
     for body, f, i in named:
         if hasattr(f, "dims"):
             kind, x, y, yaw, dims = f.kind, f.x, f.y, f.yaw, f.dims
@@ -151,7 +152,7 @@ def undrawn_bodies(incident: dict, drawn: list[dict]) -> list[str]:
     person ``person_<j>`` the trace holds."""
     tr = incident.get("trace", [])
     n_people = max((len(f.get("people", [])) for f in tr), default=0)
-    have = {"world"} | {f["body"] for f in drawn} | {f"person_{j}" for j in range(n_people)}
+    have = {"world"} | {f["body"] for f in drawn} | {person_body(j) for j in range(n_people)}
     return [b for b in incident["event"].get("bodies", []) if b not in have]
 
 
@@ -212,7 +213,7 @@ def _draw_incident(ax, inc: dict, segs: np.ndarray, robot_radius_m: float, perso
     cx, cy = float(ev["x"]), float(ev["y"])
     ax.add_collection(LineCollection(segs.reshape(-1, 2, 2), colors="k", linewidths=1.2))
     if tr:
-        named = {int(b[len("person_"):]) for b in ev.get("bodies", []) if b.startswith("person_") and b[len("person_"):].isdigit()}
+        named = {j for j in (person_index(b) for b in ev.get("bodies", [])) if j is not None}
         _draw_tracks(ax, tr, cx, cy, person_radius_m, named)
         _draw_commands(ax, tr)
     _draw_contact(ax, ev, cx, cy, robot_radius_m)

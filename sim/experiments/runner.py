@@ -42,7 +42,7 @@ from sim.experiments.trace import TRACE_FILE, in_window, trace_record, write_tra
 from sim.experiments.waypoints import Mission, close_leg, follow_plan, plan_mission, start_leg
 from sim.scenario import Scenario
 from sim.simulator import blueprints
-from sim.simulator.actors import Furniture, Person
+from sim.simulator.actors import Furniture, Person, furniture_body, person_index
 from sim.simulator.blueprints import ASSETS_DIR
 from sim.simulator.building import Building, navgraph_from_walls, random_furniture, random_people
 from sim.simulator.faults import FaultInjector, fault_actors, fault_rng
@@ -523,8 +523,9 @@ def note_contacts(
             ev["nav_state"] = nav.state
             ev["cmd_dir_deg"] = round(math.degrees(math.atan2(cmd[1], cmd[0])), 1) if np.hypot(cmd[0], cmd[1]) > 1e-6 else None
             for b in ev["bodies"]:
-                if b.startswith("person_"):
-                    ev["person_in_view_s_ago"] = round(t_next - float(run.last_in_view[int(b[7:])]), 2)
+                j = person_index(b)
+                if j is not None:
+                    ev["person_in_view_s_ago"] = round(t_next - float(run.last_in_view[j]), 2)
         # Fault-placed furniture stands where the fault put it now, not where it was built.
         run.blackbox.on_events(new, furniture=furniture_now(run) if run.faults is not None else ())
     run.collisions += frame.new_contacts
@@ -538,7 +539,7 @@ def furniture_now(run: Run) -> list[tuple[float, float, float, tuple[float, floa
     model = run.world.model
     out = []
     for i, f in enumerate(run.furniture):
-        b = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, f"furniture_{i}")
+        b = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, furniture_body(i))
         if b < 0:
             out.append((f.x, f.y, f.yaw, f.dims))
             continue

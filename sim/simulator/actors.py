@@ -17,6 +17,27 @@ from autonomy.common.errors import InputError
 from autonomy.common.geometry import point_segment_distance, rectangle_corners
 from sim.simulator.robot import COLL_PEOPLE, COLL_ROBOT, COLL_STATIC
 
+FURNITURE_PREFIX = "furniture_"
+"""MJCF body names of the furniture: this prefix and the piece's index ..."""
+PERSON_PREFIX = "person_"
+"""... and of the people (their mocap bodies): this prefix and the person's index."""
+
+
+def furniture_body(i: int) -> str:
+    """The MJCF body name of furniture piece ``i``."""
+    return f"{FURNITURE_PREFIX}{i}"
+
+
+def person_body(i: int) -> str:
+    """The MJCF body name of person ``i``."""
+    return f"{PERSON_PREFIX}{i}"
+
+
+def person_index(body: str) -> int | None:
+    """The index of the person whose body is named ``body`` (None: not a person's)."""
+    rest = body[len(PERSON_PREFIX) :] if body.startswith(PERSON_PREFIX) else ""
+    return int(rest) if rest.isdigit() else None
+
 FURNITURE_KINDS = ("table", "chair", "box", "cabinet")
 
 #: Where unused furniture and people are parked (outside any building).
@@ -114,7 +135,7 @@ def add_furniture(spec: mujoco.MjSpec, items: tuple[Furniture, ...]) -> None:
     kw = dict(contype=COLL_STATIC, conaffinity=COLL_ROBOT, group=1)
     for i, f in enumerate(items):
         lx, ly, h = f.dims
-        b = spec.worldbody.add_body(name=f"furniture_{i}", pos=[f.x, f.y, 0.0], quat=_yaw_quat(f.yaw))
+        b = spec.worldbody.add_body(name=furniture_body(i), pos=[f.x, f.y, 0.0], quat=_yaw_quat(f.yaw))
         if f.kind == "table":
             _add_table(b, lx, ly, h, kw)
         elif f.kind == "chair":
@@ -154,7 +175,7 @@ def add_people(spec: mujoco.MjSpec, people: tuple[Person, ...]) -> None:
     """Add each person as a mocap body ``person_<i>``: a capsule torso and a sphere head."""
     kw = dict(contype=COLL_PEOPLE, conaffinity=COLL_ROBOT, group=1)
     for i, p in enumerate(people):
-        b = spec.worldbody.add_body(name=f"person_{i}", mocap=True, pos=[p.route[0][0], p.route[0][1], 0.0])
+        b = spec.worldbody.add_body(name=person_body(i), mocap=True, pos=[p.route[0][0], p.route[0][1], 0.0])
         head_r = 0.11
         body_top = p.height_m - 2 * head_r
         half_len = max(0.05, (body_top - 2 * p.radius_m) / 2)
@@ -334,7 +355,7 @@ class PeopleController:
     ) -> PeopleController:
         ids = []
         for i in range(len(people)):
-            bid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, f"person_{i}")
+            bid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, person_body(i))
             ids.append(model.body_mocapid[bid])
         return cls(people, np.array(ids, dtype=int), walls, robot_radius_m)
 

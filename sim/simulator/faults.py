@@ -57,7 +57,7 @@ from autonomy.common.geometry import (
 from autonomy.maps.graph_builder import graph_components
 from autonomy.maps.planner import adjacency, astar, dijkstra, path_points
 from autonomy.maps.vectormap import NavGraph
-from sim.simulator.actors import PARK_XY, Furniture, Person, parked_person
+from sim.simulator.actors import PARK_XY, Furniture, Person, furniture_body, parked_person
 from sim.simulator.building import Building, random_people
 from sim.simulator.robot import Odometry
 from sim.simulator.step import SimFrame
@@ -425,7 +425,7 @@ class FaultInjector:
         self._walls = np.ascontiguousarray(building.vectormap.segments, dtype=np.float64).reshape(-1, 4)
         model = world.model
         self._furniture_bodies = np.array(
-            [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, f"furniture_{i}") for i in range(len(world.furniture))], dtype=np.int64
+            [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, furniture_body(i)) for i in range(len(world.furniture))], dtype=np.int64
         )
         self._furniture_half = np.array([0.5 * math.hypot(f.dims[0], f.dims[1]) for f in world.furniture])
         panels, crowd = fault_actors(cfg)

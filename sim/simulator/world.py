@@ -22,7 +22,15 @@ import numpy as np
 from autonomy.common.errors import InputError
 from autonomy.maps.vectormap import VectorMap
 from autonomy.perception.camera import CameraIntrinsics, CameraMount
-from sim.simulator.actors import Furniture, PeopleController, Person, add_furniture, add_people
+from sim.simulator.actors import (
+    FURNITURE_PREFIX,
+    PERSON_PREFIX,
+    Furniture,
+    PeopleController,
+    Person,
+    add_furniture,
+    add_people,
+)
 from sim.simulator.robot import (
     COLL_ROBOT,
     COLL_STATIC,
@@ -275,9 +283,9 @@ class World:
     def contact_kind(self, geom_id: int) -> str:
         """What a geom belongs to: 'wall', 'furniture', 'person' or 'other'."""
         body = mujoco.mj_id2name(self.model, mujoco.mjtObj.mjOBJ_BODY, int(self.model.geom_bodyid[geom_id])) or ""
-        if body.startswith("person_"):
+        if body.startswith(PERSON_PREFIX):
             return "person"
-        if body.startswith("furniture_"):
+        if body.startswith(FURNITURE_PREFIX):
             return "furniture"
         if self.wall_geom_start <= geom_id < self.wall_geom_start + self.n_walls:
             return "wall"

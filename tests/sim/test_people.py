@@ -429,3 +429,11 @@ def test_a_world_with_a_person_drawn_on_the_robots_start_does_not_shove_the_robo
     pose = world.robot.pose(world.data)
     assert np.hypot(pose[0] - start[0], pose[1] - start[1]) < 0.01, pose
     assert contacts == 0 and not world.collision_log
+
+
+def test_body_names_are_made_and_read_back_in_one_place() -> None:
+    from sim.simulator.actors import furniture_body, person_body, person_index
+
+    assert furniture_body(3) == "furniture_3" and person_body(12) == "person_12"
+    assert person_index(person_body(12)) == 12
+    assert person_index(furniture_body(3)) is None and person_index("person_") is None and person_index("person_x") is None

@@ -256,10 +256,12 @@ def cmd_run(args: argparse.Namespace) -> int:
 def cmd_reloc_sample(args: argparse.Namespace) -> int:
     from dataclasses import asdict
 
+    from autonomy.common.files import output_path
     from sim.experiments.reloc_sample import parse_region, sample
     from sim.experiments.report_file import write_json
 
     region = parse_region(args.region) if args.region else None
+    out = output_path(args.out, "--out") if args.out else None  # checked before the long sampling
 
     def show(tr) -> None:
         x, y, yaw = tr.start
@@ -273,9 +275,9 @@ def cmd_reloc_sample(args: argparse.Namespace) -> int:
     times = sorted(t.seconds for t in found)
     tail = f", median {times[len(times) // 2]:.1f} s, worst {times[-1]:.1f} s" if times else ""
     print(f"{args.map}: {len(found)} of {len(trials)} unknown starts relocalized within {args.seconds:.0f} s{tail}")
-    if args.out:
-        write_json(args.out, [asdict(t) for t in trials])
-        print(f"wrote {args.out}")
+    if out is not None:
+        write_json(out, [asdict(t) for t in trials])
+        print(f"wrote {out}")
     return 0
 
 

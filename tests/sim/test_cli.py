@@ -125,6 +125,8 @@ def test_console_script_exit_code_and_no_traceback(tmp_path: Path) -> None:
         ["eval", "--policy", "random", "--episodes", "1", "--out", "{file}/r.json"],
         ["demos", "record", "--episodes", "1", "--out", "{file}/d.npz"],
         ["train", "ppo", "--steps", "10", "--out", "{file}/ppo"],
+        ["reloc-sample", "--n", "1", "--out", "{dir}"],
+        ["reloc-sample", "--n", "1", "--out", "{file}/r.json"],
     ],
 )
 def test_an_unusable_output_path_is_refused_before_any_episode(tmp_path: Path, capsys, argv) -> None:

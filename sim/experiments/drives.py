@@ -44,6 +44,7 @@ from autonomy.navigation.navigator import NavigatorConfig
 from autonomy.perception.camera import CameraIntrinsics, CameraMount
 from autonomy.perception.fspf import FSPFConfig
 from sim.config import to_dict
+from sim.experiments.report_file import config_json
 from sim.simulator.actors import Furniture, Person
 from sim.simulator.kinect import KinectConfig
 from sim.simulator.robot import RobotConfig, avoidance_for_body
@@ -98,18 +99,10 @@ class RecordingConfig:
 
     def key(self) -> str:
         """Hash of everything that changes the recorded log."""
-        payload = json.dumps({"version": LOG_VERSION, "config": _jsonable(to_dict(self))}, sort_keys=True)
+        payload = json.dumps({"version": LOG_VERSION, "config": config_json(to_dict(self))}, sort_keys=True)
         return hashlib.sha256(payload.encode()).hexdigest()[:16]
 
 
-def _jsonable(x):
-    if isinstance(x, float) and not math.isfinite(x):
-        return str(x)
-    if isinstance(x, dict):
-        return {k: _jsonable(v) for k, v in x.items()}
-    if isinstance(x, list):
-        return [_jsonable(v) for v in x]
-    return x
 
 
 @dataclass
@@ -424,7 +417,7 @@ def _write_log(cfg: RecordingConfig, path: Path, rec: _Recording, nodes: list[in
         "events": extra["events"],
         "completed": extra["completed"],
         "record_wall_s": extra["record_wall_s"],
-        "config": _jsonable(to_dict(cfg)),
+        "config": config_json(to_dict(cfg)),
     }
     depth = rec.depth[:n]
     tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp.npz")

@@ -53,7 +53,7 @@ from autonomy.stack import LOCALIZATION_GRID, LocalizationConfig, RobotStack, St
 from sim.config import to_dict
 from sim.experiments.drives import DriveLog, RecordingConfig, ensure_log, load_log
 from sim.experiments.kinds import Experiment
-from sim.experiments.report_file import write_json
+from sim.experiments.report_file import config_json, write_json
 from sim.simulator.robot import OdometryConfig
 
 #: Approaches: the paper's four, and plain MCL on FSPF's points (CGR without refinement)
@@ -417,20 +417,12 @@ def summarize(cfg: LocComparisonConfig, results: list[dict], out_dir: Path) -> d
             "route_completed": log.meta.get("completed"),
         },
         "figures": figures,
-        "config": {k: v for k, v in _json_cfg(to_dict(cfg)).items() if k != "base_dir"},
+        "config": {k: v for k, v in config_json(to_dict(cfg)).items() if k != "base_dir"},
     }
     write_json(out_dir / "report.json", report)
     return report
 
 
-def _json_cfg(x):
-    if isinstance(x, float) and not math.isfinite(x):
-        return str(x)
-    if isinstance(x, dict):
-        return {k: _json_cfg(v) for k, v in x.items()}
-    if isinstance(x, list):
-        return [_json_cfg(v) for v in x]
-    return x
 
 
 def _figures(cfg, ctx: Context, results: list[dict], per: dict, order: list[str], out_dir: Path) -> dict[str, str]:

@@ -31,7 +31,6 @@ from __future__ import annotations
 import hashlib
 import importlib
 import json
-import math
 import os
 import signal
 import socket
@@ -46,7 +45,7 @@ from autonomy.common.errors import InputError
 from autonomy.common.files import atomic_write_text
 from sim.config import to_dict
 from sim.experiments.kinds import KINDS, Experiment, experiment, load_experiment
-from sim.experiments.report_file import write_json
+from sim.experiments.report_file import config_json, write_json
 
 ENGINES = ("local", "ray")
 SWEEP_VERSION = 1
@@ -98,21 +97,13 @@ def _worker_init() -> None:
 # --------------------------------------------------------------------------- bookkeeping
 
 
-def _json_safe(x: Any) -> Any:
-    if isinstance(x, float) and not math.isfinite(x):
-        return str(x)
-    if isinstance(x, dict):
-        return {k: _json_safe(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_json_safe(v) for v in x]
-    return x
 
 
 def config_hash(cfg: Any) -> str:
     d = to_dict(cfg)
     if isinstance(d, dict):
         d = {k: v for k, v in d.items() if k != "base_dir"}
-    return hashlib.sha256(json.dumps(_json_safe(d), sort_keys=True).encode()).hexdigest()[:16]
+    return hashlib.sha256(json.dumps(config_json(d), sort_keys=True).encode()).hexdigest()[:16]
 
 
 def read_trials(path: Path, ids: set[str] | None = None) -> tuple[dict[str, dict], bool]:

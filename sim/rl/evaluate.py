@@ -26,7 +26,8 @@ from typing import Any
 
 import numpy as np
 
-from autonomy.common.files import atomic_write_text, output_path
+from autonomy.common.files import output_path
+from sim.experiments.report_file import json_safe, write_json
 from sim.rl.policies import Policy, make_policy
 from sim.rl.splits import BENCHMARK_TASK, TASK_KEYS, EpisodeSpec, Split, episode_specs, get_split
 
@@ -203,7 +204,7 @@ class EvalReport:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready (non-finite numbers as null)."""
-        return _jsonable(
+        return json_safe(
             {
                 "policy": self.policy,
                 "split": self.split,
@@ -268,7 +269,7 @@ def episode_env_kwargs(policy: Policy, building_seed: int, env_kwargs: Mapping[s
     own = dict(policy.env_kwargs())
     for k in sorted(TASK_KEYS & own.keys()):
         v = own.pop(k)
-        if k in BENCHMARK_TASK and _jsonable(v) != _jsonable(BENCHMARK_TASK[k]):
+        if k in BENCHMARK_TASK and json_safe(v) != json_safe(BENCHMARK_TASK[k]):
             warnings.warn(
                 f"policy {policy.name}: env argument {k}={v!r} ignored; the benchmark task sets {BENCHMARK_TASK[k]!r}",
                 stacklevel=3,
@@ -404,24 +405,4 @@ def _evaluate(
 
 
 # -- helpers -------------------------------------------------------------------------------
-def write_json(path: str | Path, doc: Any) -> Path:
-    """Write JSON atomically (:func:`autonomy.common.files.atomic_write_text`), making the
-    directory."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    return atomic_write_text(path, json.dumps(_jsonable(doc), indent=2) + "\n")
-
-
-def _jsonable(x: Any) -> Any:
-    if dataclasses.is_dataclass(x) and not isinstance(x, type):
-        return _jsonable(dataclasses.asdict(x))
-    if isinstance(x, Mapping):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, list | tuple | np.ndarray):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.generic):
-        x = x.item()
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    return x
 

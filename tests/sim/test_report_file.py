@@ -51,3 +51,22 @@ def test_json_safe_always_gives_strict_json_that_keeps_finite_values(obj) -> Non
         return a == b
 
     assert same(obj, json.loads(text))
+
+
+def test_dataclasses_write_as_their_fields_and_a_missing_folder_is_made(tmp_path: Path) -> None:
+    from dataclasses import dataclass
+
+    @dataclass(frozen=True)
+    class Row:
+        name: str
+        error_m: float
+
+    p = write_json(tmp_path / "new" / "eval.json", {"rows": [Row("a", math.nan)], 3: Row("b", 0.5)})
+    assert json.loads(p.read_text(encoding="utf-8")) == {"rows": [{"name": "a", "error_m": None}], "3": {"name": "b", "error_m": 0.5}}
+
+
+def test_a_configuration_keeps_its_infinities_as_text() -> None:
+    from sim.experiments.report_file import config_json
+
+    cfg = {"max_range_m": math.inf, "route": [(0.0, 1.0), (2.0, -math.inf)], "name": "x"}
+    assert json.loads(json.dumps(config_json(cfg), allow_nan=False)) == {"max_range_m": "inf", "route": [[0.0, 1.0], [2.0, "-inf"]], "name": "x"}

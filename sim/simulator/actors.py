@@ -481,19 +481,58 @@ class PeopleController:
         not stopped by walls) can end no step ``squeeze_m`` from it; it takes the first
         step that goes no deeper into the wall. Else it would stand still there while the
         robot, which cannot see it beside it, drives out of the door into it.
+
+        Failing every step of ``_retreat_steps``, a person slides along the nearest wall,
+        either way: pressed against a wall by a robot closing in at a slant, each step of
+        the 30 degree fan either goes into the wall or comes nearer the robot, and the one
+        way out, along the wall, is none of them.
         """
         _, d = self._route_point(i, self._s[i])
         right = np.array([d[1], -d[0]])
-        cands = _retreat_steps(away, d, right, self.retreat_speed_mps * dt)
+        step = self.retreat_speed_mps * dt
         here = self._state[i, :2]
         inside = self._wall_distance(here)
+        if self._try_steps(i, _retreat_steps(away, d, right, step), d, right, inside, robot_xy, dist):
+            return True
+        along = self._wall_direction(here)
+        if along is None:
+            return False
+        along = along if float(along @ away) >= 0.0 else -along
+        cands = [(step * float(u @ d), step * float(u @ right)) for u in (along, -along)]
+        return self._try_steps(i, cands, d, right, inside, robot_xy, dist, 1e-9)
+
+    def _wall_direction(self, pos: np.ndarray) -> np.ndarray | None:
+        """Unit direction of the wall nearest ``pos`` (None without walls)."""
+        if not len(self.walls):
+            return None
+        w = self.walls[int(np.argmin(point_segment_distance(pos, self.walls)))]
+        u = w[2:4] - w[0:2]
+        n = float(np.hypot(u[0], u[1]))
+        return u / n if n > 1e-12 else None
+
+    def _try_steps(
+        self,
+        i: int,
+        cands: list[tuple[float, float]],
+        d: np.ndarray,
+        right: np.ndarray,
+        inside: float,
+        robot_xy: np.ndarray,
+        dist: float,
+        tol: float = 0.0,
+    ) -> bool:
+        """Take the first of ``cands`` (along the route, to its right) that keeps 5 cm from
+        the walls, else ``squeeze_m``, else (a body already that close) goes no deeper
+        (``tol``: rounding allowed, for steps along a wall), and ends farther than ``dist``
+        from the robot (see :meth:`_step_back`)."""
+        here = self._state[i, :2]
         tries = [(m, c) for m in (0.05, self.squeeze_m) for c in cands]
         if inside <= self.people[i].radius_m + self.squeeze_m:
             tries += [(None, c) for c in cands]
         for margin, (cand_s, cand_side) in tries:
             new = here + cand_s * d + cand_side * right
             if margin is None:
-                if self._wall_distance(new) < inside:
+                if self._wall_distance(new) < inside - tol:
                     continue
             elif not self._side_is_clear(i, new, margin):
                 continue

@@ -437,3 +437,45 @@ def test_body_names_are_made_and_read_back_in_one_place() -> None:
     assert furniture_body(3) == "furniture_3" and person_body(12) == "person_12"
     assert person_index(person_body(12)) == 12
     assert person_index(furniture_body(3)) is None and person_index("person_") is None and person_index("person_x") is None
+
+
+def test_a_person_pressed_against_a_wall_slides_along_it_out_of_the_robots_way() -> None:
+    """A person who followed the robot into a corridor stands 1 cm from the corridor's wall
+    (a real floor: NSH2 of the ut-amrl/amrl_maps collection, BSD) when the robot, which
+    never saw them, backs off along its trail towards them at a slant, at 0.15 m/s: every
+    step of the 30 degree fan either goes into the wall or comes nearer the robot, so
+    they slide along the wall, and are never touched. Without the slide they stand still
+    until the robot drives into them."""
+    walls = np.array(
+        [
+            [27.631, 47.486, 27.631, 37.464],
+            [27.902, 37.825, 27.902, 47.486],
+            [27.541, 47.486, 27.541, 47.847],
+            [27.902, 47.486, 30.34, 47.486],
+            [27.541, 47.847, 30.34, 47.847],
+            [26.547, 47.486, 26.547, 47.847],
+            [22.034, 47.486, 26.547, 47.486],
+        ]
+    )
+    route = ((26.729, 38.742), (26.629, 42.542), (26.529, 46.342), (27.029, 46.992), (27.029, 48.692))
+    person = Person(route=route, speed_mps=1.0)
+    pc = PeopleController((person,), np.zeros(1, dtype=int), walls)
+    pc._s[0], pc._side[0] = 8.414, 0.457  # 0.54 m past the route's corner, stepped aside to its right ...
+    pc._state[0, :2] = (27.399, 46.753)  # ... pressed against the wall: 0.232 m from its line
+    start, v0, v1 = np.array([26.681, 46.664]), np.array([0.054, 0.138]), np.array([0.126, 0.084])
+
+    def robot(k: int) -> np.ndarray:
+        """The back-off: its direction turns from v0 to v1 over the first 0.4 s."""
+        t = k * DT
+        a = min(t, 0.4)
+        return start + v0 * a + (v1 - v0) * a * a / 0.8 + v1 * max(t - 0.4, 0.0)
+
+    touch = pc.robot_radius_m + person.radius_m
+    pc.advance(0.0, start)
+    gaps, wall = [], []
+    for k in range(1, 75):
+        pos = pc.advance(k * DT, robot(k))[0, :2]
+        gaps.append(float(np.hypot(*(pos - robot(k)))) - touch)
+        wall.append(float(point_segment_distance(pos, walls).min()))
+    assert min(gaps) > 0.05, min(gaps)
+    assert min(wall) >= person.radius_m + pc.squeeze_m - 1e-6

@@ -56,8 +56,8 @@ def test_an_exploring_drive_is_not_set_out_through_a_wall_to_a_part_the_mode_can
     stack.odom = np.zeros(3)  # modes as map-from-odometry transforms: the poses
     stack.modes = [(IN_ROOM.copy(), 0.1)]
     cmd = stack.decide(stack.cfg.recovery.explore_after_s + 1.0)
-    assert cmd.state == "looking" and stack._exploring_from is None
-    assert stack._explore_node(IN_ROOM, 0.0) is None
+    assert cmd.state == "looking" and stack.lost.motion.exploring_from is None
+    assert stack.lost.motion.explore_node(IN_ROOM, 0.0) is None
 
 
 def test_an_exploring_drive_still_sets_out_where_the_mode_reaches() -> None:
@@ -65,7 +65,7 @@ def test_an_exploring_drive_still_sets_out_where_the_mode_reaches() -> None:
     stack.odom = np.zeros(3)
     stack.modes = [(IN_CORRIDOR.copy(), 0.1)]
     cmd = stack.decide(stack.cfg.recovery.explore_after_s + 1.0)
-    assert cmd.state != "looking" and stack._exploring_from is not None
+    assert cmd.state != "looking" and stack.lost.motion.exploring_from is not None
     assert stack.navigator.goal in CORRIDOR and all(n in CORRIDOR for n in stack.navigator.plan_nodes)
 
 

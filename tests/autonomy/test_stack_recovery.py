@@ -489,7 +489,7 @@ def test_an_exploring_drive_on_a_mode_the_scan_rules_out_sets_out_again_on_the_b
     cmd = stack.decide(t + 0.2)
     np.testing.assert_allclose(seen[-1], compose_pose(b, stack.odom))
     assert cmd.state != "looking"
-    np.testing.assert_allclose(stack._explore_T, b)
+    np.testing.assert_allclose(stack.lost.motion.explore_T, b)
     stack.modes = [(b, 0.1)]  # a is no longer kept at all; b's drive goes on
     stack.decide(t + 0.3)
     np.testing.assert_allclose(seen[-1], compose_pose(b, stack.odom))
@@ -510,15 +510,15 @@ def test_an_exploring_drive_goes_where_the_modes_predict_different_walls(buildin
         stack.modes = [(pose, 0.05), (other, 0.052)]
         stacks.append(stack)
     active, plain = stacks
-    assert plain._compared_modes(pose).shape == (0, 3)
-    modes = active._compared_modes(pose)
+    assert plain.lost.motion._compared_modes(pose).shape == (0, 3)
+    modes = active.lost.motion._compared_modes(pose)
     assert len(modes) == 2
     nav = active.navigator
 
     def value(node: int) -> float:
-        return active._drive_value(nav.plan_points(node, pose), modes)
+        return active.lost.motion._drive_value(nav.plan_points(node, pose), modes)
 
-    chosen, ahead = active._explore_node(pose, 0.0), plain._explore_node(pose, 0.0)
+    chosen, ahead = active.lost.motion.explore_node(pose, 0.0), plain.lost.motion.explore_node(pose, 0.0)
     xy = nav.graph.node_xy()
     d = np.hypot(xy[:, 0] - pose[0], xy[:, 1] - pose[1])
     values = [value(int(nav.graph.nodes[int(k)].id)) for k in np.flatnonzero((d >= 6.0) & (d <= 12.0))]
@@ -538,7 +538,7 @@ def test_an_exploring_drive_does_not_set_out_into_walls_the_scan_has_seen(buildi
     stack = make_stack(building, pose=None)
     stack.odom = np.zeros(3)
     pose = START.copy()  # the best mode's belief
-    ahead = stack._explore_node(pose, 0.0)
+    ahead = stack.lost.motion.explore_node(pose, 0.0)
     assert ahead is not None
     path = points_in_frame(pose, stack.navigator.plan_points(ahead, pose))
     # A wall across that plan, 1.5 m along it, in the scan.
@@ -549,11 +549,11 @@ def test_an_exploring_drive_does_not_set_out_into_walls_the_scan_has_seen(buildi
     u = (path[k + 1] - path[k]) / seg_len[k]
     wall = at + np.outer(np.linspace(-1.0, 1.0, 41), [-u[1], u[0]])
     stack.scan.add(np.zeros(3), wall, 0.0)
-    other = stack._explore_node(pose, 0.0)
+    other = stack.lost.motion.explore_node(pose, 0.0)
     assert other is not None and other != ahead
-    stack._explored.clear()
-    assert stack._explore_node(pose, SEEN_KEEP_S + 0.1) == ahead
-    stack._explored.clear()
+    stack.lost.motion.explored.clear()
+    assert stack.lost.motion.explore_node(pose, SEEN_KEEP_S + 0.1) == ahead
+    stack.lost.motion.explored.clear()
     from autonomy.common.geometry import polyline_clear
 
     r = stack.cfg.avoidance.robot_radius_m
@@ -561,20 +561,20 @@ def test_an_exploring_drive_does_not_set_out_into_walls_the_scan_has_seen(buildi
     # Walled in all round: the node ahead after all.
     ring = 0.9 * np.column_stack([np.cos(np.linspace(0, 2 * np.pi, 200)), np.sin(np.linspace(0, 2 * np.pi, 200))])
     stack.scan.add(np.zeros(3), ring, 0.0)
-    assert stack._explore_node(pose, 0.0) == ahead
+    assert stack.lost.motion.explore_node(pose, 0.0) == ahead
 
 
 def test_prepare_recovery_builds_the_map_search_up_front(building) -> None:
     stack = make_stack(building)
-    assert stack._global is None
+    assert stack.lost._global is None
     stack.prepare_recovery()
-    gl = stack._global
+    gl = stack.lost._global
     assert gl is not None and len(gl.candidates) > 1000
     stack.prepare_recovery()
-    assert stack._global is gl  # once
+    assert stack.lost._global is gl  # once
     off = make_stack(building, recovery=replace(stack.cfg.recovery, enabled=False))
     off.prepare_recovery()
-    assert off._global is None
+    assert off.lost._global is None
 
 
 def test_prepare_recovery_loads_the_kernels_the_search_uses() -> None:
@@ -597,7 +597,7 @@ stack.prepare_recovery()
 kernels = (_grid_costs, _refine, _through_counts, _straight_runs)
 warm = [len(k.signatures) for k in kernels]
 ring = np.column_stack([3.0 * np.cos(np.linspace(0, 6, 200)), 2.0 * np.sin(np.linspace(0, 6, 200))])
-stack._global.search(ring, origins=np.zeros_like(ring))
+stack.lost._global.search(ring, origins=np.zeros_like(ring))
 stack.scan.add(stack.odom, ring, 0.0)
 on_straight_runs(stack.scan.points, 1.5)
 print(warm, [len(k.signatures) for k in kernels])
@@ -667,12 +667,12 @@ def test_a_scan_of_pillars_and_furniture_alone_sends_the_robot_to_find_walls(bui
         if want == "exploring":
             # The way out is open for the first 3 m (ahead, the pillars' row is 0.5 m
             # apart: too narrow; the mean of the points is ahead too).
-            assert stack._probe is not None
-            way = np.array([0.0, 0.0, 3.0 * math.cos(stack._probe[1]), 3.0 * math.sin(stack._probe[1])])
-            assert point_segment_distance(clutter, way[None, :]).min() > stack.cfg.avoidance.robot_radius_m, math.degrees(stack._probe[1])
+            assert stack.lost.motion.probe is not None
+            way = np.array([0.0, 0.0, 3.0 * math.cos(stack.lost.motion.probe[1]), 3.0 * math.sin(stack.lost.motion.probe[1])])
+            assert point_segment_distance(clutter, way[None, :]).min() > stack.cfg.avoidance.robot_radius_m, math.degrees(stack.lost.motion.probe[1])
             stack.scan.add(stack.odom, points_along((-1.5, 3.0), (1.5, 3.0)) + (0.0, 0.5), 1.6)
             stack.decide(1.6)
-            assert stack._probe is None
+            assert stack.lost.motion.probe is None
 
 
 def test_a_drive_to_find_walls_sets_out_the_way_most_open() -> None:
@@ -720,15 +720,15 @@ def test_kept_near_field_points_a_modes_map_explains_give_way_to_its_walls(build
     on a mode whose map has no wall there they stay, the robot's only knowledge of it."""
     stack, truth = _look_round_by_the_pillar(building)
     n_scan = len(stack.scan.recent_in_robot_frame(stack.odom, 12.0 - 15.0))
-    kept = len(stack._seen_now(12.0)) - n_scan
+    kept = len(stack.lost.view.seen_now(12.0)) - n_scan
     assert kept > 20
     # The true place: the pillar is mapped where the near field saw it (all but a few
     # sight lines past its edges, which it passes farther than near_wall_tol_m from).
-    assert len(stack._seen_now(12.0, truth)) - n_scan <= 0.15 * kept
+    assert len(stack.lost.view.seen_now(12.0, truth)) - n_scan <= 0.15 * kept
     # A mode 3 m off along the corridor, with no wall within the near field's reach.
     wrong = truth + np.array([-3.0, 0.0, 0.0])
     assert stack.navigator.map_points(wrong, 1.0, with_seen=False).shape[0] == 0
-    assert len(stack._seen_now(12.0, wrong)) - n_scan == kept
+    assert len(stack.lost.view.seen_now(12.0, wrong)) - n_scan == kept
 
 
 def test_what_the_near_field_shows_while_looking_round_keeps_a_drive_off_it(building) -> None:
@@ -744,7 +744,7 @@ def test_what_the_near_field_shows_while_looking_round_keeps_a_drive_off_it(buil
     to_pillar = PILLAR - truth[:2]
     scan = stack.scan.in_robot_frame(stack.odom)
     assert not len(scan) or np.hypot(scan[:, 0], scan[:, 1]).min() > 1.0
-    seen = stack._seen_now(12.0)
+    seen = stack.lost.view.seen_now(12.0)
     assert len(seen) > len(scan)
     near = seen[len(scan):]
     assert len(near) > 20
@@ -767,8 +767,8 @@ def test_what_the_near_field_shows_while_looking_round_keeps_a_drive_off_it(buil
     kept = nav.head_for(facing, heading, np.zeros((0, 2)), 12.0, seen=turned(seen))
     assert kept.state == "blocked" or abs(kept.theta_star_rad) > math.radians(20.0), kept
     late = 12.0 + SEEN_KEEP_S
-    stack._keep_near(None, late)
-    assert len(stack._seen_now(late)) == 0
+    stack.lost.view.keep_near(None, late)
+    assert len(stack.lost.view.seen_now(late)) == 0
 
 
 @pytest.mark.parametrize("tests", ["view", "missing walls", "neither"])

@@ -1,0 +1,524 @@
+"""The robot-side stack behind one entry point: depth frame + odometry + time -> command.
+
+:class:`RobotStack` owns every per-frame module of the robot (BV2012): FSPF on the depth
+image (Algorithm 1), CGR localization on the plane-filtered points (Section IV), the
+obstacle points P u O and the near field, and the navigator with its obstacle memory and
+avoidance (Eq. 3-5). It needs no simulator: feed it a real Kinect's frames (float32
+metres, 0 = invalid) and wheel-odometry increments and it drives.
+
+One frame is three steps, callable separately where a user needs only some of them:
+
+1. :meth:`RobotStack.perceive` -- FSPF, the floor-plane projection, obstacles, near field;
+2. :meth:`RobotStack.localize` -- CGR predict and update (or dead reckoning when
+   localization is off);
+3. :meth:`RobotStack.decide` -- the navigator's velocity command on the estimate.
+
+:meth:`RobotStack.step` runs all three and returns a :class:`StackOutput` with the command,
+the estimate and what a viewer or a report needs (planes, particles, the avoidance fan,
+per-stage timings).
+
+Its parts: the frame guard (:mod:`autonomy.stack.frames`), the recovery when lost
+(:mod:`autonomy.stack.lost`, :mod:`autonomy.stack.lost_view`,
+:mod:`autonomy.stack.search_motion`), sharing the belief and the last frame
+(:mod:`autonomy.stack.state`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from autonomy.common.errors import InputError
+from autonomy.common.geometry import compose_pose
+from autonomy.localization.cgr import CGRLocalizer, UpdateStats
+from autonomy.localization.health import HealthMonitor, HealthSample
+from autonomy.localization.observation import correspond
+from autonomy.localization.relocalization import GlobalLocalizer, Scan
+from autonomy.localization.view_check import ViewCheck
+from autonomy.maps.planner import NoPathError
+from autonomy.maps.raycast import SceneQuery, load_or_build
+from autonomy.maps.vectormap import NavGraph, VectorMap
+from autonomy.navigation.avoidance import obstacle_points
+from autonomy.navigation.navigator import NavCommand, Navigator
+from autonomy.perception.camera import CameraMount
+from autonomy.perception.fspf import fspf
+from autonomy.perception.mount_check import MountCheck
+from autonomy.perception.nearfield import NearField
+from autonomy.stack.config import StackConfig
+from autonomy.stack.frames import FrameGuard, moved_more_than_noise
+from autonomy.stack.lost import Accepted, LostRecovery
+from autonomy.stack.state import Perception, StackState, empty_perception
+
+#: Seeds of the FSPF sampling stream stay below this (the kernel's xorshift seed range).
+FSPF_SEED_MODULUS = 2**31
+
+
+@dataclass
+class StackOutput:
+    """One frame of the stack: the command, the belief, and what viewers and reports read."""
+
+    command: NavCommand | None
+    """The navigator's decision (None when the stack does not navigate)."""
+    estimate: np.ndarray
+    """Pose estimate (x, y, theta) in the map frame."""
+    spread: tuple[float, float]
+    """(position spread m, heading spread rad) of the belief; (0, 0) for dead reckoning."""
+    perception: Perception
+    """This frame's FSPF result, observation points, obstacles and near field."""
+    timings_s: dict[str, float]
+    """Seconds spent in each stage this frame: fspf, obstacles, localization, navigation."""
+
+    @property
+    def velocity(self) -> np.ndarray:
+        """Body-frame velocity command (vx, vy, omega); zero when not navigating."""
+        return np.zeros(3) if self.command is None else self.command.velocity
+
+
+class RobotStack:
+    """FSPF, CGR, near field, obstacle memory and navigator: one object, one step a frame."""
+
+    def __init__(
+        self,
+        vectormap: VectorMap,
+        navgraph: NavGraph | None,
+        cfg: StackConfig = StackConfig(),
+        *,
+        rng: np.random.Generator,
+        fspf_seed: int = 0,
+        scene: SceneQuery | None = None,
+        map_path: str | Path | None = None,
+    ) -> None:
+        """``rng`` drives CGR's sampling; ``fspf_seed`` starts FSPF's per-frame seeds
+        (frame k uses ``fspf_seed + k``). ``scene`` is the map's ray-cast query; without
+        it one is made (its visibility grid cached beside ``map_path`` when given)."""
+        if cfg.navigate and navgraph is None:
+            raise InputError("robot stack: navigating needs a navigation graph")
+        self.cfg = cfg
+        self.vectormap = vectormap
+        self.fspf_seed = int(fspf_seed)
+        cam = cfg.camera
+        self.scene: SceneQuery | None = None
+        self.localizer: CGRLocalizer | None = None
+        loc = cfg.localization
+        if loc.enabled:
+            self.scene = scene if scene is not None else SceneQuery(vectormap, load_or_build(vectormap, map_path, loc.grid))
+            query = self.scene
+            self.localizer = CGRLocalizer(lambda x, y: query.scene_lines(x, y)[0], loc.cgr, loc.observation, rng)
+        self.navigator: Navigator | None = None
+        self.near_field: NearField | None = None
+        if cfg.navigate:
+            walls = np.asarray(vectormap.segments)
+            self.navigator = Navigator(navgraph, cfg.navigator, cfg.avoidance, walls=walls, camera=cam)
+            self.near_field = NearField(
+                cam.intrinsics, cam.mount, cam.min_range_m, cfg.avoidance.robot_radius_m, cfg.avoidance.near_field
+            )
+        self.frame = 0
+        self.state = StackState(mount=cam.mount)
+        self.timings_s: dict[str, float] = {}
+        self.guard = FrameGuard()
+        self.mount_check = MountCheck(cam.mount, cfg.recovery.mount_check) if (cfg.recovery.enabled and cfg.recovery.check_mount) else None
+        rec = cfg.recovery
+        self.health: HealthMonitor | None = HealthMonitor(rec.health) if (rec.enabled and self.localizer is not None) else None
+        self.view_check: ViewCheck | None = None
+        if self.health is not None and rec.view.enabled:
+            self.view_check = ViewCheck(rec.view, cam.intrinsics, cam.mount.robot_from_camera(), cam.min_range_m, cam.max_range_m)
+        self.lost = LostRecovery(cfg, self.state, vectormap, self.scene, self.health, self.navigator)
+        self._home: np.ndarray | None = None
+        """Where the robot was started (x, y; :meth:`reset`), or the first goal when the
+        start was unknown: a goal with no path from there is the user's mistake."""
+        self._view_agree = math.nan
+        self._cgr_lines: np.ndarray | None = None
+        self._cgr_stats: UpdateStats | None = None
+        self._correction: tuple[float, float] | None = None
+
+    # -- the shared belief and frame, read and set by callers ---------------------------
+    @property
+    def pose(self) -> np.ndarray:
+        """The pose estimate (x, y, theta), map frame."""
+        return self.state.pose
+
+    @pose.setter
+    def pose(self, value: np.ndarray) -> None:
+        self.state.pose = value
+
+    @property
+    def spread(self) -> tuple[float, float]:
+        """(position spread m, heading spread rad) of the belief."""
+        return self.state.spread
+
+    @spread.setter
+    def spread(self, value: tuple[float, float]) -> None:
+        self.state.spread = value
+
+    @property
+    def odom(self) -> np.ndarray:
+        """Dead reckoning from the odometry alone (the relocalization's scan frame)."""
+        return self.state.odom
+
+    @odom.setter
+    def odom(self, value: np.ndarray) -> None:
+        self.state.odom = value
+
+    @property
+    def perception(self) -> Perception | None:
+        """The last usable frame's perception (None before the first)."""
+        return self.state.perception
+
+    @property
+    def mount(self) -> CameraMount:
+        """The camera mount FSPF and the near field use (the mount check corrects it)."""
+        return self.state.mount
+
+    @property
+    def events(self) -> list[dict]:
+        """What the recovery did: {"t", "event": lost | relocalized | blind | seeing | mount corrected, ...}."""
+        return self.state.events
+
+    @property
+    def frame_fault(self) -> str:
+        """What was wrong with this frame ('' nothing): dropped or stale (not used), invalid
+        (no valid pixel; used), corrupt (NaN or infinite pixels; used without them)."""
+        return self.guard.fault
+
+    @property
+    def frames_rejected(self) -> dict[str, int]:
+        """How many frames were dropped, stale, invalid or corrupt."""
+        return self.guard.rejected
+
+    @property
+    def relocalizing(self) -> bool:
+        """True while the stack is lost and searching the map (the navigator looks round)."""
+        return self.lost.relocalizing
+
+    @property
+    def scan(self) -> Scan:
+        """The relocalization's scan (dead-reckoning frame)."""
+        return self.lost.view.scan
+
+    @property
+    def modes(self) -> list[tuple[np.ndarray, float]]:
+        """Relocalization modes as (map-from-odometry transform, score), best first."""
+        return self.lost.view.modes
+
+    @modes.setter
+    def modes(self, value: list[tuple[np.ndarray, float]]) -> None:
+        self.lost.view.modes = value
+
+    @property
+    def last_search(self):
+        """The relocalization's last map search (None before the first)."""
+        return self.lost.last_search
+
+    # -- belief ------------------------------------------------------------------------
+    def reset(self, pose: np.ndarray | None) -> None:
+        """Start at a known pose (the mission's start): belief and dead reckoning there.
+        ``None``: the pose is unknown; the robot looks round and relocalizes on the map
+        first (needs localization with recovery)."""
+        st = self.state
+        self.frame = 0
+        st.perception = None
+        st.events = []
+        self.guard.reset()
+        st.odom = np.zeros(3) if pose is None else np.asarray(pose, dtype=np.float64).copy()
+        self._home = None if pose is None else st.odom[:2].copy()
+        if pose is None:
+            if self.health is None:
+                raise InputError("robot stack: an unknown start pose needs localization with recovery enabled")
+            st.pose = np.zeros(3)
+            st.spread = (math.inf, math.inf)
+            self.lost.start(0.0, prior=None, why="start with an unknown pose")
+            return
+        self.relocalize(pose)
+
+    def relocalize(self, pose: np.ndarray) -> None:
+        """Re-initialise the belief around ``pose`` (an operator's reset, or a
+        simulation's truth reset when the error passes the failure threshold)."""
+        st = self.state
+        # The estimate is the given pose itself until the next update, not the mean of
+        # the particles just drawn around it: the pose is known.
+        st.pose = np.asarray(pose, dtype=np.float64).copy()
+        st.spread = (0.0, 0.0)
+        if self.localizer is not None:
+            self.localizer.reset(st.pose)
+            est = self.localizer.estimate()
+            st.spread = (est.std_xy_m, est.std_theta_rad)
+        self.lost.end()
+        self.lost.settle_until = -math.inf
+        if self.health is not None:
+            self.health.reset(st.t)
+
+    def _read_estimate(self) -> None:
+        assert self.localizer is not None
+        est = self.localizer.estimate()
+        self.state.pose = est.pose.copy()
+        self.state.spread = (est.std_xy_m, est.std_theta_rad)
+
+    # -- the three steps of a frame ----------------------------------------------------
+    def perceive(self, depth: np.ndarray | None, seed: int | None = None) -> Perception:
+        """FSPF (BV2012 Algorithm 1) on a depth frame (float32 m, 0 = invalid), its
+        floor projection (IV-B), the obstacles P u O (Section V) and the near field.
+        ``seed`` overrides this frame's FSPF seed (``fspf_seed + frame``).
+
+        ``None`` is a dropped frame; NaN or infinite pixels count as invalid. A dropped
+        frame, or the same pixels as the last one while the wheels turn (a stuck driver
+        repeating itself, :meth:`localize` tells), is not used: the last perception
+        stands and ``frame_fault`` says why. A frame with no valid pixel is used (the
+        near field reads it as blocked right ahead) and counted as ``invalid``."""
+        cam, cfg, st = self.cfg.camera, self.cfg, self.state
+        s = (self.fspf_seed + self.frame) % FSPF_SEED_MODULUS if seed is None else int(seed)
+        self.frame += 1
+        self.guard.begin()
+        st.fresh = False
+        if depth is None:
+            return self._reject("dropped")
+        depth = self.guard.check(np.asarray(depth))
+        t0 = time.perf_counter()
+        planes = fspf(depth, cam.intrinsics, cfg.fspf, seed=s, mount=st.mount)
+        if self.mount_check is not None:
+            corrected = self.mount_check.update(planes)
+            if corrected is not None:
+                self._correct_mount(corrected)
+                planes = fspf(depth, cam.intrinsics, cfg.fspf, seed=s, mount=st.mount)
+        p2d, n2d = planes.projected(cfg.fspf.max_vertical_normal_angle_rad)
+        t1 = time.perf_counter()
+        if self.navigator is not None:
+            obstacles = obstacle_points(planes.points, cfg.avoidance, also=planes.outliers)
+            assert self.near_field is not None
+            near = self.near_field.sight_lines(depth)
+        else:
+            obstacles, near = np.zeros((0, 2)), np.zeros((0, 4))
+        t2 = time.perf_counter()
+        self.timings_s = {"fspf": t1 - t0, "obstacles": t2 - t1}
+        st.perception = Perception(planes, p2d, n2d, obstacles, near)
+        st.fresh = True
+        st.depth = depth
+        return st.perception
+
+    def _correct_mount(self, mount) -> None:
+        """Use a corrected camera mount from now on (FSPF, the near field)."""
+        assert self.mount_check is not None
+        st = self.state
+        st.events.append(
+            {"t": round(st.t, 3), "event": "mount corrected", "tilt_error_deg": round(float(self.mount_check.tilt_error_deg), 2),
+             "pitch_down_deg": round(math.degrees(float(mount.pitch_down_rad)), 2),
+             "roll_deg": round(math.degrees(float(getattr(mount, "roll_rad", 0.0))), 2)}
+        )
+        st.mount = mount
+        if self.view_check is not None:
+            self.view_check.set_mount(mount.robot_from_camera())
+        if self.near_field is not None:
+            cam = self.cfg.camera
+            try:
+                # A camera tilted up may no longer see the configured band of near floor:
+                # the nearest floor it sees takes its place (the robot is blind a little
+                # farther out, and the event says how far).
+                self.near_field = NearField(
+                    cam.intrinsics, mount, cam.min_range_m, self.cfg.avoidance.robot_radius_m, self.cfg.avoidance.near_field, shift_band=True
+                )
+                st.events[-1]["near_floor_m"] = [round(v, 2) for v in self.near_field.band_m]
+            except InputError:
+                # No floor in view at all: the last near field stays (it watches the
+                # pixels the floor was last seen in).
+                st.events[-1]["near_floor_m"] = None
+
+    def _reject(self, why: str) -> Perception:
+        self.guard.reject(why)
+        self.timings_s = {"fspf": 0.0, "obstacles": 0.0}
+        if self.state.perception is None:
+            self.state.perception = empty_perception()
+        return self.state.perception
+
+    def localize(self, increment: np.ndarray | None, t: float | None = None) -> np.ndarray:
+        """CGR's predict (odometry ``increment``, robot frame dx, dy, dtheta) and update
+        on the last perception's points (BV2012 IV-C); without localization, dead
+        reckoning. ``increment`` None: no motion since the last frame (the first one).
+
+        ``t`` (seconds) drives the recovery: the health monitor's averages, the lost test
+        and, while lost, the relocalization (:mod:`autonomy.localization.health`,
+        :mod:`autonomy.localization.relocalization`). Without it the recovery waits."""
+        t0 = time.perf_counter()
+        st = self.state
+        if t is not None:
+            st.t = float(t)
+        self._cgr_lines = None
+        self._cgr_stats = None
+        self._correction = None
+        self._view_agree = math.nan
+        if increment is not None:
+            inc = np.asarray(increment, dtype=np.float64)
+            if inc.shape != (3,):
+                raise InputError(f"robot stack: odometry increment expected (dx, dy, dtheta), got shape {inc.shape}")
+            moved = False
+            if np.all(np.isfinite(inc)):
+                st.odom = compose_pose(st.odom, inc)
+                moved = moved_more_than_noise(inc)
+            if self.guard.stale(st.odom, moved):
+                # The wheels turned but the camera gave the same pixels: a stale frame.
+                st.fresh = False
+            if self.localizer is None:
+                if np.all(np.isfinite(inc)):
+                    st.pose = compose_pose(st.pose, inc)
+            elif self.lost.relocalizing:
+                belief = self.lost.belief(st.odom)
+                if belief is not None:
+                    st.pose = belief
+            else:
+                predicted = compose_pose(st.pose, inc)
+                self.localizer.predict(inc)
+                if st.perception is not None and st.fresh:
+                    self._cgr_stats = self.localizer.update(st.perception.points_2d, st.perception.normals_2d)
+                    self._cgr_lines = self.localizer.last_lines
+                self._read_estimate()
+                # How far the update moved the belief beyond the odometry (the jump test).
+                self._correction = (float(st.pose[0] - predicted[0]), float(st.pose[1] - predicted[1]))
+        self.guard.note_odometry(st.odom)
+        if t is not None and self.view_check is not None and st.fresh and st.depth is not None:
+            if self.lost.relocalizing:  # the health monitor does not listen while relocalizing
+                self.view_check.store(float(t), st.odom, st.depth)
+            else:
+                self._view_agree = self.view_check.update(float(t), st.odom, st.depth)
+        if t is not None and self.health is not None:
+            if self.lost.relocalizing:
+                accepted = self.lost.step(float(t))
+                if accepted is not None:
+                    self._restart_on(accepted, float(t))
+            else:
+                self.lost.watch(float(t), self._cgr_lines, self._correction, self._view_agree)
+        self.timings_s["localization"] = time.perf_counter() - t0
+        return st.pose
+
+    def _restart_on(self, accepted: Accepted, t: float) -> None:
+        """Restart CGR on the accepted place; the navigator re-plans to its goal from there."""
+        rec = self.cfg.recovery
+        assert self.localizer is not None and self.health is not None
+        st = self.state
+        pose = accepted.pose
+        self.localizer.reset(pose, rec.restart_std_xy_m, rec.restart_std_theta_rad)
+        st.pose = pose
+        est = self.localizer.estimate()
+        st.spread = (est.std_xy_m, est.std_theta_rad)
+        self.health.reset(t)
+        self.lost.settle_until = t + rec.settle_s
+        if self.navigator is not None:
+            self.navigator.pose_jumped()
+            if self.lost.goal is not None:
+                self.navigator.set_goal(self.lost.goal, pose, t)
+
+    # -- recovery ------------------------------------------------------------------------
+    @property
+    def health_state(self) -> str:
+        """ok, blind, lost (the moment it is noticed) or relocalizing; ok without recovery."""
+        if self.lost.relocalizing:
+            return "relocalizing"
+        return "ok" if self.health is None else self.health.state
+
+    @property
+    def correction(self) -> tuple[float, float] | None:
+        """How far this frame's localizer update moved the belief beyond the odometry's
+        prediction (world x, y; None: no update this frame)."""
+        return self._correction
+
+    @property
+    def cgr_stats(self) -> UpdateStats | None:
+        """What CGR's update did on this frame (None: no update, the frame was refused or
+        the robot is relocalizing)."""
+        return self._cgr_stats
+
+    @property
+    def health_sample(self) -> HealthSample | None:
+        """The health monitor's last sample (None without recovery)."""
+        return None if self.health is None else self.health.last
+
+    def prepare_recovery(self) -> None:
+        """Build the relocalization's map search now rather than at the first alarm
+        (:meth:`autonomy.stack.lost.LostRecovery.prepare`)."""
+        self.lost.prepare()
+
+    def global_localizer(self) -> GlobalLocalizer:
+        """The relocalization's map search on this stack's map (built on first use)."""
+        return self.lost.global_localizer()
+
+    # -- deciding ------------------------------------------------------------------------
+    def decide(self, t: float, pose: np.ndarray | None = None) -> NavCommand:
+        """The navigator's command at time ``t`` from the last perception, on the estimate
+        (or on ``pose``: a simulation's ground-truth follower). Blind (no usable frame
+        for a while), the robot stands still; relocalizing, it turns in place to look
+        (and, undecided after ``recovery.explore_after_s``, drives on the best mode), and
+        goes on turning for ``recovery.settle_s`` after a mode is accepted."""
+        if self.navigator is None:
+            raise InputError("robot stack: built with navigate = false, it has no navigator")
+        per = self.state.perception
+        obstacles = np.zeros((0, 2)) if per is None else per.obstacles
+        near = None if per is None else per.near_lines
+        t0 = time.perf_counter()
+        if self.health is not None and self.health.state == "blind":
+            cmd = NavCommand(np.zeros(3), "blind")
+        elif self.lost.relocalizing and pose is None:
+            cmd = self.lost.motion.command(t, obstacles, near)
+        elif pose is None and t < self.lost.settle_until:
+            cmd = self.navigator.look_around(t)
+            cmd.state = "settling"
+        else:
+            cmd = self.navigator.command(self.state.pose if pose is None else pose, obstacles, t, near)
+        self.timings_s["navigation"] = time.perf_counter() - t0
+        return cmd
+
+    def step(
+        self, depth: np.ndarray | None, increment: np.ndarray | None, t: float, pose: np.ndarray | None = None
+    ) -> StackOutput:
+        """One frame: perceive, localize, and (when navigating) decide."""
+        per = self.perceive(depth)
+        self.localize(increment, t)
+        cmd = self.decide(t, pose) if self.navigator is not None else None
+        return StackOutput(cmd, self.state.pose.copy(), self.state.spread, per, dict(self.timings_s))
+
+    # -- goals ---------------------------------------------------------------------------
+    def set_goal(self, node_id: int, t: float, pose: np.ndarray | None = None) -> float:
+        """Plan to a navigation-graph node from the estimate (or ``pose``); returns the
+        plan's length in metres. While relocalizing the goal is kept for when the robot
+        knows where it is again (the length is then the best mode's).
+
+        A goal that the place the robot was started at (:meth:`reset`; unknown there,
+        the first goal) has no path to is the user's mistake:
+        :class:`autonomy.maps.planner.NoPathError`. One that only the belief has no path to
+        (a wrong belief in a part of the graph cut off from the goal) is the robot's:
+        the plan starts at the nearest node that reaches the goal, and the localization
+        recovers the belief (:meth:`Navigator.set_goal`)."""
+        nav = self.navigator
+        if nav is None:
+            raise InputError("robot stack: built with navigate = false, it has no navigator")
+        if self._home is None:
+            home = nav.graph.node_xy()[nav.graph.index_of(int(node_id))]
+            self._home = np.asarray(home, dtype=np.float64).copy()
+        elif not nav.reaches(int(node_id), self._home)[0]:
+            start = nav.nearest_reachable_node(self._home)
+            raise NoPathError(f"no path from node {start} (where the robot started) to node {int(node_id)} in the navigation graph")
+        self.lost.goal = int(node_id)
+        at = self.state.pose if pose is None else pose
+        if self.lost.relocalizing and pose is None:
+            return nav.plan_length(int(node_id), at)
+        return nav.set_goal(node_id, at, t)
+
+    # -- for viewers ---------------------------------------------------------------------
+    def correspondences(self) -> tuple[np.ndarray, np.ndarray]:
+        """The scene lines visible from the estimate and, for each observation point, the
+        index of the line it is associated with there (-1: none), as CGR's observation
+        model associates them (BV2012 Eq. 1). For viewers; costs one association pass."""
+        per = self.state.perception
+        if self.scene is None or per is None:
+            return np.zeros((0, 4)), np.zeros(0, dtype=np.int64)
+        est = self.state.pose
+        lines = np.ascontiguousarray(self.scene.scene_lines(float(est[0]), float(est[1]))[0])
+        p2d = np.ascontiguousarray(per.points_2d, dtype=np.float64)
+        idx = np.full(len(p2d), -1, dtype=np.int64)
+        if len(lines) and len(p2d):
+            ocfg = self.cfg.localization.observation
+            correspond(
+                lines, est, p2d, np.ascontiguousarray(per.normals_2d, dtype=np.float64), True,
+                math.cos(ocfg.theta_max_rad), ocfg.max_distance_m, idx,
+            )
+        return lines, idx

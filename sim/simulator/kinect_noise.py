@@ -87,6 +87,7 @@ import numpy as np
 
 from autonomy.common.constants import KINECT_FOCAL_PX, KINECT_MAX_RANGE_M, KINECT_MIN_RANGE_M
 from autonomy.common.errors import InputError
+from autonomy.common.rng import GAMMA, mix64, mix64_int
 from autonomy.perception.camera import CameraIntrinsics
 
 #: Incidence angles are clamped below this in the closed forms (both blow up at pi/2).
@@ -283,12 +284,7 @@ def dropout_probability(theta, cfg: KinectNoiseConfig | None = None) -> np.ndarr
 #   48-63 dropout uniform.
 # The rare ziggurat wedge and tail tests hash r again for more words.
 
-_GAMMA = np.uint64(0x9E3779B97F4A7C15)
-_M1 = np.uint64(0xBF58476D1CE4E5B9)
-_M2 = np.uint64(0x94D049BB133111EB)
-_S30 = np.uint64(30)
-_S27 = np.uint64(27)
-_S31 = np.uint64(31)
+_GAMMA = np.uint64(GAMMA)
 _S11 = np.uint64(11)
 _S22 = np.uint64(22)
 _S32 = np.uint64(32)
@@ -330,14 +326,6 @@ _LAT_G_MAX = float(np.abs(_LAT_G).max())
 
 
 @numba.njit(cache=True, inline="always")
-def _mix64(s):  # pragma: no cover - numba
-    """SplitMix64 finaliser (Steele, Lea & Flood 2014)."""
-    s = (s ^ (s >> _S30)) * _M1
-    s = (s ^ (s >> _S27)) * _M2
-    return s ^ (s >> _S31)
-
-
-@numba.njit(cache=True, inline="always")
 def _uniform53(r):  # pragma: no cover - numba
     """Uniform in [0, 1) from the top 53 bits of a 64-bit word."""
     return float(np.int64(r >> _S11)) * _TWO_M53
@@ -361,25 +349,25 @@ def _normal_slow(r):  # pragma: no cover - numba
             return sgn * x
         if i == 0:  # tail beyond R (Marsaglia 1964)
             while True:
-                r = _mix64(r + _GAMMA)
+                r = mix64(r + _GAMMA)
                 xt = -math.log(1.0 - _uniform53(r)) / _ZIG_R
-                r = _mix64(r + _GAMMA)
+                r = mix64(r + _GAMMA)
                 yt = -math.log(1.0 - _uniform53(r))
                 if 2.0 * yt > xt * xt:
                     break
             return sgn * (_ZIG_R + xt)
-        r = _mix64(r + _GAMMA)  # wedge
+        r = mix64(r + _GAMMA)  # wedge
         y = _ZIG_F[i] + _uniform53(r) * (_ZIG_F[i + 1] - _ZIG_F[i])
         if y < math.exp(-0.5 * x * x):
             return sgn * x
-        r = _mix64(r + _GAMMA)
+        r = mix64(r + _GAMMA)
 
 
 @numba.njit(cache=True)
 def _normals(key, n, out):  # pragma: no cover - numba
     """n standard normals from the kernel's ziggurat and words (tests the generator)."""
     for i in range(n):
-        out[i] = _normal_slow(_mix64(key + np.uint64(i + 1) * _GAMMA))
+        out[i] = _normal_slow(mix64(key + np.uint64(i + 1) * _GAMMA))
 
 
 # --------------------------------------------------------------------------- smooth random fields
@@ -409,7 +397,7 @@ def _field_block(key, kern, nx, j0, j1, iu, wu0, wu1):  # pragma: no cover - num
     for i in range(nr + 2 * r):
         base = (j0 + i) * wx
         for j in range(wx):
-            white[j] = _normal_slow(_mix64(key + np.uint64(base + j + 1) * _GAMMA))
+            white[j] = _normal_slow(mix64(key + np.uint64(base + j + 1) * _GAMMA))
         for j in range(nx):
             acc = 0.0
             for t in range(kern.size):
@@ -473,11 +461,7 @@ def smooth_field(seed: int, h: int, w: int, length_px: float) -> np.ndarray:
 def _field_key(key: np.uint64, tag: int) -> np.uint64:
     """Key of a field drawn from a frame or pattern key (tag 1: per-frame field, 2: pattern);
     unrelated to the per-pixel words of the same key."""
-    m = (1 << 64) - 1
-    s = (int(key) ^ (tag * 0xD1B54A32D192ED03)) & m
-    s = ((s ^ (s >> 30)) * 0xBF58476D1CE4E5B9) & m
-    s = ((s ^ (s >> 27)) * 0x94D049BB133111EB) & m
-    return np.uint64(s ^ (s >> 31))
+    return np.uint64(mix64_int(int(key) ^ (tag * 0xD1B54A32D192ED03)))
 
 
 # --------------------------------------------------------------------------- kernels
@@ -763,7 +747,7 @@ def _noise_rows(
         ctr = key + np.uint64(v * w) * _GAMMA
         for u in range(w):  # 1: scalar (table lookups)
             ctr += _GAMMA
-            r = _mix64(ctr)
+            r = mix64(ctr)
             hi[u] = np.uint32(r >> _S32)
             g1[u] = _LAT_G[r & _LAT_MASK]
             g2[u] = _LAT_G[(r >> _S11) & _LAT_MASK]
@@ -793,7 +777,7 @@ def _noise_rows(
             ctr = key + np.uint64(v * w) * _GAMMA
             for u in range(w):
                 if slow[u]:
-                    gz[u] = _F32(_normal_slow(_mix64(ctr + np.uint64(u + 1) * _GAMMA)))
+                    gz[u] = _F32(_normal_slow(mix64(ctr + np.uint64(u + 1) * _GAMMA)))
         rc = depth[v]
         orow = out[v]
         j = rj[v] - j0 if corr else 0
@@ -936,11 +920,7 @@ def _check_seed(seed) -> int:
 
 def _seed_key(seed: int) -> np.uint64:
     """Per-frame key: SplitMix64 of the seed (nearby seeds give unrelated streams)."""
-    m = (1 << 64) - 1
-    s = (seed * 0x9E3779B97F4A7C15 + 0x632BE59BD9B4E019) & m
-    s = ((s ^ (s >> 30)) * 0xBF58476D1CE4E5B9) & m
-    s = ((s ^ (s >> 27)) * 0x94D049BB133111EB) & m
-    return np.uint64(s ^ (s >> 31))
+    return np.uint64(mix64_int(seed * GAMMA + 0x632BE59BD9B4E019))
 
 
 _CPUS = os.cpu_count() or 1  # read once: the call costs tens of microseconds here

@@ -59,7 +59,7 @@ history, global RNG state or the thread count): same seed, same image, bit for b
 Speed: per row, vectorised float32 loops (normals, incidence angles, the final arithmetic)
 and lean scalar loops (table lookups, gathers, the shadow scan). The image is split into
 ``cfg.threads`` row blocks run on threads with the GIL released; each block computes its
-own halo rows, so blocks need no synchronisation. See :func:`benchmark_noise`.
+own halo rows, so blocks need no synchronisation. ``python bench/noise_bench.py`` times it.
 
 Choices where the sources leave room: an output pixel whose own input is invalid stays 0
 (holes are not filled by the lateral jitter; a shadowed pixel can take a lit neighbour's
@@ -78,8 +78,7 @@ import math
 import os
 import queue
 import threading
-import time
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, fields
 from statistics import NormalDist
 
 import numba
@@ -1119,95 +1118,3 @@ def apply_kinect_noise(
     )  # fmt: skip
     _run_blocks(n, d, margin, args, out)
     return out
-
-
-# --------------------------------------------------------------------------- references
-
-
-def shadow_mask_reference(depth: np.ndarray, fx: float, projector_offset_m: float) -> np.ndarray:
-    """Slow numpy reference of the projector-shadow test (True = shadowed).
-
-    A valid pixel is shadowed when some valid pixel on the same row, on the projector's
-    side, has a smaller projector column u_p = u - fx b / z (b > 0) or a larger one (b < 0).
-    Computed in float32 with the kernel's operations, so the masks agree exactly.
-    """
-    z = np.asarray(depth, dtype=np.float32)
-    valid = (z > 0) & np.isfinite(z)
-    shift = np.float32(fx * projector_offset_m)
-    if shift == 0:
-        return np.zeros(z.shape, dtype=bool)
-    u = np.arange(z.shape[1], dtype=np.float32)[None, :]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        up = u - shift / np.where(valid, z, np.float32(1))
-    n = z.shape[0]
-    if shift > 0:
-        up = np.where(valid, up, np.float32(np.inf))
-        suffix = np.minimum.accumulate(up[:, ::-1], axis=1)[:, ::-1]
-        strict = np.concatenate([suffix[:, 1:], np.full((n, 1), np.inf, np.float32)], axis=1)
-        return valid & (up > strict)
-    up = np.where(valid, up, np.float32(-np.inf))
-    prefix = np.maximum.accumulate(up, axis=1)
-    strict = np.concatenate([np.full((n, 1), -np.inf, np.float32), prefix[:, :-1]], axis=1)
-    return valid & (up < strict)
-
-
-def quantize_depth_reference(z: np.ndarray, cfg: KinectNoiseConfig | None = None) -> np.ndarray:
-    """Slow numpy reference of disparity quantisation; 0 (and anything not > 0) gives 0.
-
-    With s = subpixel: k = round(s f b / z) (the disparity d = f b / z in 1/s px units) and
-    z_q = s f b / k = f b / (k / s), in float32 like the kernel.
-    """
-    c = cfg or KinectNoiseConfig()
-    z = np.asarray(z, dtype=np.float32)
-    fbs = np.float32(_fbs(c))
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        k = np.rint(fbs / z)
-        zq = fbs / k
-    return np.where((z > 0) & (k > 0) & np.isfinite(zq), zq, np.float32(0)).astype(np.float32)
-
-
-# --------------------------------------------------------------------------- benchmark
-
-
-def _bench_scene(intr: CameraIntrinsics) -> np.ndarray:
-    """A floor, a slanted wall and a box: a typical indoor frame."""
-    xn, yn = _normalised_coords(intr)
-    x, y = np.meshgrid(xn, yn)
-    wall = 3.0 / (1.0 + 0.6 * x)
-    with np.errstate(divide="ignore"):
-        floor = np.where(y > 0.01, 0.7 / np.maximum(y, 1e-9), np.inf)
-    z = np.minimum(wall, floor)
-    box = (np.abs(x - 0.1) < 0.15) & (np.abs(y - 0.05) < 0.2)
-    z[box] = 1.5
-    z[z > 6.0] = 0.0
-    return z.astype(np.float32)
-
-
-def benchmark_noise(
-    repeats: int = 100, cfg: KinectNoiseConfig | None = None, threads: int | None = None
-) -> float:
-    """Median milliseconds of :func:`apply_kinect_noise` on a 640 x 480 frame (JIT warmed up).
-
-    The frame is a floor, a slanted wall and a box; ``threads`` overrides ``cfg.threads``.
-    """
-    intr = CameraIntrinsics()
-    c = cfg or KinectNoiseConfig()
-    if threads is not None:
-        c = replace(c, threads=threads)
-    depth = _bench_scene(intr)
-    out = np.empty_like(depth)
-    for i in range(3):
-        apply_kinect_noise(depth, intr, c, i, out=out)
-    times = []
-    for i in range(repeats):
-        t0 = time.perf_counter()
-        apply_kinect_noise(depth, intr, c, i, out=out)
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times) * 1e3)
-
-
-if __name__ == "__main__":
-    for n in (1, 2):
-        print(
-            f"kinect noise, 640x480, {n} thread(s): {benchmark_noise(300, threads=n):.3f} ms median"
-        )

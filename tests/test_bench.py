@@ -1,5 +1,6 @@
-"""The benchmark harness (`make bench`) runs and writes its results file: a smoke test of
-one quick group (the numbers themselves are measured by `make bench`, never asserted)."""
+"""The benchmark harness (`make bench`) runs and writes its results file: smoke tests of
+one quick group and of bench/noise_bench.py (the numbers themselves are measured by
+`make bench`, never asserted)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,8 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -47,3 +50,13 @@ def test_the_open3d_group_is_optional(tmp_path: Path) -> None:
         assert res == {} and "Open3D comparison is skipped" in p.stderr
     else:
         assert res["o3d_plane_frame"]["fspf_speedup"] > 0 and res["o3d_plane_ransac"]["ransac_speedup"] > 0
+
+
+def test_the_noise_benchmark_runs(capsys: pytest.CaptureFixture[str]) -> None:
+    """bench/noise_bench.py times the noise model alone, for 1 and 2 threads."""
+    sys.path.insert(0, str(ROOT / "bench"))
+    import noise_bench
+
+    assert noise_bench.benchmark_noise(repeats=2) > 0
+    assert noise_bench.main(["--repeats", "2"]) == 0
+    assert capsys.readouterr().out.count("ms median") == 2

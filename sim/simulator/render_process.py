@@ -13,7 +13,7 @@ One render server per process, started on first use, hosts every camera of that 
 (a new building sends its model once). Per frame the caller writes the poses of the
 moving geoms (everything not on the world body) and of the camera into a shared memory
 file, sends one short message and waits; the server renders with
-:class:`sim.simulator.kinect.GLDepth` into the same file. The server sees the very
+:class:`sim.simulator.gl_depth.GLDepth` into the same file. The server sees the very
 ``geom_xpos``/``geom_xmat``/``cam_xpos``/``cam_xmat`` the caller holds, so the frame is
 the one an in-process render makes, bit for bit. A process forked from one that owns a
 server starts its own on first use (the pipes belong to the parent).
@@ -41,6 +41,7 @@ import numpy as np
 
 from autonomy.common.errors import InputError
 from autonomy.perception.camera import CameraIntrinsics
+from sim.simulator.gl_depth import GLDepth
 
 _HEADER = struct.Struct("<I")
 
@@ -209,7 +210,7 @@ def _close_server() -> None:
 
 
 class ProcessGLDepth:
-    """:class:`sim.simulator.kinect.GLDepth` run by the render server; same interface,
+    """:class:`sim.simulator.gl_depth.GLDepth` run by the render server; same interface,
     same frames."""
 
     def __init__(self, model: mujoco.MjModel, camera_id: int, intr: CameraIntrinsics, far_m: float = math.inf) -> None:
@@ -278,8 +279,6 @@ class ProcessGLDepth:
 # -- the server --------------------------------------------------------------------------
 class _Camera:
     def __init__(self, model, camera_id, intr, far_m, path, moving) -> None:
-        from sim.simulator.kinect import GLDepth
-
         self.model = model
         self.data = mujoco.MjData(model)
         mujoco.mj_kinematics(model, self.data)  # the world body's geoms never move

@@ -13,14 +13,8 @@ import pytest
 
 from autonomy.maps.vectormap import VectorMap
 from autonomy.perception.camera import CameraIntrinsics, CameraMount
-from sim.simulator.kinect import (
-    KinectCamera,
-    KinectConfig,
-    RaycastDepth,
-    culled_geoms,
-    make_depth_backend,
-    static_geoms,
-)
+from sim.simulator.gl_depth import culled_geoms, static_geoms
+from sim.simulator.kinect import KinectCamera, KinectConfig, RaycastDepth, make_depth_backend
 from sim.simulator.world import WorldConfig, build_world
 from tests.helpers import GL
 
@@ -116,13 +110,12 @@ def test_same_seed_same_frame_and_different_seed_differs() -> None:
 @pytest.mark.parametrize("process", [True, False])
 def test_raycast_fallback_is_chosen_without_gl(monkeypatch: pytest.MonkeyPatch, process: bool) -> None:
     import sim.simulator.kinect as kinect
-    import sim.simulator.render_process as render_process
 
     def broken(*args, **kwargs):
         raise RuntimeError("no display")
 
     monkeypatch.setattr(kinect, "GLDepth", broken)
-    monkeypatch.setattr(render_process, "ProcessGLDepth", broken)
+    monkeypatch.setattr(kinect, "ProcessGLDepth", broken)
     w = _wall_world(2.0, SMALL)
     with pytest.warns(RuntimeWarning, match="ray-cast depth fallback"):
         b = kinect.make_depth_backend(w.model, w.camera_id, SMALL, "auto", process=process)

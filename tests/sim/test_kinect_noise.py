@@ -1,4 +1,5 @@
-"""Tests of the Kinect v1 noise model (sim/kinect_noise.py) on analytic depth images."""
+"""Tests of the Kinect v1 noise model (sim.simulator.kinect_noise) on analytic depth images,
+against closed forms and slow numpy references of the kernel's steps."""
 
 from __future__ import annotations
 
@@ -20,9 +21,8 @@ from sim.simulator.kinect_noise import (
     dropout_probability,
     incidence_angle,
     lateral_sigma_px,
-    quantize_depth_reference,
-    shadow_mask_reference,
 )
+from sim.simulator.kinect_noise.draws import normals, seed_key
 
 INTR = CameraIntrinsics()
 H, W = INTR.height, INTR.width
@@ -81,6 +81,51 @@ def box_scene(z_near: float = 1.0, z_far: float = 3.0) -> np.ndarray:
     return d
 
 
+# --------------------------------------------------------------------------- references
+
+
+def shadow_mask_reference(depth: np.ndarray, fx: float, projector_offset_m: float) -> np.ndarray:
+    """Slow numpy reference of the projector-shadow test (True = shadowed).
+
+    A valid pixel is shadowed when some valid pixel on the same row, on the projector's
+    side, has a smaller projector column u_p = u - fx b / z (b > 0) or a larger one (b < 0).
+    Computed in float32 with the kernel's operations, so the masks agree exactly.
+    """
+    z = np.asarray(depth, dtype=np.float32)
+    valid = (z > 0) & np.isfinite(z)
+    shift = np.float32(fx * projector_offset_m)
+    if shift == 0:
+        return np.zeros(z.shape, dtype=bool)
+    u = np.arange(z.shape[1], dtype=np.float32)[None, :]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        up = u - shift / np.where(valid, z, np.float32(1))
+    n = z.shape[0]
+    if shift > 0:
+        up = np.where(valid, up, np.float32(np.inf))
+        suffix = np.minimum.accumulate(up[:, ::-1], axis=1)[:, ::-1]
+        strict = np.concatenate([suffix[:, 1:], np.full((n, 1), np.inf, np.float32)], axis=1)
+        return valid & (up > strict)
+    up = np.where(valid, up, np.float32(-np.inf))
+    prefix = np.maximum.accumulate(up, axis=1)
+    strict = np.concatenate([np.full((n, 1), -np.inf, np.float32), prefix[:, :-1]], axis=1)
+    return valid & (up < strict)
+
+
+def quantize_depth_reference(z: np.ndarray, cfg: KinectNoiseConfig | None = None) -> np.ndarray:
+    """Slow numpy reference of disparity quantisation; 0 (and anything not > 0) gives 0.
+
+    With s = subpixel: k = round(s f b / z) (the disparity d = f b / z in 1/s px units) and
+    z_q = s f b / k = f b / (k / s), in float32 like the kernel.
+    """
+    c = cfg or KinectNoiseConfig()
+    z = np.asarray(z, dtype=np.float32)
+    fbs = np.float32(float(c.subpixel) * float(c.focal_px) * float(c.baseline_m))
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        k = np.rint(fbs / z)
+        zq = fbs / k
+    return np.where((z > 0) & (k > 0) & np.isfinite(zq), zq, np.float32(0)).astype(np.float32)
+
+
 # --------------------------------------------------------------------------- closed forms
 
 
@@ -100,7 +145,7 @@ def test_closed_forms_match_the_paper_and_design_values():
 
 def test_ziggurat_draws_standard_normals():
     g = np.empty(400_000)
-    kn._normals(kn._seed_key(11), g.size, g)
+    normals(seed_key(11), g.size, g)
     assert abs(g.mean()) < 0.006
     assert g.std() == pytest.approx(1.0, rel=0.005)
     nd = NormalDist()
@@ -549,7 +594,3 @@ def test_bad_arguments_raise_input_error():
     ):
         with pytest.raises(InputError):
             call()
-
-
-def test_benchmark_runs():
-    assert kn.benchmark_noise(repeats=2) > 0

@@ -51,7 +51,7 @@ def test_frames_from_the_render_process_are_the_in_process_frames_bit_for_bit() 
     r = _python(
         """
         import numpy as np, gymnasium as gym, sim
-        from sim.simulator.kinect import GLDepth
+        from sim.simulator.gl_depth import GLDepth
         from sim.simulator.render_process import ProcessGLDepth
         env = gym.make("DepthNav-v0", n_people=3, n_furniture=3)
         env.reset(seed=3)

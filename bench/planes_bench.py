@@ -42,7 +42,7 @@ def corridor_frames(n: int = 8, seed: int = 0) -> tuple[list[np.ndarray], list[n
     import math
 
     from autonomy.planes import pose_transform
-    from sim.experiments.mapping import LoopDriver
+    from sim.experiments.mapping.loop_driver import LoopDriver
     from sim.scenes.corridor import (
         CorridorScene,
         build_corridor_world,

@@ -12,15 +12,12 @@ import pytest
 
 from autonomy.common.errors import InputError
 from sim.cli import main
-from sim.experiments.kinds import load_experiment
-from sim.experiments.mapping import (
-    EXPERIMENTS,
-    PAPER,
-    CorridorExperiment,
-    CuboidExperiment,
-    WallExperiment,
-    map_wall_error,
-)
+from sim.experiments.kinds import experiment, load_experiment
+from sim.experiments.mapping import corridor, cuboid, wall
+from sim.experiments.mapping.corridor import CorridorExperiment
+from sim.experiments.mapping.cuboid import CuboidExperiment
+from sim.experiments.mapping.plane_maps import map_wall_error
+from sim.experiments.mapping.wall import WallExperiment
 from sim.scenario import SCENARIOS_DIR
 from sim.scenes.corridor import CorridorScene, corridor_map, corridor_path, robot_from_camera
 from sim.scenes.cuboid import (
@@ -33,6 +30,8 @@ from sim.scenes.cuboid import (
 from tests.helpers import rrd_chunks
 
 SCENARIOS = {k: SCENARIOS_DIR / f"{k}.toml" for k in ("mapping_cuboid", "mapping_wall", "mapping_corridor")}
+EXPERIMENTS = {k: experiment(k) for k in SCENARIOS}
+PAPER = {m.KIND: m.PAPER for m in (cuboid, wall, corridor)}
 
 
 @pytest.mark.parametrize("kind", list(SCENARIOS))
@@ -121,9 +120,7 @@ def test_wall_experiment_reduced(tmp_path) -> None:
 
 def _failing_detector(monkeypatch, after: int, exc: Exception) -> None:
     """Make the detectors raise ``exc`` from their ``after``-th call on."""
-    import sim.experiments.mapping as mapping
-
-    real = mapping._detect
+    real = wall.detect
     calls = {"n": 0}
 
     def detect(*args, **kwargs):
@@ -132,7 +129,7 @@ def _failing_detector(monkeypatch, after: int, exc: Exception) -> None:
             raise exc
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(mapping, "_detect", detect)
+    monkeypatch.setattr(wall, "detect", detect)
 
 
 def test_a_run_stopped_by_an_error_keeps_what_it_measured(tmp_path, monkeypatch, capsys) -> None:
@@ -156,13 +153,12 @@ def test_a_run_stopped_by_an_error_keeps_what_it_measured(tmp_path, monkeypatch,
 def test_a_run_whose_summary_fails_still_writes_a_report(tmp_path, monkeypatch) -> None:
     """The summary of what the loop left can fail too: the report says so rather than
     nothing being written."""
-    import sim.experiments.mapping as mapping
     from sim.experiments.kinds import RunCrashed
 
     def broken(*args, **kwargs):
         raise ZeroDivisionError("no frames")
 
-    monkeypatch.setattr(mapping, "_measure", broken)
+    monkeypatch.setattr(wall, "_measure", broken)
     _, cfg = load_experiment(SCENARIOS["mapping_wall"], ["frames=1"])
     with pytest.raises(RunCrashed, match="ZeroDivisionError: no frames"):
         EXPERIMENTS["mapping_wall"].run(cfg, tmp_path)

@@ -27,9 +27,9 @@ from sim.config import apply_overrides, from_dict, read_toml
 KINDS: dict[str, str] = {
     "mission": "sim.experiments.mission",
     "localization_comparison": "sim.experiments.loc_compare",
-    "mapping_cuboid": "sim.experiments.mapping",
-    "mapping_wall": "sim.experiments.mapping",
-    "mapping_corridor": "sim.experiments.mapping",
+    "mapping_cuboid": "sim.experiments.mapping.cuboid",
+    "mapping_wall": "sim.experiments.mapping.wall",
+    "mapping_corridor": "sim.experiments.mapping.corridor",
     "real_floors": "sim.experiments.real_floors",
 }
 

@@ -30,7 +30,7 @@ def trials(cfg: Scenario, n: int, seed: int) -> list[dict]:
     graph gets its graph made here, once, so the workers read it from the cache instead
     of each making it."""
     if cfg.map.vectormap and not cfg.map.navgraph:
-        from sim.experiments.runner import load_building
+        from sim.experiments.site import load_building
 
         load_building(cfg)
     seeds = np.random.SeedSequence(seed).generate_state(n, dtype=np.uint32)
@@ -65,7 +65,7 @@ def trial(cfg: Scenario, spec: dict) -> dict:
 
 
 def summarize(cfg: Scenario, results: list[dict], out_dir: Path) -> dict:
-    from sim.experiments.runner import PAPER_FIGURES
+    from sim.experiments.report import PAPER_FIGURES
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)

@@ -172,7 +172,7 @@ def trials(cfg: RealFloorsConfig, n: int, seed: int) -> list[dict]:
 def prepare(cfg: RealFloorsConfig, progress: bool) -> None:
     """Make the navigation graph of every map that has none, once, before the workers
     start: they then read it from the cache instead of each making it."""
-    from sim.experiments.runner import load_building
+    from sim.experiments.site import load_building
 
     for i in range(len(cfg.map_paths())):
         scn = map_scenario(cfg, i)

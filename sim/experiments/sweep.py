@@ -3,7 +3,7 @@
 ``depthnav sweep SCENARIO.toml [--trials N] [--engine local|ray] [--address ADDR]
 [--workers K] [--out DIR] [--resume]`` asks the scenario's kind (:mod:`sim.experiments.kinds`)
 for ``N`` seeded trial specs, runs each with the kind's ``trial`` and hands all results
-to its ``summarize`` (report.json and figures). Engines:
+to its ``summarize`` (report.json and figures). Engines (:mod:`sim.experiments.sweep_engines`):
 
 - ``local`` (default): a process pool (spawn start method) of ``K`` workers on this
   machine (``K = 1`` runs the trials in this process); nothing else needed.
@@ -32,8 +32,6 @@ import hashlib
 import importlib
 import json
 import os
-import signal
-import socket
 import sys
 import time
 from collections.abc import Callable
@@ -44,59 +42,21 @@ from typing import Any
 from autonomy.common.errors import InputError
 from autonomy.common.files import atomic_write_text
 from sim.config import to_dict
-from sim.experiments.kinds import KINDS, Experiment, experiment, load_experiment
+from sim.experiments.kinds import KINDS, Experiment, load_experiment
 from sim.experiments.report_file import config_json, write_json
+from sim.experiments.sweep_engines import run_local, run_ray
 
 ENGINES = ("local", "ray")
 SWEEP_VERSION = 1
 #: Default trial count for kinds whose config has no ``replays``.
 DEFAULT_TRIALS = 10
-RAY_MAX_RETRIES = 3
 
 
 class SweepError(RuntimeError):
     """Some trials raised; the finished ones are kept, the sweep can be resumed."""
 
 
-# --------------------------------------------------------------------------- workers
-
-_LOADED: dict[Any, tuple[Experiment, Any]] = {}
-
-
-def _load(source: tuple, kind: str, module: str) -> tuple[Experiment, Any]:
-    if kind not in KINDS:  # a kind registered at run time in the parent (plugins, tests)
-        KINDS[kind] = module
-    if source[0] == "config":
-        return experiment(kind), source[1]
-    key = (source[1], tuple(source[2]))
-    if key not in _LOADED:
-        _LOADED[key] = load_experiment(source[1], list(source[2]))
-    return _LOADED[key]
-
-
-def execute_trial(source: tuple, kind: str, module: str, spec: dict) -> dict:
-    """Run one trial in whatever process this is; the trials.jsonl record."""
-    exp, cfg = _load(source, kind, module)
-    t0 = time.perf_counter()
-    result = exp.trial(cfg, spec)
-    return {
-        "id": spec["id"],
-        "spec": spec,
-        "result": result,
-        "wall_s": round(time.perf_counter() - t0, 4),
-        "host": socket.gethostname(),
-        "pid": os.getpid(),
-    }
-
-
-def _worker_init() -> None:
-    # The parent handles Ctrl-C and stops the workers itself.
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
 # --------------------------------------------------------------------------- bookkeeping
-
-
 
 
 def config_hash(cfg: Any) -> str:
@@ -151,100 +111,6 @@ class _Appender:
 
     def close(self) -> None:
         self.f.close()
-
-
-# --------------------------------------------------------------------------- engines
-
-
-def _deliver(result: Callable[[], dict], spec: dict, on_done, on_error) -> None:
-    """Hand a trial's record to ``on_done``, or what it raised to ``on_error``: a failing
-    trial must not lose the others (Ctrl-C is not caught)."""
-    try:
-        rec = result()
-    except Exception as exc:  # noqa: BLE001 - any trial error, e.g. a RayTaskError wrapping it
-        on_error(spec, exc)
-        return
-    on_done(rec)
-
-
-def _run_local(source, kind, module, specs, workers, on_done, on_error) -> None:
-    if workers <= 1:
-        for s in specs:
-            _deliver(lambda s=s: execute_trial(source, kind, module, s), s, on_done, on_error)
-        return
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-
-    pool = ProcessPoolExecutor(max_workers=min(workers, len(specs)), mp_context=mp.get_context("spawn"), initializer=_worker_init)
-    try:
-        futs = {pool.submit(execute_trial, source, kind, module, s): s for s in specs}
-        for fut in as_completed(futs):
-            _deliver(fut.result, futs[fut], on_done, on_error)
-    except KeyboardInterrupt:
-        procs = list(getattr(pool, "_processes", {}).values())
-        pool.shutdown(wait=False, cancel_futures=True)
-        for p in procs:  # our own workers, by their handles
-            if p.is_alive():
-                p.terminate()
-        raise
-    pool.shutdown(wait=True)
-
-
-def _import_ray():
-    try:
-        import ray
-    except ImportError:
-        raise InputError("--engine ray: Ray is not installed (pip install 'depthnav[ray]')") from None
-    return ray
-
-
-def _init_ray(ray, address: str | None, workers: int) -> None:
-    """Connect to the cluster at ``address``, or start a local Ray with ``workers`` CPUs."""
-    if address:
-        try:
-            ray.init(address=address, log_to_driver=False)
-        except (ConnectionError, ValueError, RuntimeError) as exc:
-            raise InputError(f"--address {address}: cannot connect to a Ray cluster ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
-        return
-    # Local workers must import this project (and anything on our path) as we do.
-    old = os.environ.get("PYTHONPATH")
-    paths = [p for p in sys.path if p and Path(p).is_dir()]
-    os.environ["PYTHONPATH"] = os.pathsep.join(dict.fromkeys([os.getcwd(), *paths]))
-    try:
-        ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False, configure_logging=False)
-    finally:
-        if old is None:
-            os.environ.pop("PYTHONPATH", None)
-        else:
-            os.environ["PYTHONPATH"] = old
-
-
-def _run_ray(source, kind, module, specs, workers, address, on_done, on_error) -> None:
-    ray = _import_ray()
-    started = False
-    if not ray.is_initialized():
-        _init_ray(ray, address, workers)
-        started = True
-    remote = ray.remote(num_cpus=1, max_retries=RAY_MAX_RETRIES)(execute_trial)
-    refs = {}
-    try:
-        for s in specs:
-            refs[remote.remote(source, kind, module, s)] = s
-        pending = list(refs)
-        while pending:
-            ready, pending = ray.wait(pending, num_returns=1)
-            for r in ready:
-                _deliver(lambda r=r: ray.get(r), refs[r], on_done, on_error)
-    except KeyboardInterrupt:
-        for r in refs:
-            try:
-                ray.cancel(r, force=True)
-            except Exception:  # noqa: BLE001 - best effort
-                pass
-        raise
-    finally:
-        if started:
-            ray.shutdown()
 
 
 # --------------------------------------------------------------------------- the sweep
@@ -388,9 +254,9 @@ def _run_pending(
     try:
         if pending:
             if sw.engine == "local":
-                _run_local(sw.source, sw.exp.kind, kind_module, pending, sw.workers, on_done, on_error)
+                run_local(sw.source, sw.exp.kind, kind_module, pending, sw.workers, on_done, on_error)
             else:
-                _run_ray(sw.source, sw.exp.kind, kind_module, pending, sw.workers, sw.address, on_done, on_error)
+                run_ray(sw.source, sw.exp.kind, kind_module, pending, sw.workers, sw.address, on_done, on_error)
     except KeyboardInterrupt:
         interrupted = True
     finally:

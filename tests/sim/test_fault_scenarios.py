@@ -11,7 +11,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sim.experiments.runner import build_run, drive, fault_report, run_metrics, run_scenario
+from sim.experiments.loop import drive
+from sim.experiments.metrics import fault_report, run_metrics
+from sim.experiments.runner import run_scenario
+from sim.experiments.site import build_run
 from sim.scenario import load_scenario
 from tests.helpers import GL
 

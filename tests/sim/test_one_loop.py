@@ -15,7 +15,8 @@ import pytest
 
 import sim  # noqa: F401  (registers DepthNav-v0)
 from sim.envs.depthnav import DepthNavEnv
-from sim.experiments.runner import load_building, run_scenario
+from sim.experiments.runner import run_scenario
+from sim.experiments.site import load_building
 from sim.experiments.waypoints import plan_mission
 from sim.scenario import SCENARIOS_DIR, load_scenario
 from sim.simulator.step import EpisodeSeeds, SimStep

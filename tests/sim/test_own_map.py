@@ -19,7 +19,8 @@ from autonomy.maps.graph_builder import graph_components
 from autonomy.maps.planner import adjacency
 from autonomy.maps.vectormap import VectorMap, save_vectormap
 from autonomy.navigation.avoidance import AvoidanceConfig
-from sim.experiments.runner import load_building, run_scenario
+from sim.experiments.runner import run_scenario
+from sim.experiments.site import load_building
 from sim.experiments.waypoints import plan_mission
 from sim.scenario import MissionConfig, load_scenario
 from sim.simulator import blueprints

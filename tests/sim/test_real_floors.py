@@ -154,7 +154,7 @@ def test_sweep_on_the_shipped_floor_prints_one_table_and_resumes(tmp_path: Path,
 
 
 def test_the_shipped_real_floor_loads_with_its_graph_and_its_attribution() -> None:
-    from sim.experiments.runner import load_building
+    from sim.experiments.site import load_building
     from sim.scenario import load_scenario
 
     scn = load_scenario(ROOT / "scenarios" / "ghc4.toml")

@@ -81,10 +81,10 @@ def _fail_at_call(monkeypatch: pytest.MonkeyPatch, n: int, exc: Exception | None
     """Make the runner's localization check raise ``exc`` (a bug's ZeroDivisionError) on
     its ``n``-th call: mid-frame, after the frame's FSPF counts are recorded and before
     its poses are."""
-    import sim.experiments.runner as runner
+    import sim.experiments.loop as loop
 
     calls = {"n": 0}
-    real = runner.check_localization
+    real = loop.check_localization
 
     def failing(*args, **kwargs):
         calls["n"] += 1
@@ -92,7 +92,7 @@ def _fail_at_call(monkeypatch: pytest.MonkeyPatch, n: int, exc: Exception | None
             raise exc if exc is not None else ZeroDivisionError("a bug in the loop\nsecond line")
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(runner, "check_localization", failing)
+    monkeypatch.setattr(loop, "check_localization", failing)
 
 
 def test_a_run_that_stops_on_an_error_keeps_its_report(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -262,7 +262,7 @@ def test_demo_scenario_end_to_end_via_cli(tmp_path: Path) -> None:
 
 
 def test_collision_incidents_group_contact_events() -> None:
-    from sim.experiments.runner import collision_incidents
+    from sim.experiments.metrics import collision_incidents
 
     ev = [
         {"t": 1.0, "bodies": ["person_0"]}, {"t": 1.1, "bodies": ["person_0"]}, {"t": 3.9, "bodies": ["person_0"]},
@@ -274,7 +274,7 @@ def test_collision_incidents_group_contact_events() -> None:
 
 
 def test_the_depth_backend_line_names_the_fix_for_the_slow_fallback():
-    from sim.experiments.runner import depth_backend_line
+    from sim.experiments.loop import depth_backend_line
 
     assert "OpenGL" in depth_backend_line("gl")
     slow = depth_backend_line("raycast")
@@ -285,7 +285,8 @@ def test_resources_report_memory_and_frame_time_at_both_ends():
     from types import SimpleNamespace
 
     from sim.experiments.memory import resident_mb
-    from sim.experiments.runner import ENDS_FRAMES, STAGES, resources
+    from sim.experiments.metrics import ENDS_FRAMES, resources
+    from sim.experiments.site import STAGES
 
     n = 2 * ENDS_FRAMES + 500
     timing = {k: [0.001] * n for k in STAGES}
@@ -324,7 +325,8 @@ def test_the_incident_figure_draws_the_furniture_the_contact_names(tmp_path):
 def test_per_frame_records_cost_bytes_not_objects(tmp_path: Path) -> None:
     """A 4 km run is 200,000 frames: what the loop keeps per frame must be raw values
     (about 130 bytes), not Python objects (about 800)."""
-    from sim.experiments.runner import build_run, drive
+    from sim.experiments.loop import drive
+    from sim.experiments.site import build_run
 
     run = build_run(_short_demo(["mission.max_duration_s=2.0"]), seed=5)
     drive(run, None, progress=False)
@@ -347,7 +349,7 @@ def _deep_size(obj) -> int:
 
 
 def test_the_trajectory_figure_keeps_fault_failures_apart_from_the_papers_resets() -> None:
-    from sim.experiments.runner import failure_markers, failures_title
+    from sim.experiments.report import failure_markers, failures_title
 
     failures = [
         {"x": 1.0, "y": 2.0, "fault": None},
@@ -403,7 +405,7 @@ def test_a_bad_trace_window_is_a_one_line_error(window: str) -> None:
 def test_an_interrupt_inside_a_numba_kernel_is_an_interruption(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A signal handled while a numba kernel runs surfaces as a SystemError caused by the
     KeyboardInterrupt: the run is interrupted (report kept), not crashed."""
-    import sim.experiments.runner as runner
+    import sim.experiments.loop as loop
 
     def interrupted_kernel(run, recorder) -> bool:
         # As numba raises it: the interrupt wrapped in SystemErrors three levels deep.
@@ -418,14 +420,14 @@ def test_an_interrupt_inside_a_numba_kernel_is_an_interruption(tmp_path: Path, m
         except SystemError as e2:
             raise SystemError("CPUDispatcher(update_memory) returned a result with an exception set") from e2
 
-    monkeypatch.setattr(runner, "tick", interrupted_kernel)
+    monkeypatch.setattr(loop, "tick", interrupted_kernel)
     rep = run_scenario(_short_demo(["mission.max_duration_s=1.0"]), tmp_path, seed=1, progress=False)
     assert rep["interrupted"] is True and rep["error"] is None and not (tmp_path / "crash.txt").exists()
 
 
 def test_a_system_error_without_an_interrupt_is_a_crash(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A SystemError with no KeyboardInterrupt down its chain is a bug: crash report written."""
-    import sim.experiments.runner as runner
+    import sim.experiments.loop as loop
     from sim.experiments.kinds import RunCrashed
 
     def broken_kernel(run, recorder) -> bool:
@@ -434,7 +436,7 @@ def test_a_system_error_without_an_interrupt_is_a_crash(tmp_path: Path, monkeypa
         except ValueError as v:
             raise SystemError("CPUDispatcher(update_memory) returned a result with an exception set") from v
 
-    monkeypatch.setattr(runner, "tick", broken_kernel)
+    monkeypatch.setattr(loop, "tick", broken_kernel)
     with pytest.raises(RunCrashed, match="SystemError"):
         run_scenario(_short_demo(["mission.max_duration_s=1.0"]), tmp_path, seed=1, progress=False)
     assert "ValueError: bad array" in (tmp_path / "crash.txt").read_text()
@@ -444,7 +446,7 @@ def test_blind_driving_counts_the_metres_cgr_dead_reckoned_and_the_longest_stret
     from types import SimpleNamespace
 
     from autonomy.localization.cgr import UpdateStats
-    from sim.experiments.runner import note_blind
+    from sim.experiments.accounting import note_blind
 
     seen, unseen = UpdateStats(observation=True), UpdateStats(observation=False)
     stack = SimpleNamespace(localizer=object(), relocalizing=False, cgr_stats=None)

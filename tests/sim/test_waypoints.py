@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sim.experiments.runner import load_building
+from sim.experiments.site import load_building
 from sim.experiments.waypoints import close_leg, plan_mission
 from sim.scenario import SCENARIOS_DIR, MissionConfig, load_scenario
 

@@ -51,7 +51,8 @@ from autonomy.maps.planner import NoPathError
 from autonomy.maps.raycast import SceneQuery, VisibilityGridConfig, load_or_build
 from autonomy.maps.vectormap import NavGraph, VectorMap
 from autonomy.navigation.avoidance import AvoidanceConfig, obstacle_points, open_path_lengths
-from autonomy.navigation.navigator import NavCommand, Navigator, NavigatorConfig
+from autonomy.navigation.config import NavCommand, NavigatorConfig
+from autonomy.navigation.navigator import Navigator
 from autonomy.perception.camera import DepthCamera, frame_checks
 from autonomy.perception.floor_rays import floor_rays
 from autonomy.perception.fspf import FSPFConfig, FSPFResult, fspf

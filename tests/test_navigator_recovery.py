@@ -17,7 +17,8 @@ from autonomy.common.errors import InputError
 from autonomy.common.geometry import wrap_angles
 from autonomy.maps.planner import NoPathError, astar, edge_key
 from autonomy.maps.vectormap import NavEdge, NavGraph, NavNode
-from autonomy.navigation.navigator import Navigator, NavigatorConfig, in_camera_view, wall_points
+from autonomy.navigation.config import NavigatorConfig
+from autonomy.navigation.navigator import Navigator, in_camera_view, wall_points
 from autonomy.perception.camera import KINECT_V1
 
 RATE_HZ = 30.0

@@ -10,7 +10,8 @@ from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 
 from autonomy.maps.vectormap import NavEdge, NavGraph, NavNode
-from autonomy.navigation.navigator import Navigator, NavigatorConfig
+from autonomy.navigation.config import NavigatorConfig
+from autonomy.navigation.navigator import Navigator
 
 
 def line_graph() -> NavGraph:

@@ -10,7 +10,8 @@ import pytest
 from autonomy.common.errors import InputError
 from autonomy.common.geometry import point_segment_distance
 from autonomy.maps.vectormap import NavEdge, NavGraph, NavNode
-from autonomy.navigation.navigator import Navigator, NavigatorConfig, in_camera_view, wall_points
+from autonomy.navigation.config import NavigatorConfig
+from autonomy.navigation.navigator import Navigator, in_camera_view, wall_points
 from autonomy.perception.camera import DepthCamera
 
 

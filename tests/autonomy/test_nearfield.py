@@ -12,7 +12,8 @@ from hypothesis import strategies as st
 
 from autonomy.common.errors import InputError
 from autonomy.maps.vectormap import NavEdge, NavGraph, NavNode
-from autonomy.navigation.navigator import Navigator, NavigatorConfig
+from autonomy.navigation.config import NavigatorConfig
+from autonomy.navigation.navigator import Navigator
 from autonomy.perception.camera import CameraIntrinsics, CameraMount
 from autonomy.perception.nearfield import NearField, NearFieldConfig, line_points
 

@@ -12,10 +12,10 @@ from hypothesis import strategies as st
 
 from autonomy.common.errors import InputError
 from autonomy.maps.vectormap import NavEdge, NavGraph, NavNode
+from autonomy.navigation.config import NavigatorConfig
 from autonomy.navigation.navigator import (
     WALL_STEP_M,
     Navigator,
-    NavigatorConfig,
     in_camera_view,
     wall_points,
 )

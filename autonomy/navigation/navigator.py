@@ -55,18 +55,10 @@ from autonomy.navigation.avoidance import (
 )
 from autonomy.navigation.config import MEMORY_KEEP_MARGIN_M, NavCommand, NavigatorConfig
 from autonomy.navigation.obstacle_memory import update_memory
+from autonomy.navigation.trail import Trail
 from autonomy.perception.camera import KINECT_V1, DepthCamera
 from autonomy.perception.nearfield import line_points
 
-_TRAIL_STEP_M = 0.05
-"""The trail keeps a footprint each time the robot has moved this far (``trail_s``)."""
-_TRAIL_SAMPLE_M = 0.025
-"""A back-off's way back is checked for clearance at points this far apart."""
-_TRAIL_GAP_M = 0.15
-"""Consecutive footprints farther apart than this were not joined by driving (a pose
-correction, a stretch the robot backed along): the way back ends there."""
-_RETRACE_AHEAD_M = 0.1
-"""A back-off heads for the point this far back along the trail."""
 _LOOK_BACK_FACING_RAD = math.radians(10.0)
 """A look back drives once the robot faces the way back this closely."""
 _BLOCKED_POINTS_KEPT = 64
@@ -136,15 +128,8 @@ class Navigator:
         """The stuck clock's start when a blocked wait last re-planned to no avail."""
         self._t = 0.0
         """Time of the last frame (``command``)."""
-        # The trail (trail_s): a ring of footprints every _TRAIL_STEP_M, with their times,
-        # big enough for trail_s at twice the cruise speed.
-        cap = int(math.ceil(2.0 * cfg.trail_s * max(cfg.cruise_speed_mps, cfg.backoff_speed_mps) / _TRAIL_STEP_M)) + 16
-        self._trail = np.zeros((cap, 2))
-        self._trail_t = np.full(cap, -np.inf)
-        self._trail_next = 0
-        self._trail_last: np.ndarray | None = None
-        self._retracing = False
-        """The last command backed off along the trail (:meth:`retrace`)."""
+        self.trail = Trail(cfg)
+        """The robot's footprints (``trail_s``), along which a back-off goes."""
         self._mem = np.zeros((0, 2))
         self._mem_t = np.zeros(0)
         self._mem_all = np.zeros((0, 2))
@@ -583,7 +568,7 @@ class Navigator:
         pts = np.vstack([pts, walls, self._mem_all])
         clear = self.avoid.robot_radius_m + cfg.backoff_clearance_m
         if cfg.trail_s > 0:
-            return self._retrace_velocity(pose, pts, clear)
+            return self.trail.retrace_velocity(pose, pts, clear, self._t)
         for k in (0, 1, -1, 2, -2, 3, -3, 4, -4, 5, -5):
             phi = math.pi + k * math.radians(15.0)
             u = np.array([math.cos(phi), math.sin(phi)])
@@ -595,103 +580,16 @@ class Navigator:
             return np.array([cfg.backoff_speed_mps * u[0], cfg.backoff_speed_mps * u[1], 0.0])
         return np.zeros(3)
 
-    def _retrace_velocity(self, pose: np.ndarray, pts: np.ndarray, clear: float) -> np.ndarray:
-        """The back-off along :meth:`retrace` (robot-frame velocity; zero where it may
-        not): towards the point ``_RETRACE_AHEAD_M`` back along the trail, when that runs
-        within 75 degrees of straight back and no point of ``pts`` (robot frame) that the
-        way back brings the robot closer to comes within ``clear`` of it."""
-        cfg = self.cfg
-        way = self.retrace(pose)
-        if len(way) < 2:
-            return np.zeros(3)
-        c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
-        rel = way - way[0]
-        q = np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]])  # robot frame
-        steps = np.hypot(*np.diff(q, axis=0).T)
-        cum = np.concatenate([[0.0], np.cumsum(steps)])
-        if cum[-1] < _TRAIL_STEP_M:
-            return np.zeros(3)
-        target = np.array([np.interp(min(_RETRACE_AHEAD_M, cum[-1]), cum, q[:, i]) for i in range(2)])
-        if abs(wrap_angle(math.atan2(target[1], target[0]) - math.pi)) > math.radians(75.0) + 1e-9:
-            return np.zeros(3)
-        # Only points within the way back's length plus the clearance can block it.
-        pts = pts[pts[:, 0] * pts[:, 0] + pts[:, 1] * pts[:, 1] < (cum[-1] + clear) ** 2] if len(pts) else pts
-        if len(pts):
-            # The way back, every _TRAIL_SAMPLE_M; a point blocks where the robot would
-            # come closer to it than it is now, within the clearance.
-            d = np.linspace(0.0, cum[-1], int(math.ceil(cum[-1] / _TRAIL_SAMPLE_M)) + 1)
-            samples = np.column_stack([np.interp(d, cum, q[:, 0]), np.interp(d, cum, q[:, 1])])
-            gap = np.sqrt(((pts[:, None, :] - samples[None, 1:, :]) ** 2).sum(axis=-1)).min(axis=1)
-            now = np.hypot(pts[:, 0], pts[:, 1])
-            if np.any((gap < clear) & (gap < now)):
-                return np.zeros(3)
-        u = target / max(float(np.hypot(target[0], target[1])), 1e-12)
-        self._retracing = True
-        return np.array([cfg.backoff_speed_mps * u[0], cfg.backoff_speed_mps * u[1], 0.0])
-
     # -- the trail, blocked edges, looking round, pose jumps ----------------------------
-    def _record_trail(self, pose: np.ndarray, t: float) -> None:
-        """Add the pose to the trail once it is ``_TRAIL_STEP_M`` from the last footprint."""
-        if self.cfg.trail_s <= 0:
-            return
-        x, y = float(pose[0]), float(pose[1])
-        last = self._trail_last
-        if last is not None and (x - last[0]) ** 2 + (y - last[1]) ** 2 < _TRAIL_STEP_M * _TRAIL_STEP_M:
-            return
-        k = self._trail_next % len(self._trail)
-        self._trail[k] = (x, y)
-        self._trail_t[k] = t
-        self._trail_next += 1
-        self._trail_last = self._trail[k].copy()
-
     def trail_points(self, t: float | None = None) -> np.ndarray:
-        """The trail: the robot's footprints (pose estimates, world frame, about
-        ``_TRAIL_STEP_M`` apart, oldest first) of the ``trail_s`` before ``t`` (default:
-        the last frame's time)."""
-        t = self._t if t is None else float(t)
-        cap = len(self._trail)
-        n = min(self._trail_next, cap)
-        order = np.arange(self._trail_next - n, self._trail_next) % cap
-        return self._trail[order][t - self._trail_t[order] <= self.cfg.trail_s]
+        """The trail: the robot's footprints (pose estimates, world frame, oldest first)
+        of the ``trail_s`` before ``t`` (default: the last frame's time)."""
+        return self.trail.points(self._t if t is None else float(t))
 
     def retrace(self, pose: np.ndarray) -> np.ndarray:
-        """The way back along the trail from the pose (world frame, the pose first).
-
-        It starts at the point of the trail nearest the pose (the latest such, on a trail
-        that crosses itself), if that lies within ``trail_tolerance_m``, and runs back
-        through older footprints for ``backoff_check_m`` at most, ending where
-        consecutive footprints lie more than ``_TRAIL_GAP_M`` apart (the robot did not
-        drive between them). Just the pose when the trail is off or not near it."""
-        cfg = self.cfg
-        xy = np.asarray(pose[:2], dtype=np.float64)
-        tr = self.trail_points() if cfg.trail_s > 0 else np.zeros((0, 2))
-        if len(tr) < 2:
-            if len(tr) and float(np.hypot(*(tr[0] - xy))) <= cfg.trail_tolerance_m:
-                return np.vstack([xy, tr[0]])
-            return xy[None, :]
-        a, d = tr[:-1], np.diff(tr, axis=0)
-        dd = (d * d).sum(axis=1)
-        f = np.clip(((xy - a) * d).sum(axis=1) / np.maximum(dd, 1e-12), 0.0, 1.0)
-        proj = a + f[:, None] * d
-        gap = np.hypot(*(proj - xy).T)
-        gap[dd > _TRAIL_GAP_M**2] = np.inf  # not driven between those footprints
-        j = len(gap) - 1 - int(np.argmin(gap[::-1]))  # the nearest, the latest of equals
-        if not gap[j] <= cfg.trail_tolerance_m:
-            return xy[None, :]
-        back = tr[j::-1]
-        cut = np.flatnonzero(np.hypot(*np.diff(back, axis=0).T) > _TRAIL_GAP_M)
-        if len(cut):
-            back = back[: cut[0] + 1]
-        way = np.vstack([xy, proj[j], back])
-        steps = np.hypot(*np.diff(way, axis=0).T)
-        keep = np.concatenate([[True], steps > 1e-9])
-        way, steps = way[keep], steps[steps > 1e-9]
-        cum = np.concatenate([[0.0], np.cumsum(steps)])
-        if cum[-1] <= cfg.backoff_check_m:
-            return way
-        k = int(np.searchsorted(cum, cfg.backoff_check_m))
-        w = (cfg.backoff_check_m - cum[k - 1]) / max(cum[k] - cum[k - 1], 1e-12)
-        return np.vstack([way[:k], way[k - 1] + w * (way[k] - way[k - 1])])
+        """The way back along the trail from the pose, as of the last frame
+        (:meth:`Trail.retrace`): what a back-off drives."""
+        return self.trail.retrace(pose, self._t)
 
     def _plan_direction(self, pose: np.ndarray) -> tuple[np.ndarray, float, float]:
         """The carrot on the plan (no lane shift), its direction in the robot frame and
@@ -871,10 +769,7 @@ class Navigator:
         self._mem = np.zeros((0, 2))
         self._mem_t = np.zeros(0)
         self._mem_all = np.zeros((0, 2))
-        self._trail_t[:] = -np.inf
-        self._trail_next = 0
-        self._trail_last = None
-        self._retracing = False
+        self.trail.clear()
         self._lane = 0.0
         self._side = 0
         self._backoff_until = -1.0
@@ -1040,9 +935,7 @@ class Navigator:
         """
         self._seen = np.zeros((0, 2)) if seen is None else np.asarray(seen, dtype=np.float64).reshape(-1, 2)
         self._t = float(t)
-        if not self._retracing:  # the way back is trail already; the retrace reads it back
-            self._record_trail(pose, t)
-        self._retracing = False
+        self.trail.record(pose, t)
         if self.blocked:
             self._prune_blocked(t)
         obstacles = self.remember(pose, obstacles, t)

@@ -18,7 +18,8 @@ from autonomy.common.geometry import wrap_angles
 from autonomy.maps.planner import NoPathError, astar, edge_key
 from autonomy.maps.vectormap import NavEdge, NavGraph, NavNode
 from autonomy.navigation.config import NavigatorConfig
-from autonomy.navigation.navigator import Navigator, in_camera_view, wall_points
+from autonomy.navigation.navigator import Navigator
+from autonomy.navigation.surroundings import in_camera_view, wall_points
 from autonomy.perception.camera import KINECT_V1
 
 RATE_HZ = 30.0
@@ -381,11 +382,11 @@ def test_look_around_turns_in_place_and_a_pose_jump_clears_what_the_old_estimate
         nav.command(np.array([x, 0.0, 0.0]), np.array([[0.2, 0.7], [1.5, 0.0]]), t)
         t += 1.0 / RATE_HZ
     nav._lane, nav._side = 0.5, 1
-    assert len(nav.trail_points()) > 10 and len(nav._mem) > 0
+    assert len(nav.trail_points()) > 10 and len(nav.surroundings._mem) > 0
     nav.blocked[edge_key(D, E)] = t + 100.0
     replans = nav.replans
     nav.pose_jumped(np.array([8.0, 3.0, 0.0]), t)
-    assert len(nav.trail_points()) == 0 and len(nav._mem) == 0 and len(nav._mem_all) == 0
+    assert len(nav.trail_points()) == 0 and len(nav.surroundings._mem) == 0 and len(nav.surroundings.remembered) == 0
     assert nav._lane == 0.0 and nav._side == 0
     assert nav.replans == replans + 1 and nav.plan_nodes[0] == E and nav.plan_nodes[-1] == C
     assert edge_key(D, E) in nav.blocked  # marks stay (they expire)

@@ -41,7 +41,6 @@ from autonomy.common.geometry import (
     crosses_any,
     point_segment_distance,
     point_segment_projection,
-    segments_near_points,
     wrap_angle,
     wrap_angles,
 )
@@ -53,8 +52,8 @@ from autonomy.navigation.avoidance import (
     choose_direction,
     eq5_scores,
 )
-from autonomy.navigation.config import MEMORY_KEEP_MARGIN_M, NavCommand, NavigatorConfig
-from autonomy.navigation.obstacle_memory import update_memory
+from autonomy.navigation.config import NavCommand, NavigatorConfig
+from autonomy.navigation.surroundings import Surroundings
 from autonomy.navigation.trail import Trail
 from autonomy.perception.camera import KINECT_V1, DepthCamera
 from autonomy.perception.nearfield import line_points
@@ -87,15 +86,13 @@ class Navigator:
         """The connected part of the graph each node (by index) lies in (:func:`autonomy.maps.planner.parts`)."""
         self.camera = camera
         self.walls = None if walls is None else np.asarray(walls, dtype=np.float64).reshape(-1, 4)
-        self._wall_pts = None if self.walls is None else wall_points(self.walls, WALL_STEP_M)
+        self.surroundings = Surroundings(cfg, avoid, camera, self.walls)
+        """The map's walls near the robot and the obstacle memory."""
         self._coastal: dict[tuple[int, int], float] = {}
         """Extra plan cost per edge for its blind metres (:attr:`NavigatorConfig.coastal_weight`)."""
         if self.walls is not None and cfg.coastal_weight > 0:
             blind = blind_lengths(graph, self.walls, cfg.coastal_range_m, 0.5 * camera.fov_h_rad)
             self._coastal = {k: cfg.coastal_weight * v for k, v in blind.items()}
-        self._local = np.zeros((0, 2))
-        self._local_centre: np.ndarray | None = None
-        self._local_radius = 0.0
         self.goal: int | None = None
         self.path = np.zeros((0, 2))
         self._cum = np.zeros(1)
@@ -130,11 +127,6 @@ class Navigator:
         """Time of the last frame (``command``)."""
         self.trail = Trail(cfg)
         """The robot's footprints (``trail_s``), along which a back-off goes."""
-        self._mem = np.zeros((0, 2))
-        self._mem_t = np.zeros(0)
-        self._mem_all = np.zeros((0, 2))
-        self._seen = np.zeros((0, 2))
-        """Points seen before (robot frame) given to this frame's :meth:`command`."""
         self._side = 0
         self._lane = 0.0
         self._corners = np.zeros(0)
@@ -423,129 +415,12 @@ class Navigator:
         near = (along > 0.0) & (along < self.cfg.proximity_range_m) & (lateral < self.avoid.radius_m + self.cfg.proximity_gap_m)
         return bool(near.any())
 
-    def map_blind_spots(self, pose: np.ndarray) -> np.ndarray:
-        """Map wall points within ``map_blind_spots_m`` that the camera cannot see now
-        (outside its view cone or closer than its minimum range), robot frame."""
-        cfg = self.cfg
-        if cfg.map_blind_spots_m <= 0:
-            return np.zeros((0, 2))
-        return self._out_of_view(self.map_points(pose, cfg.map_blind_spots_m))
-
-    def _out_of_view(self, pts: np.ndarray) -> np.ndarray:
-        """The points (robot frame) the camera cannot see now: outside its view cone or
-        closer than its minimum range."""
-        if not len(pts):
-            return pts
-        return pts[~in_camera_view(pts[:, 0] - self.camera.forward_m, pts[:, 1], self.camera)]
-
     def _point_at(self, s: float) -> np.ndarray:
         s = min(max(s, 0.0), float(self._cum[-1]))
         k = min(max(int(np.searchsorted(self._cum, s, side="right")) - 1, 0), len(self.path) - 2)
         L = self._cum[k + 1] - self._cum[k]
         a = 0.0 if L == 0 else (s - self._cum[k]) / L
         return self.path[k] + a * (self.path[k + 1] - self.path[k])
-
-    # -- obstacle memory ----------------------------------------------------------------
-    def remember(self, pose: np.ndarray, obstacles: np.ndarray, t: float) -> np.ndarray:
-        """Fold this frame's obstacles into the memory; all known obstacles, robot frame.
-
-        Remembered points in the region the camera sees now are replaced by the current
-        observation (people move on); points right in front of the robot but closer than
-        the camera's minimum range persist until that place is seen again; those near the
-        robot for ``memory_beside_s``; the others for ``memory_s``. Each sensed point's
-        shadow (``shadow_m``) is remembered with it. Points stay remembered for
-        ``backoff_memory_s`` for the back-off's check of the way back only
-        (:meth:`_backoff_velocity`).
-        """
-        cfg, cam = self.cfg, self.camera
-        obs = np.asarray(obstacles, dtype=np.float64).reshape(-1, 2)
-        if cfg.memory_s <= 0:
-            self._mem_all = np.zeros((0, 2))
-            return obs
-        # Wall marks reach at least the wall points' spacing, so that they join up.
-        reach = max(1, math.ceil(WALL_STEP_M / cfg.memory_cell_m - 1e-9))
-        self._mem, self._mem_t, out, recent = update_memory(
-            self._mem,
-            self._mem_t,
-            obs,
-            float(pose[0]),
-            float(pose[1]),
-            float(pose[2]),
-            float(t),
-            cfg.memory_cell_m,
-            max(cfg.memory_s, cfg.backoff_memory_s, cfg.memory_beside_s),
-            cfg.memory_s,
-            cfg.memory_radius_m + MEMORY_KEEP_MARGIN_M,
-            cfg.memory_radius_m,
-            cam.forward_m,
-            # A little inside the view's edges, so what is replaced was really seen.
-            0.5 * 0.9 * cam.fov_h_rad,
-            cam.min_range_m + 0.1,
-            cam.max_range_m - 0.2,
-            cam.min_range_m + 0.1,
-            self.avoid.radius_m + 0.2,
-            cfg.memory_beside_s,
-            cfg.memory_beside_m,
-            cfg.shadow_m,
-            self._shadow_walls(pose, reach),
-            reach,
-        )
-        self._mem_all = out
-        return out[recent]
-
-    def _shadow_walls(self, pose: np.ndarray, reach: int) -> np.ndarray:
-        """The map's wall points (world frame, exactly as stored, so that each lands on
-        the same cell every frame) where the memory's shadows end: those whose marks,
-        ``reach`` cells round each, can touch a cell within the memory's reach of the
-        pose (``WALL_STEP_M`` apart, closer than a cell)."""
-        if self.cfg.shadow_m <= 0 or self._wall_pts is None:
-            return np.zeros((0, 2))
-        radius = self.cfg.memory_radius_m + MEMORY_KEEP_MARGIN_M + (reach + 1) * self.cfg.memory_cell_m * math.sqrt(2.0)
-        return self._local_walls(pose, radius)
-
-    def _blind_blocked(self, obstacles: np.ndarray) -> bool:
-        """Whether an obstacle point lies in the path ahead closer than the camera sees."""
-        if self.cfg.memory_s <= 0 or not len(obstacles):
-            return False
-        o = np.asarray(obstacles, dtype=np.float64).reshape(-1, 2)
-        rng = np.hypot(o[:, 0] - self.camera.forward_m, o[:, 1])
-        ahead = (o[:, 0] > 0.0) & (np.abs(o[:, 1]) < self.avoid.radius_m)
-        return bool(np.any(ahead & (rng < self.camera.min_range_m + 0.1)))
-
-    def map_points(self, pose: np.ndarray, radius_m: float, with_seen: bool = True) -> np.ndarray:
-        """The map's walls within ``radius_m`` of the pose as points every
-        ``WALL_STEP_M``, in the robot frame: what is known to be there even where the
-        camera cannot look. The walls are sampled once; the points near the robot are
-        cached and re-selected only after it has moved ``_LOCAL_MARGIN_M``. The points
-        this frame's :meth:`command` was given as ``seen`` within the radius join them:
-        a pose on a wrong relocalization mode puts the map's walls where none are, and the
-        robot's own sight of the walls around it is then the only knowledge it has
-        (``with_seen`` False: the map's alone)."""
-        rel = self._near_walls(pose, radius_m)
-        c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
-        pts = np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]])
-        seen = self._seen
-        if with_seen and len(seen):
-            pts = np.vstack([pts, seen[seen[:, 0] * seen[:, 0] + seen[:, 1] * seen[:, 1] < radius_m * radius_m]])
-        return pts
-
-    def _near_walls(self, pose: np.ndarray, radius_m: float) -> np.ndarray:
-        """:meth:`map_points` relative to the robot's position, in world axes."""
-        return self._local_walls(pose, radius_m) - np.asarray(pose[:2], dtype=np.float64)
-
-    def _local_walls(self, pose: np.ndarray, radius_m: float) -> np.ndarray:
-        """The map's wall points (world frame) closer than ``radius_m`` to the robot."""
-        if self._wall_pts is None or not len(self._wall_pts):
-            return np.zeros((0, 2))
-        xy = np.asarray(pose[:2], dtype=np.float64)
-        c0, r0 = self._local_centre, self._local_radius
-        if c0 is None or radius_m > r0 - _LOCAL_MARGIN_M or math.hypot(xy[0] - c0[0], xy[1] - c0[1]) > r0 - radius_m:
-            r0 = max(radius_m, r0 - _LOCAL_MARGIN_M) + _LOCAL_MARGIN_M
-            w = self._wall_pts
-            self._local = w[np.hypot(w[:, 0] - xy[0], w[:, 1] - xy[1]) < r0]
-            self._local_centre, self._local_radius = xy.copy(), r0
-        rel = self._local - xy
-        return self._local[rel[:, 0] * rel[:, 0] + rel[:, 1] * rel[:, 1] < radius_m * radius_m]
 
     def _backoff_velocity(self, pose: np.ndarray, obstacles: np.ndarray) -> np.ndarray:
         """Recovery motion: back off the way the robot came, where nothing is in the way.
@@ -564,8 +439,8 @@ class Navigator:
         """
         cfg = self.cfg
         pts = np.asarray(obstacles, dtype=np.float64).reshape(-1, 2)
-        walls = self.map_points(pose, cfg.backoff_check_m + self.avoid.robot_radius_m + 0.2)
-        pts = np.vstack([pts, walls, self._mem_all])
+        walls = self.surroundings.map_points(pose, cfg.backoff_check_m + self.avoid.robot_radius_m + 0.2)
+        pts = np.vstack([pts, walls, self.surroundings.remembered])
         clear = self.avoid.robot_radius_m + cfg.backoff_clearance_m
         if cfg.trail_s > 0:
             return self.trail.retrace_velocity(pose, pts, clear, self._t)
@@ -643,7 +518,7 @@ class Navigator:
         on = (point_segment_distance(w, np.hstack([a + f0 * d, a + f1 * d])) < r).any(axis=1)
         rel, w = rel[on], w[on]
         if len(rel):
-            walls = self._near_walls(pose, float(np.max(np.hypot(rel[:, 0], rel[:, 1]))) + cfg.near_wall_tol_m)
+            walls = self.surroundings.near_walls(pose, float(np.max(np.hypot(rel[:, 0], rel[:, 1]))) + cfg.near_wall_tol_m)
             if len(walls):
                 d2 = ((rel[:, None, :] - walls[None, :, :]) ** 2).sum(axis=-1).min(axis=1)
                 w = w[d2 >= cfg.near_wall_tol_m**2]
@@ -734,10 +609,10 @@ class Navigator:
         camera's blind spots standing in for the map's walls, which cannot be placed
         without a pose. Blocked, the robot waits turning towards the heading."""
         cfg = self.cfg
-        self._seen = np.zeros((0, 2))
+        self.surroundings.seen = np.zeros((0, 2))
         self._t = float(t)
         self._progress_t = float(t)
-        obstacles = self.remember(pose, obstacles, t)
+        obstacles = self.surroundings.remember(pose, obstacles, t)
         # Every near-field sight line counts: no map wall can be placed to explain one.
         lines = np.zeros((0, 4)) if near_lines is None else np.asarray(near_lines, dtype=np.float64).reshape(-1, 4)
         near = line_points(lines, self.avoid.near_field.point_step_m)
@@ -752,7 +627,7 @@ class Navigator:
         static = np.zeros((0, 2))
         if seen is not None and cfg.map_blind_spots_m > 0:
             static = np.asarray(seen, dtype=np.float64).reshape(-1, 2)
-            static = self._out_of_view(static[static[:, 0] ** 2 + static[:, 1] ** 2 < cfg.map_blind_spots_m**2])
+            static = self.surroundings.out_of_view(static[static[:, 0] ** 2 + static[:, 1] ** 2 < cfg.map_blind_spots_m**2])
         res = self._keep_side(
             choose_direction(obstacles, desired, self.avoid, static, self.avoid.robot_radius_m + cfg.map_clearance_m), desired
         )
@@ -766,9 +641,7 @@ class Navigator:
         and side chosen -- and a back-off under way; given the new ``pose`` and with a
         goal set, re-plan from it (at ``t``, default the last frame's time). Blocked
         edges stay marked (they expire, and are forgotten when they leave no path)."""
-        self._mem = np.zeros((0, 2))
-        self._mem_t = np.zeros(0)
-        self._mem_all = np.zeros((0, 2))
+        self.surroundings.forget()
         self.trail.clear()
         self._lane = 0.0
         self._side = 0
@@ -838,7 +711,7 @@ class Navigator:
         ua, na = (c * u[0] + sn * u[1], -sn * u[0] + c * u[1]), (c * n[0] + sn * n[1], -sn * n[0] + c * n[1])
         a0, l0 = float(rel0 @ u), float(rel0 @ n)
         obs = np.asarray(obstacles, dtype=np.float64).reshape(-1, 2)
-        walls = self._near_walls(pose, reach + cfg.lane_shift_m + r)
+        walls = self.surroundings.near_walls(pose, reach + cfg.lane_shift_m + r)
         lats = []
         for pts, (au, nu_), gap in (
             (obs, (ua, na), r),
@@ -901,25 +774,10 @@ class Navigator:
         return res
 
     # -- control -----------------------------------------------------------------------
-    def near_points(self, pose: np.ndarray, near_lines: np.ndarray | None) -> np.ndarray:
-        """Points along the near-field sight lines (:mod:`autonomy.perception.nearfield`) that no
-        mapped wall explains, robot frame: a sight line with a map wall within
-        ``near_wall_tol_m`` of it is hidden by that wall (a door frame the robot passes
-        close to), which ``map_blind_spots_m`` covers already."""
-        lines = np.zeros((0, 4)) if near_lines is None else np.asarray(near_lines, dtype=np.float64).reshape(-1, 4)
-        if not len(lines):
-            return np.zeros((0, 2))
-        return line_points(lines[~self.walls_explain(pose, lines)], self.avoid.near_field.point_step_m)
-
     def walls_explain(self, pose: np.ndarray, lines: np.ndarray, with_seen: bool = True) -> np.ndarray:
-        """Per near-field sight line (robot frame, (K, 4)): whether a wall passes within
-        ``near_wall_tol_m`` of it at the pose (the map's, and with ``with_seen`` those
-        given to this frame's :meth:`command` as seen: :meth:`map_points`)."""
-        lines = np.asarray(lines, dtype=np.float64).reshape(-1, 4)
-        if not len(lines):
-            return np.zeros(0, dtype=bool)
-        reach = float(np.max(np.hypot(lines[:, 2], lines[:, 3]))) + self.cfg.near_wall_tol_m
-        return segments_near_points(lines, self.map_points(pose, reach, with_seen), self.cfg.near_wall_tol_m)
+        """Per near-field sight line: whether a wall passes within ``near_wall_tol_m`` of
+        it at the pose (:meth:`Surroundings.walls_explain`)."""
+        return self.surroundings.walls_explain(pose, lines, with_seen)
 
     def command(
         self, pose: np.ndarray, obstacles: np.ndarray, t: float, near_lines: np.ndarray | None = None, seen: np.ndarray | None = None
@@ -931,16 +789,16 @@ class Navigator:
         frame only (the next frame tells again whether they are still there).
         ``seen``: wall points the robot has seen before, robot frame (the relocalization's
         scan while it explores on a mode whose map may be wrong); they count with the
-        map's walls where the camera cannot look (:meth:`map_points`).
+        map's walls where the camera cannot look (:meth:`Surroundings.map_points`).
         """
-        self._seen = np.zeros((0, 2)) if seen is None else np.asarray(seen, dtype=np.float64).reshape(-1, 2)
+        self.surroundings.seen = np.zeros((0, 2)) if seen is None else np.asarray(seen, dtype=np.float64).reshape(-1, 2)
         self._t = float(t)
         self.trail.record(pose, t)
         if self.blocked:
             self._prune_blocked(t)
-        obstacles = self.remember(pose, obstacles, t)
+        obstacles = self.surroundings.remember(pose, obstacles, t)
         located = obstacles
-        near = self.near_points(pose, near_lines)
+        near = self.surroundings.near_points(pose, near_lines)
         if len(near):
             obstacles = np.vstack([obstacles, near])
         out = self._decide(pose, obstacles, t, located)
@@ -994,7 +852,7 @@ class Navigator:
         (:meth:`_replan_round_block`; ``located``: the obstacles whose place is known)
         and ends."""
         cfg = self.cfg
-        if not (t < self._backoff_until or (t - self._backoff_started < cfg.max_backoff_s and self._blind_blocked(obstacles))):
+        if not (t < self._backoff_until or (t - self._backoff_started < cfg.max_backoff_s and self.surroundings.blind_blocked(obstacles))):
             return None
         if not self._stuck_backoff and self._replan_round_block(pose, located, t):
             self._backoff_until = -1.0
@@ -1098,7 +956,7 @@ class Navigator:
         """Eq. 3-5 on the obstacles and the map's walls in the camera's blind spots,
         with hysteresis on the side (:meth:`_keep_side`); ``short``: the carrot is short
         (``narrow_horizon_m``)."""
-        static = self.map_blind_spots(pose)
+        static = self.surroundings.map_blind_spots(pose)
         horizon = self.cfg.narrow_horizon_m if short and self.cfg.narrow_horizon_m > 0 else None
         res = choose_direction(
             np.asarray(obstacles, dtype=np.float64).reshape(-1, 2),
@@ -1129,7 +987,7 @@ class Navigator:
         if self._replan_round_block(pose, obstacles if located is None else located, t):
             carrot, desired, omega = self._plan_direction(pose)
             return NavCommand(np.array([0.0, 0.0, omega]), "blocked", carrot, desired, res.theta_star, res.open_length_m, fan)
-        back = self._backoff_velocity(pose, obstacles) if self._blind_blocked(obstacles) else np.zeros(3)
+        back = self._backoff_velocity(pose, obstacles) if self.surroundings.blind_blocked(obstacles) else np.zeros(3)
         if back.any():
             # What blocks is too close for the camera to see: back off until it can
             # look again (a person may have moved on; else it is seen and avoided).
@@ -1191,35 +1049,8 @@ class Navigator:
         v = np.array([speed * math.cos(th), speed * math.sin(th), omega])
         return NavCommand(v, "driving", carrot, desired, th, res.open_length_m, fan)
 
-WALL_STEP_M = 0.03
-"""Spacing of the points that stand in for the map's walls (``Navigator.map_points``)."""
-_LOCAL_MARGIN_M = 1.0
 _LANE_STEP_M = 0.05
 """Spacing of the carrot shifts tried (``Navigator.lane_offset``)."""
-
-
-def wall_points(walls: np.ndarray, step_m: float) -> np.ndarray:
-    """(n, 2) points along each wall segment, both ends included, at most ``step_m`` apart."""
-    a, d = walls[:, :2], walls[:, 2:] - walls[:, :2]
-    L = np.hypot(d[:, 0], d[:, 1])
-    n = np.maximum(1, np.ceil(L / step_m).astype(np.int64)) + 1
-    seg = np.repeat(np.arange(len(L)), n)
-    frac = (np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)) / np.repeat(n - 1, n)
-    return a[seg] + frac[:, None] * d[seg]
-
-
-def in_camera_view(
-    x: np.ndarray, y: np.ndarray, camera: DepthCamera, fov_fraction: float = 1.0, near_pad_m: float = 0.0, far_pad_m: float = 0.0
-) -> np.ndarray:
-    """Which points (x, y relative to the camera, robot axes) lie inside the camera's
-    horizontal view: within ``fov_fraction`` of its field of view and between its minimum
-    and maximum range (narrowed by the pads). Occlusion is not considered."""
-    r = np.hypot(x, y)
-    return (
-        (np.abs(np.arctan2(y, x)) < 0.5 * fov_fraction * camera.fov_h_rad)
-        & (r > camera.min_range_m + near_pad_m)
-        & (r < camera.max_range_m - far_pad_m)
-    )
 
 
 def _side_of(theta: float, desired: float, dead_band: float) -> int:

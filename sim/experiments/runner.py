@@ -26,7 +26,7 @@ from autonomy.common.geometry import wrap_angle
 from autonomy.maps.planner import path_points
 from autonomy.maps.vectormap import load_navgraph, load_vectormap
 from autonomy.navigation.config import NavCommand
-from autonomy.navigation.navigator import in_camera_view
+from autonomy.navigation.surroundings import in_camera_view
 from autonomy.stack import RobotStack
 from sim.config import to_dict
 from sim.experiments.blackbox import (

@@ -11,7 +11,8 @@ from autonomy.common.errors import InputError
 from autonomy.common.geometry import point_segment_distance
 from autonomy.maps.vectormap import NavEdge, NavGraph, NavNode
 from autonomy.navigation.config import NavigatorConfig
-from autonomy.navigation.navigator import Navigator, in_camera_view, wall_points
+from autonomy.navigation.navigator import Navigator
+from autonomy.navigation.surroundings import in_camera_view, wall_points
 from autonomy.perception.camera import DepthCamera
 
 
@@ -158,28 +159,28 @@ def test_obstacle_memory_keeps_points_out_of_view_and_refreshes_points_in_view()
     nav = Navigator(line_graph(), NavigatorConfig(memory_s=2.0, memory_beside_s=0.0, shadow_m=0.0))
     nav.set_goal(5, np.zeros(3))
     person = np.array([[2.0, 0.0]])  # 2 m ahead: in view
-    assert len(nav.remember(np.zeros(3), person, 0.0)) == 1
+    assert len(nav.surroundings.remember(np.zeros(3), person, 0.0)) == 1
     # Next frame the camera sees the same place and the person is gone: forgotten.
-    assert len(nav.remember(np.zeros(3), np.zeros((0, 2)), 0.1)) == 0
+    assert len(nav.surroundings.remember(np.zeros(3), np.zeros((0, 2)), 0.1)) == 0
     # A point beside the robot (out of view) persists until memory_s, then is dropped.
-    nav.remember(np.zeros(3), np.array([[0.0, 0.6]]), 0.2)
-    kept = nav.remember(np.array([0.5, 0.0, 0.0]), np.zeros((0, 2)), 1.0)
+    nav.surroundings.remember(np.zeros(3), np.array([[0.0, 0.6]]), 0.2)
+    kept = nav.surroundings.remember(np.array([0.5, 0.0, 0.0]), np.zeros((0, 2)), 1.0)
     np.testing.assert_allclose(kept, [[-0.5, 0.6]], atol=0.03)  # in the new robot frame
-    assert len(nav.remember(np.array([0.5, 0.0, 0.0]), np.zeros((0, 2)), 2.5)) == 0
+    assert len(nav.surroundings.remember(np.array([0.5, 0.0, 0.0]), np.zeros((0, 2)), 2.5)) == 0
 
 
 def test_obstacle_memory_keeps_what_stands_beside_the_robot_while_it_is_near() -> None:
     nav = Navigator(line_graph(), NavigatorConfig(memory_s=2.0, memory_beside_s=10.0, memory_beside_m=1.0, shadow_m=0.0))
     nav.set_goal(5, np.zeros(3))
-    nav.remember(np.zeros(3), np.array([[0.0, 0.6]]), 0.0)
+    nav.surroundings.remember(np.zeros(3), np.array([[0.0, 0.6]]), 0.0)
     # 0.78 m from the robot, out of view: kept past memory_s, until memory_beside_s.
-    kept = nav.remember(np.array([0.5, 0.0, 0.0]), np.zeros((0, 2)), 9.9)
+    kept = nav.surroundings.remember(np.array([0.5, 0.0, 0.0]), np.zeros((0, 2)), 9.9)
     np.testing.assert_allclose(kept, [[-0.5, 0.6]], atol=0.03)
-    assert len(nav.remember(np.array([0.5, 0.0, 0.0]), np.zeros((0, 2)), 10.1)) == 0
+    assert len(nav.surroundings.remember(np.array([0.5, 0.0, 0.0]), np.zeros((0, 2)), 10.1)) == 0
     # Once the robot has moved away from it, memory_s alone holds.
-    nav.remember(np.zeros(3), np.array([[0.0, 0.6]]), 20.0)
-    assert len(nav.remember(np.array([0.9, 0.0, 0.0]), np.zeros((0, 2)), 23.0)) == 0
-    assert len(nav.remember(np.array([0.5, 0.0, 0.0]), np.zeros((0, 2)), 23.1)) == 1  # near again
+    nav.surroundings.remember(np.zeros(3), np.array([[0.0, 0.6]]), 20.0)
+    assert len(nav.surroundings.remember(np.array([0.9, 0.0, 0.0]), np.zeros((0, 2)), 23.0)) == 0
+    assert len(nav.surroundings.remember(np.array([0.5, 0.0, 0.0]), np.zeros((0, 2)), 23.1)) == 1  # near again
 
 
 def test_obstacle_memory_takes_what_hides_behind_a_seen_face_as_occupied() -> None:
@@ -188,20 +189,20 @@ def test_obstacle_memory_takes_what_hides_behind_a_seen_face_as_occupied() -> No
     cfg = NavigatorConfig(memory_s=2.0, shadow_m=0.3, memory_cell_m=0.05)
     nav = Navigator(line_graph(), cfg)
     cam_x = nav.camera.forward_m
-    got = nav.remember(np.zeros(3), np.array([[1.5, 0.0]]), 0.0)
+    got = nav.surroundings.remember(np.zeros(3), np.array([[1.5, 0.0]]), 0.0)
     want = np.array([[1.5 + 0.05 * j, 0.0] for j in range(7)])
     np.testing.assert_allclose(got[np.argsort(got[:, 0])], want, atol=1e-9)
     # Off the camera's axis the shadow runs along the sight line from the camera.
     nav = Navigator(line_graph(), cfg)
     p = np.array([1.4, 0.4])  # 19 degrees off the camera's axis: in the replaced region
-    got = nav.remember(np.zeros(3), p[None], 0.0)
+    got = nav.surroundings.remember(np.zeros(3), p[None], 0.0)
     u = (p - [cam_x, 0.0]) / np.hypot(p[0] - cam_x, p[1])
     ideal = p + np.outer(0.05 * np.arange(7), u)
     # On the 5 cm grid: every ideal point has its cell remembered.
     cells = {(round(x / 0.05), round(y / 0.05)) for x, y in got}
     assert cells == {(round(x / 0.05), round(y / 0.05)) for x, y in ideal}
     # The camera looks at that place again and sees it clear: the shadow is gone.
-    assert len(nav.remember(np.zeros(3), np.zeros((0, 2)), 0.1)) == 0
+    assert len(nav.surroundings.remember(np.zeros(3), np.zeros((0, 2)), 0.1)) == 0
 
 
 def test_obstacle_memory_keeps_one_point_per_cell_with_its_latest_time() -> None:
@@ -215,11 +216,11 @@ def test_obstacle_memory_keeps_one_point_per_cell_with_its_latest_time() -> None
         # Points behind the robot (never in view), some cells repeated across frames.
         pts = np.column_stack([rng.uniform(-1.5, -0.2, 300), rng.uniform(-1.0, 1.0, 300)])
         pts = np.round(pts / (2 * cell)) * (2 * cell)
-        nav.remember(pose, pts, float(k))
+        nav.surroundings.remember(pose, pts, float(k))
         for x, y in pts + pose[:2]:
             seen[(round(x / cell), round(y / cell))] = float(k)
-    got = {(round(x / cell), round(y / cell)): t for (x, y), t in zip(nav._mem, nav._mem_t, strict=True)}
-    assert len(got) == len(nav._mem) == len(seen)
+    got = {(round(x / cell), round(y / cell)): t for (x, y), t in zip(nav.surroundings._mem, nav.surroundings._mem_t, strict=True)}
+    assert len(got) == len(nav.surroundings._mem) == len(seen)
     assert got == seen
 
 
@@ -227,7 +228,7 @@ def test_map_points_are_the_walls_near_the_robot_in_the_robot_frame() -> None:
     walls = np.array([[-5.0, 1.0, 5.0, 1.0], [-5.0, -3.0, 5.0, -3.0]])
     nav = Navigator(line_graph(), walls=walls)
     # Facing +y: the wall y = 1 is 1 m ahead (robot x); the wall y = -3 is out of reach.
-    p = nav.map_points(np.array([0.0, 0.0, math.pi / 2]), 1.5)
+    p = nav.surroundings.map_points(np.array([0.0, 0.0, math.pi / 2]), 1.5)
     assert len(p) > 10
     np.testing.assert_allclose(p[:, 0], 1.0, atol=1e-9)
     assert np.all(np.hypot(p[:, 0], p[:, 1]) < 1.5) and p[:, 1].min() < -1.0 and p[:, 1].max() > 1.0
@@ -360,8 +361,8 @@ def test_map_points_cache_matches_a_fresh_selection() -> None:
         xy = xy + rng.normal(0.0, 0.15, 2)
         pose = np.array([*xy, rng.uniform(-math.pi, math.pi)])
         for r in (0.7, 1.6):
-            got = nav.map_points(pose, r)
-            want = Navigator(line_graph(), walls=walls).map_points(pose, r)
+            got = nav.surroundings.map_points(pose, r)
+            want = Navigator(line_graph(), walls=walls).surroundings.map_points(pose, r)
             np.testing.assert_allclose(np.sort(got, axis=0), np.sort(want, axis=0))
             assert np.all(np.hypot(got[:, 0], got[:, 1]) < r)
 
@@ -375,7 +376,7 @@ def test_map_walls_the_camera_cannot_see_steer_the_robot_off_them() -> None:
     wall = np.array([[-2.0, -0.33, 3.0, -0.33]])
     nav = Navigator(line_graph(), walls=wall)
     nav.set_goal(5, np.zeros(3))
-    pts = nav.map_blind_spots(np.zeros(3))
+    pts = nav.surroundings.map_blind_spots(np.zeros(3))
     assert len(pts) and np.all(np.hypot(pts[:, 0], pts[:, 1]) <= nav.cfg.map_blind_spots_m + 1e-9)
     cmd = nav.command(np.zeros(3), np.zeros((0, 2)), 0.0)
     assert cmd.state == "driving" and cmd.theta_star_rad > math.radians(5)
@@ -396,13 +397,13 @@ def test_walls_seen_before_count_with_the_map_in_the_blind_spots() -> None:
     nav.set_goal(5, np.zeros(3))
     cmd = nav.command(np.zeros(3), np.zeros((0, 2)), 0.0, seen=wall)
     assert cmd.state == "driving" and cmd.theta_star_rad > math.radians(5)
-    pts = nav.map_points(np.zeros(3), 1.0)
+    pts = nav.surroundings.map_points(np.zeros(3), 1.0)
     assert len(pts) and np.all(np.hypot(pts[:, 0], pts[:, 1]) < 1.0)
     nav2 = Navigator(line_graph(), NavigatorConfig(lane_shift_m=0.0), walls=np.zeros((0, 4)))
     nav2.set_goal(5, np.zeros(3))
     assert nav2.command(np.zeros(3), np.zeros((0, 2)), 0.0).theta_star_rad == pytest.approx(0.0)
     nav.command(np.zeros(3), np.zeros((0, 2)), 0.1)
-    assert len(nav.map_points(np.zeros(3), 1.0)) == 0
+    assert len(nav.surroundings.map_points(np.zeros(3), 1.0)) == 0
 
 
 def test_heads_for_a_direction_without_a_plan_or_the_map() -> None:
@@ -499,9 +500,9 @@ def test_backs_off_clear_of_furniture_seen_long_before() -> None:
         # The memory's check alone (no trail: trail_s = 0; it would not back off there either).
         nav = Navigator(line_graph(), NavigatorConfig(backoff_memory_s=backoff_memory_s, trail_s=0.0, memory_beside_s=0.0))
         nav.set_goal(5, np.zeros(3))
-        nav.remember(np.zeros(3), box, 0.0)
+        nav.surroundings.remember(np.zeros(3), box, 0.0)
         turned = np.array([0.0, 0.0, math.pi])
-        assert len(nav.remember(turned, np.zeros((0, 2)), 10.0)) == 0  # forgotten by the avoidance
+        assert len(nav.surroundings.remember(turned, np.zeros((0, 2)), 10.0)) == 0  # forgotten by the avoidance
         v = nav._backoff_velocity(turned, np.zeros((0, 2)))
         assert np.allclose(v[:2], [-0.15, 0.0]) == straight, v
 
@@ -517,8 +518,8 @@ def test_the_navigator_sees_through_its_camera() -> None:
     far = Navigator(line_graph(), NavigatorConfig(map_blind_spots_m=1.5), walls=walls, camera=DepthCamera(min_range_m=1.5))
     pose = np.array([0.0, 0.0, 0.0])
     ahead = lambda pts: pts[np.abs(pts[:, 1]) < 0.05]  # noqa: E731
-    assert len(ahead(near.map_blind_spots(pose))) == 0
-    assert len(ahead(far.map_blind_spots(pose))) > 0
+    assert len(ahead(near.surroundings.map_blind_spots(pose))) == 0
+    assert len(ahead(far.surroundings.map_blind_spots(pose))) > 0
 
 
 # A corridor (y in [5.25, 7.4]) with a 0.906 m door in its south wall at x = 23.661,

@@ -499,7 +499,7 @@ def test_blocking_points_are_those_on_the_plans_line_ahead() -> None:
     world = np.column_stack([rng.uniform(-0.5, 3.5, 4000), rng.uniform(-1.0, 1.0, 4000)])
     rel = world - pose[:2]
     local = np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]])
-    got = nav.blocking_points(pose, local)
+    got = nav.route.blocking_points(nav.plan, pose, local, nav.surroundings)
     r, s0 = nav.avoid.radius_m, 1.0  # the plan runs along y = 0 from x = 0
     xs = np.arange(s0 - r, s0 + nav.cfg.blocked_check_m, 0.001)
     line = np.column_stack([xs, np.zeros(len(xs))])

@@ -302,11 +302,11 @@ def test_takes_the_plans_corners_slowly() -> None:
     nav = Navigator(l_graph(), NavigatorConfig(corner_speed_mps=0.4))
     nav.set_goal(5, np.zeros(3))
     cfg = nav.cfg
-    assert nav.corner_speed_limit(0.0) == math.inf and nav.corner_speed_limit(3.9) == math.inf
-    assert nav.corner_speed_limit(4.5) == pytest.approx(cfg.corner_speed_mps + 0.5 * (cfg.cruise_speed_mps - cfg.corner_speed_mps))
+    assert nav.plan.corner_speed_limit(0.0) == math.inf and nav.plan.corner_speed_limit(3.9) == math.inf
+    assert nav.plan.corner_speed_limit(4.5) == pytest.approx(cfg.corner_speed_mps + 0.5 * (cfg.cruise_speed_mps - cfg.corner_speed_mps))
     for s in (5.0, 5.5, 6.0, 6.29):
-        assert nav.corner_speed_limit(s) == pytest.approx(cfg.corner_speed_mps)
-    assert nav.corner_speed_limit(6.31) == math.inf
+        assert nav.plan.corner_speed_limit(s) == pytest.approx(cfg.corner_speed_mps)
+    assert nav.plan.corner_speed_limit(6.31) == math.inf
     speed = lambda x: float(np.hypot(*nav.command(np.array([x, 0.0, 0.0]), np.zeros((0, 2)), 0.0).velocity[:2]))  # noqa: E731
     assert speed(2.0) == pytest.approx(0.75) and speed(5.2) == pytest.approx(cfg.corner_speed_mps)
     # A shallow bend (30 degrees) is no corner; corner_speed_mps = 0 turns it off.
@@ -316,10 +316,10 @@ def test_takes_the_plans_corners_slowly() -> None:
     )
     nav = Navigator(bend, NavigatorConfig(corner_speed_mps=0.4))
     nav.set_goal(2, np.zeros(3))
-    assert nav.corner_speed_limit(2.5) == math.inf
+    assert nav.plan.corner_speed_limit(2.5) == math.inf
     nav = Navigator(l_graph(), NavigatorConfig(corner_speed_mps=0.0))  # 0 = off
     nav.set_goal(5, np.zeros(3))
-    assert nav.corner_speed_limit(5.5) == math.inf
+    assert nav.plan.corner_speed_limit(5.5) == math.inf
     with pytest.raises(InputError, match="corner_speed_mps"):
         NavigatorConfig(corner_speed_mps=-0.1)
 
@@ -331,15 +331,15 @@ def test_honours_the_edges_max_speed() -> None:
     edges = tuple(NavEdge(s0_id=e.s0_id, s1_id=e.s1_id, has_door=e.s0_id == 2, max_speed=0.5 if e.s0_id == 2 else 0.75) for e in g.edges)
     nav = Navigator(NavGraph(nodes=g.nodes, edges=edges))
     nav.set_goal(5, np.zeros(3))
-    assert nav.edge_speed_limit(1.0) == pytest.approx(0.75) and nav.edge_speed_limit(3.1) == pytest.approx(0.75)
+    assert nav.plan.edge_speed_limit(1.0) == pytest.approx(0.75) and nav.plan.edge_speed_limit(3.1) == pytest.approx(0.75)
     for s in (3.3, 5.0, 6.2):
-        assert nav.edge_speed_limit(s) == pytest.approx(0.5)
-    assert nav.edge_speed_limit(6.4) == pytest.approx(0.75)
+        assert nav.plan.edge_speed_limit(s) == pytest.approx(0.5)
+    assert nav.plan.edge_speed_limit(6.4) == pytest.approx(0.75)
     speed = lambda n, x: float(np.hypot(*n.command(np.array([x, 0.0, 0.0]), np.zeros((0, 2)), 0.0).velocity[:2]))  # noqa: E731
     assert speed(nav, 1.0) == pytest.approx(0.75) and speed(nav, 5.0) == pytest.approx(0.5)
     # Planned the other way round, the same edge limits too.
     nav.set_goal(0, np.array([10.0, 0.0, math.pi]))
-    assert nav.edge_speed_limit(5.0) == pytest.approx(0.5)
+    assert nav.plan.edge_speed_limit(5.0) == pytest.approx(0.5)
     off = Navigator(NavGraph(nodes=g.nodes, edges=edges), NavigatorConfig(edge_speed_limits=False))
     off.set_goal(5, np.zeros(3))
     assert speed(off, 5.0) == pytest.approx(0.75)
@@ -347,7 +347,7 @@ def test_honours_the_edges_max_speed() -> None:
     zero = tuple(NavEdge(s0_id=e.s0_id, s1_id=e.s1_id, max_speed=0.0) for e in g.edges)
     unlimited = Navigator(NavGraph(nodes=g.nodes, edges=zero))
     unlimited.set_goal(5, np.zeros(3))
-    assert unlimited.edge_speed_limit(5.0) == math.inf and speed(unlimited, 5.0) == pytest.approx(0.75)
+    assert unlimited.plan.edge_speed_limit(5.0) == math.inf and speed(unlimited, 5.0) == pytest.approx(0.75)
 
 
 def test_map_points_cache_matches_a_fresh_selection() -> None:
@@ -599,7 +599,7 @@ def test_enters_a_door_straight_on_a_short_carrot() -> None:
     # On a graph whose edges are wide, the carrot stays long everywhere.
     wide = Navigator(door_graph(max_clearance=1.0, has_door=False))
     wide.set_goal(4, np.array([19.0, 6.325, 0.0]))
-    assert {wide.lookahead(s) for s in np.linspace(0.0, 8.0, 81)} == {0.8}
+    assert {wide.plan.lookahead(s) for s in np.linspace(0.0, 8.0, 81)} == {0.8}
     # The plan: 4.661 m along the corridor to the corner, where the door's edges begin,
     # 1.075 m to the door, then 0.75 m to the room's node. The jambs come within 0.55 m
     # (the robot's radius and the slack) of the edges from 0.31 m before the door to
@@ -607,13 +607,13 @@ def test_enters_a_door_straight_on_a_short_carrot() -> None:
     nav = Navigator(door_graph(), walls=DOOR_WALLS)
     nav.set_goal(4, np.array([19.0, 6.325, 0.0]))
     door, reach = 4.661 + 1.075, math.sqrt(0.55**2 - DOOR_HALF**2)
-    assert nav.lookahead(door - reach - 2.75 - 0.02) == 0.8 and nav.lookahead(door - reach - 2.75 + 0.02) == 0.3
-    assert nav.lookahead(door + reach + 0.3 - 0.02) == 0.3 and nav.lookahead(door + reach + 0.3 + 0.02) == 0.8
+    assert nav.plan.lookahead(door - reach - 2.75 - 0.02) == 0.8 and nav.plan.lookahead(door - reach - 2.75 + 0.02) == 0.3
+    assert nav.plan.lookahead(door + reach + 0.3 - 0.02) == 0.3 and nav.plan.lookahead(door + reach + 0.3 + 0.02) == 0.8
     # Without the map's walls the whole of each narrow edge is narrow.
     blind = Navigator(door_graph())
     blind.set_goal(4, np.array([19.0, 6.325, 0.0]))
-    assert blind.lookahead(4.661 - 2.75 - 0.05) == 0.8 and blind.lookahead(4.661 - 2.75 + 0.05) == 0.3
-    assert blind.lookahead(door + 0.75 + 0.25) == 0.3 and blind.lookahead(door + 0.75 + 0.35) == 0.8
+    assert blind.plan.lookahead(4.661 - 2.75 - 0.05) == 0.8 and blind.plan.lookahead(4.661 - 2.75 + 0.05) == 0.3
+    assert blind.plan.lookahead(door + 0.75 + 0.25) == 0.3 and blind.plan.lookahead(door + 0.75 + 0.35) == 0.8
     with pytest.raises(InputError, match="narrow_lookahead_m"):
         NavigatorConfig(narrow_lookahead_m=1.0)
 

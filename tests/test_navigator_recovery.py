@@ -381,13 +381,13 @@ def test_look_around_turns_in_place_and_a_pose_jump_clears_what_the_old_estimate
     for x in np.arange(0.0, 1.0, 0.025):
         nav.command(np.array([x, 0.0, 0.0]), np.array([[0.2, 0.7], [1.5, 0.0]]), t)
         t += 1.0 / RATE_HZ
-    nav._lane, nav._side = 0.5, 1
+    nav.steering._lane, nav.steering._side = 0.5, 1
     assert len(nav.trail_points()) > 10 and len(nav.surroundings._mem) > 0
     nav.blocked[edge_key(D, E)] = t + 100.0
     replans = nav.replans
     nav.pose_jumped(np.array([8.0, 3.0, 0.0]), t)
     assert len(nav.trail_points()) == 0 and len(nav.surroundings._mem) == 0 and len(nav.surroundings.remembered) == 0
-    assert nav._lane == 0.0 and nav._side == 0
+    assert nav.steering._lane == 0.0 and nav.steering._side == 0
     assert nav.replans == replans + 1 and nav.plan_nodes[0] == E and nav.plan_nodes[-1] == C
     assert edge_key(D, E) in nav.blocked  # marks stay (they expire)
     nav.pose_jumped()  # without a pose: clears only

@@ -45,11 +45,11 @@ from autonomy.navigation.avoidance import (
     AvoidanceConfig,
     AvoidanceResult,
     choose_direction,
-    eq5_scores,
 )
 from autonomy.navigation.config import NavCommand, NavigatorConfig
 from autonomy.navigation.plan import Plan
 from autonomy.navigation.route import RoutePlanner
+from autonomy.navigation.steering import Steering, turn_rate
 from autonomy.navigation.surroundings import Surroundings
 from autonomy.navigation.trail import Trail
 from autonomy.perception.camera import KINECT_V1, DepthCamera
@@ -99,8 +99,8 @@ class Navigator:
         """Time of the last frame (``command``)."""
         self.trail = Trail(cfg)
         """The robot's footprints (``trail_s``), along which a back-off goes."""
-        self._side = 0
-        self._lane = 0.0
+        self.steering = Steering(cfg, avoid, camera, self.surroundings)
+        """The carrot, the direction and the speed."""
 
     @property
     def goal(self) -> int | None:
@@ -165,18 +165,6 @@ class Navigator:
         """Length of the plan still ahead of the pose; 0 without a plan."""
         return self.plan.remaining_m(np.asarray(pose[:2], dtype=np.float64))
 
-    def obstacle_near_path(self, obstacles: np.ndarray, theta: float) -> bool:
-        """Whether an obstacle point lies less than ``proximity_range_m`` ahead along
-        ``theta`` and within the avoidance radius plus ``proximity_gap_m`` of that ray."""
-        o = np.asarray(obstacles, dtype=np.float64).reshape(-1, 2)
-        if not len(o):
-            return False
-        c, s = math.cos(theta), math.sin(theta)
-        along = o[:, 0] * c + o[:, 1] * s
-        lateral = np.abs(o[:, 1] * c - o[:, 0] * s)
-        near = (along > 0.0) & (along < self.cfg.proximity_range_m) & (lateral < self.avoid.radius_m + self.cfg.proximity_gap_m)
-        return bool(near.any())
-
     def _backoff_velocity(self, pose: np.ndarray, obstacles: np.ndarray) -> np.ndarray:
         """Recovery motion: back off the way the robot came, where nothing is in the way.
 
@@ -221,23 +209,6 @@ class Navigator:
         (:meth:`Trail.retrace`): what a back-off drives."""
         return self.trail.retrace(pose, self._t)
 
-    def _plan_direction(self, pose: np.ndarray) -> tuple[np.ndarray, float, float]:
-        """The carrot on the plan (no lane shift), its direction in the robot frame and
-        the yaw rate turning towards it."""
-        cfg = self.cfg
-        xy = np.asarray(pose[:2], dtype=np.float64)
-        if len(self.plan.path) < 2:
-            return xy, 0.0, 0.0
-        s = self.plan.project(xy)
-        carrot = self.plan.point_at(s + self.plan.lookahead(s))
-        d = carrot - xy
-        desired = wrap_angle(math.atan2(d[1], d[0]) - float(pose[2]))
-        return carrot, desired, float(np.clip(cfg.heading_gain * desired, -cfg.max_turn_rate_rad_s, cfg.max_turn_rate_rad_s))
-
-    def _turn_to_plan(self, pose: np.ndarray) -> np.ndarray:
-        """Turning in place towards the plan (a round robot can always turn)."""
-        return np.array([0.0, 0.0, self._plan_direction(pose)[2]])
-
     def look_around(self, t: float) -> NavCommand:
         """Turn in place at ``look_turn_rate_rad_s`` (state "looking"), no translation:
         the camera sweeps the walls round the robot (while the localization searches
@@ -272,19 +243,19 @@ class Navigator:
         xy = np.asarray(pose[:2], dtype=np.float64)
         carrot = xy + cfg.lookahead_m * np.array([math.cos(heading), math.sin(heading)])
         desired = wrap_angle(heading - float(pose[2]))
-        turn = float(np.clip(cfg.heading_gain * desired, -cfg.max_turn_rate_rad_s, cfg.max_turn_rate_rad_s))
+        turn = turn_rate(cfg, desired)
         if abs(desired) > cfg.turn_in_place_rad:
             return NavCommand(np.array([0.0, 0.0, turn]), "turning", carrot=carrot, desired_rad=desired)
         static = np.zeros((0, 2))
         if seen is not None and cfg.map_blind_spots_m > 0:
             static = np.asarray(seen, dtype=np.float64).reshape(-1, 2)
             static = self.surroundings.out_of_view(static[static[:, 0] ** 2 + static[:, 1] ** 2 < cfg.map_blind_spots_m**2])
-        res = self._keep_side(
+        res = self.steering.keep_side(
             choose_direction(obstacles, desired, self.avoid, static, self.avoid.robot_radius_m + cfg.map_clearance_m), desired
         )
         if res.blocked:
             return NavCommand(np.array([0.0, 0.0, turn]), "blocked", carrot, desired, res.theta_star, res.open_length_m, (res.angles, res.lengths))
-        return self._drive(obstacles, carrot, desired, min(cfg.cruise_speed_mps, res.safe_speed_mps), res)
+        return self.steering.drive(obstacles, carrot, desired, min(cfg.cruise_speed_mps, res.safe_speed_mps), res)
 
     def pose_jumped(self, pose: np.ndarray | None = None, t: float | None = None) -> None:
         """The pose estimate jumped (the robot was re-localized elsewhere): forget what
@@ -294,8 +265,7 @@ class Navigator:
         edges stay marked (they expire, and are forgotten when they leave no path)."""
         self.surroundings.forget()
         self.trail.clear()
-        self._lane = 0.0
-        self._side = 0
+        self.steering.forget()
         self._backoff_until = -1.0
         self._backoff_started = -np.inf
         self._stuck_backoff = False
@@ -303,126 +273,6 @@ class Navigator:
         if pose is not None and self.goal is not None:
             self.replans += 1
             self.set_goal(self.goal, pose, self._t if t is None else float(t))
-
-    def lane_offset(self, pose: np.ndarray, obstacles: np.ndarray, s: float) -> float:
-        """Sideways shift (m, left of the plan positive) of the carrot (``lane_shift_m``).
-
-        In the plan's frame at arc length ``s`` (its tangent, over the straight stretch
-        ahead, at most ``lane_check_m`` and up to the next corner), an offset o is clear
-        when no obstacle ahead (from the avoidance radius behind ``s`` on) lies within
-        the avoidance radius of the line at o, nor a map wall within the robot radius
-        plus ``map_clearance_m``. 0 when the plan's own line is clear (Eq. 5 as the paper)
-        or no offset is; else the clear offset nearest 0, on the side chosen before while
-        that side has one; the first choice is the side of the clear offset nearest the
-        robot (on a tie the right).
-        """
-        shift = 0.0
-        frame = self._lane_frame(s) if self.cfg.lane_shift_m > 0 and len(self.plan.path) >= 2 else None
-        if frame is not None:
-            lats = self._lane_laterals(pose, obstacles, frame)
-            # Most frames end here: the plan's own line is clear.
-            if any(bool(np.any(np.abs(lat) < gap)) for lat, gap in lats):
-                shift = self._pick_lane(pose, frame, lats)
-        self._lane = float(np.sign(shift))
-        return shift
-
-    def _lane_frame(self, s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float] | None:
-        """The plan's frame for :meth:`lane_offset` at arc length ``s``: its point, unit
-        tangent and left normal there, and how far ahead the stretch is checked
-        (``lane_check_m``, up to the next corner and the plan's end); None when that is
-        shorter than the avoidance radius or the plan has no direction there."""
-        reach = self.cfg.lane_check_m
-        ahead = self.plan.corners - s
-        ahead = ahead[ahead > 0.0]
-        if len(ahead):
-            reach = min(reach, float(ahead.min()))
-        reach = min(reach, float(self.plan.cum[-1]) - s)
-        if reach < self.avoid.radius_m:
-            return None
-        p0 = self.plan.point_at(s)
-        u = self.plan.point_at(s + min(reach, 0.5)) - p0 if reach > 1e-6 else np.zeros(2)
-        nu = math.hypot(u[0], u[1])
-        if nu < 1e-9:
-            return None
-        u = u / nu
-        return p0, u, np.array([-u[1], u[0]]), reach
-
-    def _lane_laterals(
-        self, pose: np.ndarray, obstacles: np.ndarray, frame: tuple[np.ndarray, np.ndarray, np.ndarray, float]
-    ) -> list[tuple[np.ndarray, float]]:
-        """Lateral offsets (plan frame) of the obstacles and of the map's walls on the
-        stretch ahead (from the avoidance radius behind its start to ``reach``), each with
-        the gap it needs: the avoidance radius for sensed points, the robot radius plus
-        ``map_clearance_m`` for walls."""
-        cfg, r = self.cfg, self.avoid.radius_m
-        p0, u, n, reach = frame
-        c, sn = math.cos(float(pose[2])), math.sin(float(pose[2]))
-        rel0 = np.asarray(pose[:2], dtype=np.float64) - p0
-        # Plan-frame axes of robot-frame points (sensed) and of world-axes offsets (walls).
-        ua, na = (c * u[0] + sn * u[1], -sn * u[0] + c * u[1]), (c * n[0] + sn * n[1], -sn * n[0] + c * n[1])
-        a0, l0 = float(rel0 @ u), float(rel0 @ n)
-        obs = np.asarray(obstacles, dtype=np.float64).reshape(-1, 2)
-        walls = self.surroundings.near_walls(pose, reach + cfg.lane_shift_m + r)
-        lats = []
-        for pts, (au, nu_), gap in (
-            (obs, (ua, na), r),
-            (walls, (u, n), self.avoid.robot_radius_m + cfg.map_clearance_m),
-        ):
-            if len(pts):
-                a = pts[:, 0] * au[0] + pts[:, 1] * au[1] + a0
-                lat = pts[:, 0] * nu_[0] + pts[:, 1] * nu_[1] + l0
-                lats.append((lat[(a > -r) & (a < reach)], gap))
-        return lats
-
-    def _pick_lane(
-        self, pose: np.ndarray, frame: tuple[np.ndarray, np.ndarray, np.ndarray, float], lats: list[tuple[np.ndarray, float]]
-    ) -> float:
-        """The clear offset nearest the plan, on the side chosen before while that side
-        has one (0 when none is clear); the first choice is the side of the clear offset
-        nearest the robot."""
-        cfg = self.cfg
-        p0, _, n, _ = frame
-        k = int(math.floor(cfg.lane_shift_m / _LANE_STEP_M + 1e-9))
-        offsets = _LANE_STEP_M * np.arange(-k, k + 1)
-        clear = np.ones(len(offsets), dtype=bool)
-        for lat, gap in lats:
-            lat = lat[np.abs(lat) < cfg.lane_shift_m + gap]
-            if len(lat):
-                clear &= ~(np.abs(lat[:, None] - offsets[None, :]) < gap).any(axis=0)
-        if not clear.any():
-            return 0.0
-        side = self._lane
-        if side == 0.0:
-            # First choice: the clear offset nearest the robot (a tie: the right, since
-            # people step to their right, the robot's left, out of its way).
-            lat = float((np.asarray(pose[:2], dtype=np.float64) - p0) @ n)
-            cost = np.where(clear, np.abs(offsets - lat) + 1e-9 * (offsets > 0), np.inf)
-            side = 1.0 if offsets[int(np.argmin(cost))] > 0 else -1.0
-        same = clear & (np.sign(offsets) == side)
-        pick = same if same.any() else clear
-        j = int(np.flatnonzero(pick)[np.argmin(np.abs(offsets[pick]))])
-        return float(offsets[j])
-
-    def _keep_side(self, res: AvoidanceResult, desired: float, horizon: float | None = None) -> AvoidanceResult:
-        """Hysteresis on Eq. 5: once the robot swerves to one side of the carrot direction,
-        it keeps to that side while a direction there scores at least ``side_hysteresis``
-        of the best (flipping left-right-left in front of an obstacle wastes the approach)."""
-        cfg = self.cfg
-        band = math.radians(3.0)
-        side = _side_of(res.theta_star, desired, band)
-        prev = self._side
-        if prev != 0 and side == -prev and not res.blocked:
-            score = eq5_scores(res.angles, res.lengths, desired, horizon)
-            same = np.array([_side_of(a, desired, band) != -prev for a in res.angles])
-            if same.any():
-                j = int(np.flatnonzero(same)[np.argmax(score[same])])
-                if score[j] >= cfg.side_hysteresis * float(score.max()) and res.lengths[j] > self.avoid.stop_distance_m:
-                    d = float(res.lengths[j])
-                    v = math.sqrt(2.0 * self.avoid.max_decel_mps2 * max(0.0, d - self.avoid.stop_distance_m))
-                    res = AvoidanceResult(res.angles, res.lengths, j, float(res.angles[j]), d, v, False)
-                    side = prev
-        self._side = side
-        return res
 
     # -- control -----------------------------------------------------------------------
     def walls_explain(self, pose: np.ndarray, lines: np.ndarray, with_seen: bool = True) -> np.ndarray:
@@ -477,17 +327,17 @@ class Navigator:
         s = self.plan.project(xy)
         if self._stuck(s, t):
             return self._start_recovery(pose, obstacles, t, located)
-        carrot = self._carrot(pose, s, obstacles if located is None else located)
+        carrot = self.steering.carrot(self.plan, pose, s, obstacles if located is None else located)
         d = carrot - xy
         desired = wrap_angle(math.atan2(d[1], d[0]) - float(pose[2]))
-        turn = float(np.clip(cfg.heading_gain * desired, -cfg.max_turn_rate_rad_s, cfg.max_turn_rate_rad_s))
+        turn = turn_rate(cfg, desired)
         if abs(desired) > cfg.turn_in_place_rad:
             return NavCommand(np.array([0.0, 0.0, turn]), "turning", carrot=carrot, desired_rad=desired)
-        res = self._choose_direction(pose, obstacles, desired, self.plan.lookahead(s) < cfg.lookahead_m)
+        res = self.steering.choose_direction(pose, obstacles, desired, self.plan.lookahead(s) < cfg.lookahead_m)
         if res.blocked:
             return self._when_blocked(pose, obstacles, t, carrot, desired, turn, res, located)
         speed = min(cfg.cruise_speed_mps, res.safe_speed_mps, 0.8 * to_goal + 0.05, self.plan.corner_speed_limit(s), self.plan.edge_speed_limit(s))
-        return self._drive(obstacles, carrot, desired, speed, res)
+        return self.steering.drive(obstacles, carrot, desired, speed, res)
 
     def _continue_backoff(self, pose: np.ndarray, obstacles: np.ndarray, t: float, located: np.ndarray) -> NavCommand | None:
         """The back-off's command while it goes on; None once it is over.
@@ -508,7 +358,7 @@ class Navigator:
         if not self._stuck_backoff and self._replan_round_block(pose, located, t):
             self._backoff_until = -1.0
             self._backoff_started = -np.inf
-            carrot, desired, omega = self._plan_direction(pose)
+            carrot, desired, omega = self.steering.toward_plan(self.plan, pose)
             return NavCommand(np.array([0.0, 0.0, omega]), "turning", carrot, desired)
         v = self._backoff_velocity(pose, obstacles)
         if self._stuck_backoff:
@@ -516,7 +366,7 @@ class Navigator:
         if v.any():
             return NavCommand(v, "recovering")
         if t < self._backoff_until:
-            return NavCommand(self._turn_to_plan(pose), "recovering")
+            return NavCommand(np.array([0.0, 0.0, self.steering.toward_plan(self.plan, pose)[2]]), "recovering")
         self._backoff_started = -np.inf
         return None
 
@@ -548,7 +398,7 @@ class Navigator:
         v = self._backoff_velocity(pose, obstacles)
         if v.any():
             return NavCommand(v, "recovering")
-        _, desired, omega = self._plan_direction(pose)
+        _, desired, omega = self.steering.toward_plan(self.plan, pose)
         if cfg.look_back_m > 0 and abs(desired) <= cfg.turn_in_place_rad:
             turn_s = math.pi / cfg.max_turn_rate_rad_s
             drive_s = cfg.look_back_m / max(cfg.backoff_speed_mps, 1e-9)
@@ -573,48 +423,20 @@ class Navigator:
             return None
         if start is None:
             if abs(err) > _LOOK_BACK_FACING_RAD:
-                return NavCommand(np.array([0.0, 0.0, float(np.clip(cfg.heading_gain * err, -cfg.max_turn_rate_rad_s, cfg.max_turn_rate_rad_s))]), "recovering")
+                return NavCommand(np.array([0.0, 0.0, turn_rate(cfg, err)]), "recovering")
             self._look_back = (heading, xy.copy(), until)
-        res = self._choose_direction(pose, obstacles, err)
+        res = self.steering.choose_direction(pose, obstacles, err)
         if res.blocked:
             self._look_back = None
             return None
         th = res.theta_star
-        omega = float(np.clip(cfg.heading_gain * th, -cfg.max_turn_rate_rad_s, cfg.max_turn_rate_rad_s))
+        omega = turn_rate(cfg, th)
         fan = (res.angles, res.lengths)
         if abs(th) > 0.5 * self.camera.fov_h_rad:
             return NavCommand(np.array([0.0, 0.0, omega]), "recovering", theta_star_rad=th, open_length_m=res.open_length_m, fan=fan)
         speed = min(cfg.backoff_speed_mps, res.safe_speed_mps)
         v = np.array([speed * math.cos(th), speed * math.sin(th), omega])
         return NavCommand(v, "recovering", theta_star_rad=th, open_length_m=res.open_length_m, fan=fan)
-
-    def _carrot(self, pose: np.ndarray, s: float, located: np.ndarray) -> np.ndarray:
-        """The carrot: :meth:`lookahead` ahead of arc length ``s`` on the plan, shifted
-        sideways round the ``located`` obstacles by :meth:`lane_offset`."""
-        la = self.plan.lookahead(s)
-        carrot = self.plan.point_at(s + la)
-        shift = self.lane_offset(pose, located, s)
-        if shift:
-            t0 = self.plan.point_at(s + la + 0.05) - self.plan.point_at(s + la - 0.05)
-            t0 = t0 / max(1e-9, math.hypot(t0[0], t0[1]))
-            carrot = carrot + shift * np.array([-t0[1], t0[0]])
-        return carrot
-
-    def _choose_direction(self, pose: np.ndarray, obstacles: np.ndarray, desired: float, short: bool = False) -> AvoidanceResult:
-        """Eq. 3-5 on the obstacles and the map's walls in the camera's blind spots,
-        with hysteresis on the side (:meth:`_keep_side`); ``short``: the carrot is short
-        (``narrow_horizon_m``)."""
-        static = self.surroundings.map_blind_spots(pose)
-        horizon = self.cfg.narrow_horizon_m if short and self.cfg.narrow_horizon_m > 0 else None
-        res = choose_direction(
-            np.asarray(obstacles, dtype=np.float64).reshape(-1, 2),
-            desired,
-            self.avoid,
-            static,
-            self.avoid.robot_radius_m + self.cfg.map_clearance_m,
-            horizon,
-        )
-        return self._keep_side(res, desired, horizon)
 
     def _when_blocked(
         self,
@@ -633,7 +455,7 @@ class Navigator:
         turning towards the carrot."""
         fan = (res.angles, res.lengths)
         if self._replan_round_block(pose, obstacles if located is None else located, t):
-            carrot, desired, omega = self._plan_direction(pose)
+            carrot, desired, omega = self.steering.toward_plan(self.plan, pose)
             return NavCommand(np.array([0.0, 0.0, omega]), "blocked", carrot, desired, res.theta_star, res.open_length_m, fan)
         back = self._backoff_velocity(pose, obstacles) if self.surroundings.blind_blocked(obstacles) else np.zeros(3)
         if back.any():
@@ -657,30 +479,3 @@ class Navigator:
         self.replans += 1
         self._set_plan(self.goal, nodes, pose, t)
         return True
-
-    def _drive(self, obstacles: np.ndarray, carrot: np.ndarray, desired: float, speed: float, res: AvoidanceResult) -> NavCommand:
-        """Drive along theta* at ``speed``, turning towards it (look where the robot goes);
-        only turn while theta* lies outside the camera's view (``look_first``), and slow
-        down near obstacles (``proximity_speed_mps``)."""
-        cfg = self.cfg
-        fan = (res.angles, res.lengths)
-        th = res.theta_star
-        omega = float(np.clip(cfg.heading_gain * th, -cfg.max_turn_rate_rad_s, cfg.max_turn_rate_rad_s))
-        if abs(th) > 0.5 * self.camera.fov_h_rad:
-            if cfg.look_first:
-                return NavCommand(np.array([0.0, 0.0, omega]), "turning", carrot, desired, th, res.open_length_m, fan)
-            if cfg.unseen_speed_mps > 0:
-                speed = min(speed, cfg.unseen_speed_mps)
-        if cfg.proximity_speed_mps > 0 and self.obstacle_near_path(obstacles, th):
-            speed = min(speed, cfg.proximity_speed_mps)
-        v = np.array([speed * math.cos(th), speed * math.sin(th), omega])
-        return NavCommand(v, "driving", carrot, desired, th, res.open_length_m, fan)
-
-_LANE_STEP_M = 0.05
-"""Spacing of the carrot shifts tried (``Navigator.lane_offset``)."""
-
-
-def _side_of(theta: float, desired: float, dead_band: float) -> int:
-    d = wrap_angle(theta - desired)
-    return 0 if abs(d) <= dead_band else (1 if d > 0 else -1)
-

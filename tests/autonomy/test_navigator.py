@@ -439,7 +439,7 @@ def test_slows_down_passing_close_to_an_obstacle() -> None:
     nav = Navigator(line_graph(), NavigatorConfig(memory_s=0.0, proximity_speed_mps=0.4))
     nav.set_goal(5, np.zeros(3))
     person = [[1.0, -0.55], [1.0, -0.6], [1.05, -0.55]]
-    assert nav.obstacle_near_path(np.array(person), 0.0)
+    assert nav.steering.obstacle_near_path(np.array(person), 0.0)
     assert speed(nav, person) == pytest.approx(nav.cfg.proximity_speed_mps)
     assert speed(nav, [[1.0, -0.8]]) == pytest.approx(0.75)
     assert speed(nav, [[-0.5, -0.5]]) == pytest.approx(0.75)

@@ -242,17 +242,17 @@ def test_backs_off_away_from_a_wall_behind_it_and_not_into_one() -> None:
     has the trail.)"""
     cfg = NavigatorConfig(stuck_time_s=0.5, trail_s=0.0)
     clear = Navigator(line_graph(), cfg, walls=np.zeros((0, 4)))
-    v = clear._backoff_velocity(np.zeros(3), np.zeros((0, 2)))
+    v = clear.recovery.backoff_velocity(np.zeros(3), np.zeros((0, 2)), 0.0)
     np.testing.assert_allclose(v, [-cfg.backoff_speed_mps, 0.0, 0.0], atol=1e-12)
     # A wall 0.4 m behind, across: straight back is blocked; so is everything within 75 degrees.
     behind = Navigator(line_graph(), cfg, walls=np.array([[-0.4, -3.0, -0.4, 3.0]]))
-    np.testing.assert_allclose(behind._backoff_velocity(np.zeros(3), np.zeros((0, 2))), 0.0)
+    np.testing.assert_allclose(behind.recovery.backoff_velocity(np.zeros(3), np.zeros((0, 2)), 0.0), 0.0)
     # A door frame's end 0.35 m behind-left: back off to the right-back instead.
     frame = Navigator(line_graph(), cfg, walls=np.array([[-0.35, 0.2, -3.0, 0.2]]))
-    v = frame._backoff_velocity(np.zeros(3), np.zeros((0, 2)))
+    v = frame.recovery.backoff_velocity(np.zeros(3), np.zeros((0, 2)), 0.0)
     assert v[0] < 0 and v[1] < 0 and math.hypot(v[0], v[1]) == pytest.approx(cfg.backoff_speed_mps)
     # A remembered obstacle right in front does not stop it backing away.
-    v = clear._backoff_velocity(np.zeros(3), np.array([[0.32, 0.0]]))
+    v = clear.recovery.backoff_velocity(np.zeros(3), np.array([[0.32, 0.0]]), 0.0)
     assert v[0] < 0
 
 
@@ -266,9 +266,9 @@ def test_backs_through_a_door_only_near_its_centre() -> None:
     half = 0.46
     door = np.array([[-3.0, 0.0, -half, 0.0], [half, 0.0, 3.0, 0.0]])
     nav = Navigator(line_graph(), cfg, walls=door)
-    centred = nav._backoff_velocity(np.array([0.0, 0.3, math.pi / 2]), np.zeros((0, 2)))
+    centred = nav.recovery.backoff_velocity(np.array([0.0, 0.3, math.pi / 2]), np.zeros((0, 2)), 0.0)
     np.testing.assert_allclose(centred, [-cfg.backoff_speed_mps, 0.0, 0.0], atol=1e-12)  # robot frame
-    off = nav._backoff_velocity(np.array([0.1, 0.3, math.pi / 2]), np.zeros((0, 2)))
+    off = nav.recovery.backoff_velocity(np.array([0.1, 0.3, math.pi / 2]), np.zeros((0, 2)), 0.0)
     assert off[0] < 0.0 and off[1] > 0.2 * cfg.backoff_speed_mps  # back and to its left: world south-west
     # The jamb (0.46, 0) is kept beyond the robot radius plus the clearance over 0.4 m.
     u = np.array([-off[1], off[0]]) / np.hypot(off[0], off[1])  # world axes
@@ -503,7 +503,7 @@ def test_backs_off_clear_of_furniture_seen_long_before() -> None:
         nav.surroundings.remember(np.zeros(3), box, 0.0)
         turned = np.array([0.0, 0.0, math.pi])
         assert len(nav.surroundings.remember(turned, np.zeros((0, 2)), 10.0)) == 0  # forgotten by the avoidance
-        v = nav._backoff_velocity(turned, np.zeros((0, 2)))
+        v = nav.recovery.backoff_velocity(turned, np.zeros((0, 2)), 10.0)
         assert np.allclose(v[:2], [-0.15, 0.0]) == straight, v
 
 

@@ -29,6 +29,14 @@ estimate) while they are out of the camera's view: with a 58 degree field of vie
 nothing seen closer than 0.8 m, a person the robot is passing is otherwise forgotten
 exactly when it matters (ours; ``memory_s = 0`` reacts to the current frame only, as
 the paper).
+
+The :class:`Navigator` composes the parts, each in a module of its own, and arbitrates
+the command: :mod:`~autonomy.navigation.config` (the parameters and the command),
+:mod:`~autonomy.navigation.route` (plans on the graph, the blocked edges),
+:mod:`~autonomy.navigation.plan` (the plan followed), :mod:`~autonomy.navigation.surroundings`
+(the map's walls near the robot, the obstacle memory), :mod:`~autonomy.navigation.trail`,
+:mod:`~autonomy.navigation.steering` (carrot, lane shift, Eq. 5, speed) and
+:mod:`~autonomy.navigation.recovery` (the stuck clock, back-off, look back).
 """
 
 from __future__ import annotations
@@ -56,10 +64,8 @@ class Navigator:
 
     ``camera``: the depth camera's field of view, mount and valid range, which decide
     what the robot can see now (the obstacle memory, the map's blind spots, look-first).
-    The parts: :attr:`route` (plans and blocked edges), :attr:`plan` (the plan followed),
-    :attr:`surroundings` (the map's walls near the robot, the obstacle memory),
-    :attr:`trail`, :attr:`steering` (carrot, direction, speed) and :attr:`recovery`
-    (stuck clock, back-off, look back); this class arbitrates the command.
+    The parts are :attr:`route`, :attr:`plan` (replaced on every re-plan),
+    :attr:`surroundings`, :attr:`trail`, :attr:`steering` and :attr:`recovery`.
     """
 
     def __init__(

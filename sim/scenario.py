@@ -15,7 +15,7 @@ from pathlib import Path
 
 from autonomy.common.errors import InputError
 from autonomy.navigation.avoidance import AvoidanceConfig
-from autonomy.navigation.navigator import NavigatorConfig
+from autonomy.navigation.config import NavigatorConfig
 from autonomy.perception.fspf import FSPFConfig
 from autonomy.perception.nearfield import NearField
 from autonomy.stack import LocalizationConfig as StackLocalizationConfig

@@ -17,7 +17,9 @@ from autonomy.common.errors import InputError
 from autonomy.common.geometry import wrap_angles
 from autonomy.maps.planner import NoPathError, astar, edge_key
 from autonomy.maps.vectormap import NavEdge, NavGraph, NavNode
-from autonomy.navigation.navigator import Navigator, NavigatorConfig, in_camera_view, wall_points
+from autonomy.navigation.config import NavigatorConfig
+from autonomy.navigation.navigator import Navigator
+from autonomy.navigation.surroundings import in_camera_view, wall_points
 from autonomy.perception.camera import KINECT_V1
 
 RATE_HZ = 30.0
@@ -379,13 +381,13 @@ def test_look_around_turns_in_place_and_a_pose_jump_clears_what_the_old_estimate
     for x in np.arange(0.0, 1.0, 0.025):
         nav.command(np.array([x, 0.0, 0.0]), np.array([[0.2, 0.7], [1.5, 0.0]]), t)
         t += 1.0 / RATE_HZ
-    nav._lane, nav._side = 0.5, 1
-    assert len(nav.trail_points()) > 10 and len(nav._mem) > 0
+    nav.steering._lane, nav.steering._side = 0.5, 1
+    assert len(nav.trail_points()) > 10 and len(nav.surroundings._mem) > 0
     nav.blocked[edge_key(D, E)] = t + 100.0
     replans = nav.replans
     nav.pose_jumped(np.array([8.0, 3.0, 0.0]), t)
-    assert len(nav.trail_points()) == 0 and len(nav._mem) == 0 and len(nav._mem_all) == 0
-    assert nav._lane == 0.0 and nav._side == 0
+    assert len(nav.trail_points()) == 0 and len(nav.surroundings._mem) == 0 and len(nav.surroundings.remembered) == 0
+    assert nav.steering._lane == 0.0 and nav.steering._side == 0
     assert nav.replans == replans + 1 and nav.plan_nodes[0] == E and nav.plan_nodes[-1] == C
     assert edge_key(D, E) in nav.blocked  # marks stay (they expire)
     nav.pose_jumped()  # without a pose: clears only
@@ -497,7 +499,7 @@ def test_blocking_points_are_those_on_the_plans_line_ahead() -> None:
     world = np.column_stack([rng.uniform(-0.5, 3.5, 4000), rng.uniform(-1.0, 1.0, 4000)])
     rel = world - pose[:2]
     local = np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]])
-    got = nav.blocking_points(pose, local)
+    got = nav.route.blocking_points(nav.plan, pose, local, nav.surroundings)
     r, s0 = nav.avoid.radius_m, 1.0  # the plan runs along y = 0 from x = 0
     xs = np.arange(s0 - r, s0 + nav.cfg.blocked_check_m, 0.001)
     line = np.column_stack([xs, np.zeros(len(xs))])

@@ -1,7 +1,8 @@
 """The navigator's obstacle memory, one numba pass a frame.
 
 Obstacle points are kept in the world frame on a grid of ``cell`` metres, one point per
-cell with the latest time it was sensed. Each frame (:meth:`Navigator.remember`):
+cell with the latest time it was sensed. Each frame
+(:meth:`autonomy.navigation.surroundings.Surroundings.remember`):
 
 1. remembered points the camera sees now are dropped (the current frame replaces them),
    and so are those older than ``keep_s`` unless they lie right in front of the robot,

@@ -15,7 +15,7 @@ from autonomy.localization.relocalization import RelocalizationConfig
 from autonomy.localization.view_check import ViewCheckConfig
 from autonomy.maps.raycast import VisibilityGridConfig
 from autonomy.navigation.avoidance import AvoidanceConfig
-from autonomy.navigation.navigator import NavigatorConfig
+from autonomy.navigation.config import NavigatorConfig
 from autonomy.perception.camera import DepthCamera
 from autonomy.perception.fspf import FSPFConfig
 from autonomy.perception.mount_check import MountCheckConfig

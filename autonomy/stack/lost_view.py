@@ -87,7 +87,7 @@ class LostView:
         relative to it now: the scan's points, and the near field's. With the ``pose`` of
         the mode a drive is planned on, the near field's points whose sight line a wall
         of that mode's map explains are left out, as the navigator leaves out this
-        frame's (:meth:`autonomy.navigation.navigator.Navigator.near_points`): the map's wall counts
+        frame's (:meth:`autonomy.navigation.surroundings.Surroundings.near_points`): the map's wall counts
         there already, where it stands, whereas the sight line's points lie anywhere
         from the robot's edge to the camera's minimum range, and kept from a look round
         beside a wall they ring the robot (a robot put down in an office by its door

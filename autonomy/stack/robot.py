@@ -43,7 +43,8 @@ from autonomy.maps.planner import NoPathError
 from autonomy.maps.raycast import SceneQuery, load_or_build
 from autonomy.maps.vectormap import NavGraph, VectorMap
 from autonomy.navigation.avoidance import obstacle_points
-from autonomy.navigation.navigator import NavCommand, Navigator
+from autonomy.navigation.config import NavCommand
+from autonomy.navigation.navigator import Navigator
 from autonomy.perception.camera import CameraMount
 from autonomy.perception.fspf import fspf
 from autonomy.perception.mount_check import MountCheck

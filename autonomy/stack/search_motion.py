@@ -19,7 +19,8 @@ from autonomy.common.geometry import (
 from autonomy.localization.active_localization import drive_value
 from autonomy.maps.raycast import SceneQuery
 from autonomy.navigation.avoidance import open_path_lengths
-from autonomy.navigation.navigator import NavCommand, Navigator
+from autonomy.navigation.config import NavCommand
+from autonomy.navigation.navigator import Navigator
 from autonomy.stack.config import StackConfig
 from autonomy.stack.lost_view import SEEN_KEEP_S, LostView
 from autonomy.stack.state import StackState

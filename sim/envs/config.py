@@ -18,7 +18,7 @@ import numpy as np
 
 from autonomy.common.errors import InputError
 from autonomy.navigation.avoidance import AvoidanceConfig
-from autonomy.navigation.navigator import NavigatorConfig
+from autonomy.navigation.config import NavigatorConfig
 from autonomy.perception.fspf import FSPFConfig
 from autonomy.stack import StackConfig
 from sim.scenario import LocalizationConfig, load_scenario

@@ -11,7 +11,8 @@ import mujoco
 import numpy as np
 
 from autonomy.common.geometry import wrap_angle
-from autonomy.navigation.navigator import NavCommand, in_camera_view
+from autonomy.navigation.config import NavCommand
+from autonomy.navigation.surroundings import in_camera_view
 from autonomy.stack import RobotStack
 from sim.experiments.site import Run
 from sim.simulator.actors import furniture_body, person_index

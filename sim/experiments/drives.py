@@ -40,7 +40,7 @@ from autonomy.common.errors import InputError
 from autonomy.common.files import atomic_path
 from autonomy.common.geometry import relative_pose
 from autonomy.navigation.avoidance import AvoidanceConfig
-from autonomy.navigation.navigator import NavigatorConfig
+from autonomy.navigation.config import NavigatorConfig
 from autonomy.perception.camera import CameraIntrinsics, CameraMount
 from autonomy.perception.fspf import FSPFConfig
 from sim.config import to_dict

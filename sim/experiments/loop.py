@@ -18,7 +18,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from autonomy.navigation.navigator import NavCommand
+from autonomy.navigation.config import NavCommand
 from autonomy.stack import RobotStack
 from sim.experiments.accounting import check_localization, fspf_counts, note_blind, note_contacts
 from sim.experiments.kinds import crash_block

@@ -46,7 +46,7 @@ def _vec(a, nd: int = 4) -> list[float | None]:
 def trace_record(t: float, truth: np.ndarray, stack, nav) -> str:
     """One frame's record as a JSON line: ``truth`` the true pose after the frame, ``stack`` the
     :class:`autonomy.stack.RobotStack` after it perceived and localized, ``nav`` the
-    :class:`autonomy.navigation.navigator.NavCommand` it was driven by."""
+    :class:`autonomy.navigation.config.NavCommand` it was driven by."""
     est = np.asarray(stack.pose, dtype=np.float64)
     rec: dict = {
         "t": _num(t),

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from autonomy.maps.vectormap import NavGraph, VectorMap
-from autonomy.navigation.navigator import NavCommand
+from autonomy.navigation.config import NavCommand
 from autonomy.stack import RobotStack
 from sim.scenario import Scenario
 from sim.simulator.actors import Furniture

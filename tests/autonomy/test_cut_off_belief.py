@@ -108,7 +108,7 @@ def test_the_navigator_plans_from_the_goals_part_when_the_pose_is_cut_off_from_i
     np.testing.assert_allclose(nav.plan_points(CORRIDOR[-1], IN_ROOM)[1], (5.0, 2.0))
     assert nav.nearest_reachable_node(IN_ROOM[:2]) in ROOM
     assert nav.nearest_reachable_node(IN_ROOM[:2], goal_id=CORRIDOR[-1]) == CORRIDOR[0]
-    assert not nav.connected(ROOM[1], CORRIDOR[0]) and nav.connected(CORRIDOR[0], CORRIDOR[-1])
+    assert not nav.route.connected(ROOM[1], CORRIDOR[0]) and nav.route.connected(CORRIDOR[0], CORRIDOR[-1])
     # The corridor's nodes lie behind the wall: no place to choose to go from the room.
     np.testing.assert_array_equal(nav.reaches([ROOM[0], CORRIDOR[0]], IN_ROOM), [True, False])
     np.testing.assert_array_equal(nav.reaches([ROOM[0], CORRIDOR[0]], IN_CORRIDOR), [False, True])

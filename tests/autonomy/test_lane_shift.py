@@ -10,7 +10,8 @@ from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 
 from autonomy.maps.vectormap import NavEdge, NavGraph, NavNode
-from autonomy.navigation.navigator import Navigator, NavigatorConfig
+from autonomy.navigation.config import NavigatorConfig
+from autonomy.navigation.navigator import Navigator
 
 
 def line_graph() -> NavGraph:
@@ -74,7 +75,7 @@ def test_a_person_in_the_middle_of_a_corridor_is_passed_on_the_side_the_robot_is
         nav = nav_at(walls)
         pose = np.array([0.0, y, 0.0])
         pts = person(1.5, 0.0) - pose[:2]
-        assert math.isclose(nav.lane_offset(pose, pts, 0.0), side * 0.65)
+        assert math.isclose(nav.steering.lane_offset(nav.plan, pose, pts, 0.0), side * 0.65)
         cmd = nav.command(pose, pts, 0.0)
         # Towards the shifted carrot: turning first (look_first), the way it will go.
         assert side * cmd.desired_rad > math.radians(20) and side * cmd.velocity[2] > 0
@@ -86,39 +87,39 @@ def test_the_first_choice_is_the_clear_offset_nearest_the_robot() -> None:
     -0.45 m (0.55 m away), so it passes on the right, though it is left of the plan."""
     nav = nav_at(corridor(1.5))
     pose = np.array([0.0, 0.1, 0.0])
-    assert math.isclose(nav.lane_offset(pose, person(1.5, 0.2) - pose[:2], 0.0), -0.45)
+    assert math.isclose(nav.steering.lane_offset(nav.plan, pose, person(1.5, 0.2) - pose[:2], 0.0), -0.45)
 
 
 def test_the_side_chosen_is_kept_until_the_obstacle_is_passed() -> None:
     walls = corridor(1.2)
     nav = nav_at(walls)
     pts = person(1.5, 0.0)
-    assert nav.lane_offset(np.array([0.0, 0.05, 0.0]), pts - [0.0, 0.05], 0.0) > 0
+    assert nav.steering.lane_offset(nav.plan, np.array([0.0, 0.05, 0.0]), pts - [0.0, 0.05], 0.0) > 0
     # Drifted right of the plan on the way, it still passes left.
     pose = np.array([0.5, -0.1, 0.0])
-    assert nav.lane_offset(pose, pts - pose[:2], 0.5) > 0
+    assert nav.steering.lane_offset(nav.plan, pose, pts - pose[:2], 0.5) > 0
     # Left blocked now (something beside the left wall), it takes the right.
     pose = np.array([0.6, 0.0, 0.0])
     both = np.vstack([pts, person(1.8, 0.75)]) - pose[:2]
-    assert nav.lane_offset(pose, both, 0.6) < 0
+    assert nav.steering.lane_offset(nav.plan, pose, both, 0.6) < 0
     # Past the person (more than the avoidance radius behind), back on the plan.
     pose = np.array([2.2, 0.6, 0.0])
-    assert nav.lane_offset(pose, pts - pose[:2], 2.2) == 0.0
+    assert nav.steering.lane_offset(nav.plan, pose, pts - pose[:2], 2.2) == 0.0
 
 
 def test_no_shift_where_the_line_is_clear_nothing_is_clear_or_it_is_off() -> None:
     # Clear: a person 0.7 m off the plan.
     nav = nav_at(corridor(1.2))
-    assert nav.lane_offset(np.zeros(3), person(1.5, 0.7), 0.0) == 0.0
+    assert nav.steering.lane_offset(nav.plan, np.zeros(3), person(1.5, 0.7), 0.0) == 0.0
     # Nothing clear: a 1.8 m corridor, a person in its middle (0.62 + 0.35 > 0.9).
     nav = nav_at(corridor(0.9))
-    assert nav.lane_offset(np.zeros(3), person(1.5, 0.0), 0.0) == 0.0
+    assert nav.steering.lane_offset(nav.plan, np.zeros(3), person(1.5, 0.0), 0.0) == 0.0
     # Farther ahead than lane_check_m: not yet.
     nav = nav_at(corridor(1.2))
-    assert nav.lane_offset(np.zeros(3), person(2.8, 0.0), 0.0) == 0.0
+    assert nav.steering.lane_offset(nav.plan, np.zeros(3), person(2.8, 0.0), 0.0) == 0.0
     # Off.
     nav = nav_at(corridor(1.2), lane_shift_m=0.0)
-    assert nav.lane_offset(np.zeros(3), person(1.5, 0.0), 0.0) == 0.0
+    assert nav.steering.lane_offset(nav.plan, np.zeros(3), person(1.5, 0.0), 0.0) == 0.0
     cmd = nav.command(np.zeros(3), person(1.5, 0.0), 0.0)
     assert abs(cmd.desired_rad) < 1e-9
 
@@ -127,7 +128,7 @@ def test_a_wall_beside_the_plan_shifts_it_off_the_wall() -> None:
     """A map wall 0.3 m right of the plan (inside robot radius + map_clearance_m) moves
     the carrot 0.05 m left, the nearest clear offset."""
     nav = nav_at(np.array([[-1.0, -0.3, 12.0, -0.3]]))
-    assert math.isclose(nav.lane_offset(np.zeros(3), np.zeros((0, 2)), 0.0), 0.05)
+    assert math.isclose(nav.steering.lane_offset(nav.plan, np.zeros(3), np.zeros((0, 2)), 0.0), 0.05)
 
 
 @settings(max_examples=60, deadline=None)
@@ -154,7 +155,7 @@ def test_lane_offset_matches_its_definition(y, heading, s_robot, half_width, obs
     c, s = math.cos(heading), math.sin(heading)
     rel = world - pose[:2]
     sensed = np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]]) if len(rel) else rel
-    got = nav.lane_offset(pose, sensed, s_robot)
+    got = nav.steering.lane_offset(nav.plan, pose, sensed, s_robot)
     clear, _ = brute_offset(nav, pose, sensed, walls)
     if 0.0 in clear or not clear:
         assert got == 0.0

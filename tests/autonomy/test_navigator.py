@@ -10,7 +10,9 @@ import pytest
 from autonomy.common.errors import InputError
 from autonomy.common.geometry import point_segment_distance
 from autonomy.maps.vectormap import NavEdge, NavGraph, NavNode
-from autonomy.navigation.navigator import Navigator, NavigatorConfig, in_camera_view, wall_points
+from autonomy.navigation.config import NavigatorConfig
+from autonomy.navigation.navigator import Navigator
+from autonomy.navigation.surroundings import in_camera_view, wall_points
 from autonomy.perception.camera import DepthCamera
 
 
@@ -157,28 +159,28 @@ def test_obstacle_memory_keeps_points_out_of_view_and_refreshes_points_in_view()
     nav = Navigator(line_graph(), NavigatorConfig(memory_s=2.0, memory_beside_s=0.0, shadow_m=0.0))
     nav.set_goal(5, np.zeros(3))
     person = np.array([[2.0, 0.0]])  # 2 m ahead: in view
-    assert len(nav.remember(np.zeros(3), person, 0.0)) == 1
+    assert len(nav.surroundings.remember(np.zeros(3), person, 0.0)) == 1
     # Next frame the camera sees the same place and the person is gone: forgotten.
-    assert len(nav.remember(np.zeros(3), np.zeros((0, 2)), 0.1)) == 0
+    assert len(nav.surroundings.remember(np.zeros(3), np.zeros((0, 2)), 0.1)) == 0
     # A point beside the robot (out of view) persists until memory_s, then is dropped.
-    nav.remember(np.zeros(3), np.array([[0.0, 0.6]]), 0.2)
-    kept = nav.remember(np.array([0.5, 0.0, 0.0]), np.zeros((0, 2)), 1.0)
+    nav.surroundings.remember(np.zeros(3), np.array([[0.0, 0.6]]), 0.2)
+    kept = nav.surroundings.remember(np.array([0.5, 0.0, 0.0]), np.zeros((0, 2)), 1.0)
     np.testing.assert_allclose(kept, [[-0.5, 0.6]], atol=0.03)  # in the new robot frame
-    assert len(nav.remember(np.array([0.5, 0.0, 0.0]), np.zeros((0, 2)), 2.5)) == 0
+    assert len(nav.surroundings.remember(np.array([0.5, 0.0, 0.0]), np.zeros((0, 2)), 2.5)) == 0
 
 
 def test_obstacle_memory_keeps_what_stands_beside_the_robot_while_it_is_near() -> None:
     nav = Navigator(line_graph(), NavigatorConfig(memory_s=2.0, memory_beside_s=10.0, memory_beside_m=1.0, shadow_m=0.0))
     nav.set_goal(5, np.zeros(3))
-    nav.remember(np.zeros(3), np.array([[0.0, 0.6]]), 0.0)
+    nav.surroundings.remember(np.zeros(3), np.array([[0.0, 0.6]]), 0.0)
     # 0.78 m from the robot, out of view: kept past memory_s, until memory_beside_s.
-    kept = nav.remember(np.array([0.5, 0.0, 0.0]), np.zeros((0, 2)), 9.9)
+    kept = nav.surroundings.remember(np.array([0.5, 0.0, 0.0]), np.zeros((0, 2)), 9.9)
     np.testing.assert_allclose(kept, [[-0.5, 0.6]], atol=0.03)
-    assert len(nav.remember(np.array([0.5, 0.0, 0.0]), np.zeros((0, 2)), 10.1)) == 0
+    assert len(nav.surroundings.remember(np.array([0.5, 0.0, 0.0]), np.zeros((0, 2)), 10.1)) == 0
     # Once the robot has moved away from it, memory_s alone holds.
-    nav.remember(np.zeros(3), np.array([[0.0, 0.6]]), 20.0)
-    assert len(nav.remember(np.array([0.9, 0.0, 0.0]), np.zeros((0, 2)), 23.0)) == 0
-    assert len(nav.remember(np.array([0.5, 0.0, 0.0]), np.zeros((0, 2)), 23.1)) == 1  # near again
+    nav.surroundings.remember(np.zeros(3), np.array([[0.0, 0.6]]), 20.0)
+    assert len(nav.surroundings.remember(np.array([0.9, 0.0, 0.0]), np.zeros((0, 2)), 23.0)) == 0
+    assert len(nav.surroundings.remember(np.array([0.5, 0.0, 0.0]), np.zeros((0, 2)), 23.1)) == 1  # near again
 
 
 def test_obstacle_memory_takes_what_hides_behind_a_seen_face_as_occupied() -> None:
@@ -187,20 +189,20 @@ def test_obstacle_memory_takes_what_hides_behind_a_seen_face_as_occupied() -> No
     cfg = NavigatorConfig(memory_s=2.0, shadow_m=0.3, memory_cell_m=0.05)
     nav = Navigator(line_graph(), cfg)
     cam_x = nav.camera.forward_m
-    got = nav.remember(np.zeros(3), np.array([[1.5, 0.0]]), 0.0)
+    got = nav.surroundings.remember(np.zeros(3), np.array([[1.5, 0.0]]), 0.0)
     want = np.array([[1.5 + 0.05 * j, 0.0] for j in range(7)])
     np.testing.assert_allclose(got[np.argsort(got[:, 0])], want, atol=1e-9)
     # Off the camera's axis the shadow runs along the sight line from the camera.
     nav = Navigator(line_graph(), cfg)
     p = np.array([1.4, 0.4])  # 19 degrees off the camera's axis: in the replaced region
-    got = nav.remember(np.zeros(3), p[None], 0.0)
+    got = nav.surroundings.remember(np.zeros(3), p[None], 0.0)
     u = (p - [cam_x, 0.0]) / np.hypot(p[0] - cam_x, p[1])
     ideal = p + np.outer(0.05 * np.arange(7), u)
     # On the 5 cm grid: every ideal point has its cell remembered.
     cells = {(round(x / 0.05), round(y / 0.05)) for x, y in got}
     assert cells == {(round(x / 0.05), round(y / 0.05)) for x, y in ideal}
     # The camera looks at that place again and sees it clear: the shadow is gone.
-    assert len(nav.remember(np.zeros(3), np.zeros((0, 2)), 0.1)) == 0
+    assert len(nav.surroundings.remember(np.zeros(3), np.zeros((0, 2)), 0.1)) == 0
 
 
 def test_obstacle_memory_keeps_one_point_per_cell_with_its_latest_time() -> None:
@@ -214,11 +216,11 @@ def test_obstacle_memory_keeps_one_point_per_cell_with_its_latest_time() -> None
         # Points behind the robot (never in view), some cells repeated across frames.
         pts = np.column_stack([rng.uniform(-1.5, -0.2, 300), rng.uniform(-1.0, 1.0, 300)])
         pts = np.round(pts / (2 * cell)) * (2 * cell)
-        nav.remember(pose, pts, float(k))
+        nav.surroundings.remember(pose, pts, float(k))
         for x, y in pts + pose[:2]:
             seen[(round(x / cell), round(y / cell))] = float(k)
-    got = {(round(x / cell), round(y / cell)): t for (x, y), t in zip(nav._mem, nav._mem_t, strict=True)}
-    assert len(got) == len(nav._mem) == len(seen)
+    got = {(round(x / cell), round(y / cell)): t for (x, y), t in zip(nav.surroundings._mem, nav.surroundings._mem_t, strict=True)}
+    assert len(got) == len(nav.surroundings._mem) == len(seen)
     assert got == seen
 
 
@@ -226,7 +228,7 @@ def test_map_points_are_the_walls_near_the_robot_in_the_robot_frame() -> None:
     walls = np.array([[-5.0, 1.0, 5.0, 1.0], [-5.0, -3.0, 5.0, -3.0]])
     nav = Navigator(line_graph(), walls=walls)
     # Facing +y: the wall y = 1 is 1 m ahead (robot x); the wall y = -3 is out of reach.
-    p = nav.map_points(np.array([0.0, 0.0, math.pi / 2]), 1.5)
+    p = nav.surroundings.map_points(np.array([0.0, 0.0, math.pi / 2]), 1.5)
     assert len(p) > 10
     np.testing.assert_allclose(p[:, 0], 1.0, atol=1e-9)
     assert np.all(np.hypot(p[:, 0], p[:, 1]) < 1.5) and p[:, 1].min() < -1.0 and p[:, 1].max() > 1.0
@@ -240,17 +242,17 @@ def test_backs_off_away_from_a_wall_behind_it_and_not_into_one() -> None:
     has the trail.)"""
     cfg = NavigatorConfig(stuck_time_s=0.5, trail_s=0.0)
     clear = Navigator(line_graph(), cfg, walls=np.zeros((0, 4)))
-    v = clear._backoff_velocity(np.zeros(3), np.zeros((0, 2)))
+    v = clear.recovery.backoff_velocity(np.zeros(3), np.zeros((0, 2)), 0.0)
     np.testing.assert_allclose(v, [-cfg.backoff_speed_mps, 0.0, 0.0], atol=1e-12)
     # A wall 0.4 m behind, across: straight back is blocked; so is everything within 75 degrees.
     behind = Navigator(line_graph(), cfg, walls=np.array([[-0.4, -3.0, -0.4, 3.0]]))
-    np.testing.assert_allclose(behind._backoff_velocity(np.zeros(3), np.zeros((0, 2))), 0.0)
+    np.testing.assert_allclose(behind.recovery.backoff_velocity(np.zeros(3), np.zeros((0, 2)), 0.0), 0.0)
     # A door frame's end 0.35 m behind-left: back off to the right-back instead.
     frame = Navigator(line_graph(), cfg, walls=np.array([[-0.35, 0.2, -3.0, 0.2]]))
-    v = frame._backoff_velocity(np.zeros(3), np.zeros((0, 2)))
+    v = frame.recovery.backoff_velocity(np.zeros(3), np.zeros((0, 2)), 0.0)
     assert v[0] < 0 and v[1] < 0 and math.hypot(v[0], v[1]) == pytest.approx(cfg.backoff_speed_mps)
     # A remembered obstacle right in front does not stop it backing away.
-    v = clear._backoff_velocity(np.zeros(3), np.array([[0.32, 0.0]]))
+    v = clear.recovery.backoff_velocity(np.zeros(3), np.array([[0.32, 0.0]]), 0.0)
     assert v[0] < 0
 
 
@@ -264,9 +266,9 @@ def test_backs_through_a_door_only_near_its_centre() -> None:
     half = 0.46
     door = np.array([[-3.0, 0.0, -half, 0.0], [half, 0.0, 3.0, 0.0]])
     nav = Navigator(line_graph(), cfg, walls=door)
-    centred = nav._backoff_velocity(np.array([0.0, 0.3, math.pi / 2]), np.zeros((0, 2)))
+    centred = nav.recovery.backoff_velocity(np.array([0.0, 0.3, math.pi / 2]), np.zeros((0, 2)), 0.0)
     np.testing.assert_allclose(centred, [-cfg.backoff_speed_mps, 0.0, 0.0], atol=1e-12)  # robot frame
-    off = nav._backoff_velocity(np.array([0.1, 0.3, math.pi / 2]), np.zeros((0, 2)))
+    off = nav.recovery.backoff_velocity(np.array([0.1, 0.3, math.pi / 2]), np.zeros((0, 2)), 0.0)
     assert off[0] < 0.0 and off[1] > 0.2 * cfg.backoff_speed_mps  # back and to its left: world south-west
     # The jamb (0.46, 0) is kept beyond the robot radius plus the clearance over 0.4 m.
     u = np.array([-off[1], off[0]]) / np.hypot(off[0], off[1])  # world axes
@@ -300,11 +302,11 @@ def test_takes_the_plans_corners_slowly() -> None:
     nav = Navigator(l_graph(), NavigatorConfig(corner_speed_mps=0.4))
     nav.set_goal(5, np.zeros(3))
     cfg = nav.cfg
-    assert nav.corner_speed_limit(0.0) == math.inf and nav.corner_speed_limit(3.9) == math.inf
-    assert nav.corner_speed_limit(4.5) == pytest.approx(cfg.corner_speed_mps + 0.5 * (cfg.cruise_speed_mps - cfg.corner_speed_mps))
+    assert nav.plan.corner_speed_limit(0.0) == math.inf and nav.plan.corner_speed_limit(3.9) == math.inf
+    assert nav.plan.corner_speed_limit(4.5) == pytest.approx(cfg.corner_speed_mps + 0.5 * (cfg.cruise_speed_mps - cfg.corner_speed_mps))
     for s in (5.0, 5.5, 6.0, 6.29):
-        assert nav.corner_speed_limit(s) == pytest.approx(cfg.corner_speed_mps)
-    assert nav.corner_speed_limit(6.31) == math.inf
+        assert nav.plan.corner_speed_limit(s) == pytest.approx(cfg.corner_speed_mps)
+    assert nav.plan.corner_speed_limit(6.31) == math.inf
     speed = lambda x: float(np.hypot(*nav.command(np.array([x, 0.0, 0.0]), np.zeros((0, 2)), 0.0).velocity[:2]))  # noqa: E731
     assert speed(2.0) == pytest.approx(0.75) and speed(5.2) == pytest.approx(cfg.corner_speed_mps)
     # A shallow bend (30 degrees) is no corner; corner_speed_mps = 0 turns it off.
@@ -314,10 +316,10 @@ def test_takes_the_plans_corners_slowly() -> None:
     )
     nav = Navigator(bend, NavigatorConfig(corner_speed_mps=0.4))
     nav.set_goal(2, np.zeros(3))
-    assert nav.corner_speed_limit(2.5) == math.inf
+    assert nav.plan.corner_speed_limit(2.5) == math.inf
     nav = Navigator(l_graph(), NavigatorConfig(corner_speed_mps=0.0))  # 0 = off
     nav.set_goal(5, np.zeros(3))
-    assert nav.corner_speed_limit(5.5) == math.inf
+    assert nav.plan.corner_speed_limit(5.5) == math.inf
     with pytest.raises(InputError, match="corner_speed_mps"):
         NavigatorConfig(corner_speed_mps=-0.1)
 
@@ -329,15 +331,15 @@ def test_honours_the_edges_max_speed() -> None:
     edges = tuple(NavEdge(s0_id=e.s0_id, s1_id=e.s1_id, has_door=e.s0_id == 2, max_speed=0.5 if e.s0_id == 2 else 0.75) for e in g.edges)
     nav = Navigator(NavGraph(nodes=g.nodes, edges=edges))
     nav.set_goal(5, np.zeros(3))
-    assert nav.edge_speed_limit(1.0) == pytest.approx(0.75) and nav.edge_speed_limit(3.1) == pytest.approx(0.75)
+    assert nav.plan.edge_speed_limit(1.0) == pytest.approx(0.75) and nav.plan.edge_speed_limit(3.1) == pytest.approx(0.75)
     for s in (3.3, 5.0, 6.2):
-        assert nav.edge_speed_limit(s) == pytest.approx(0.5)
-    assert nav.edge_speed_limit(6.4) == pytest.approx(0.75)
+        assert nav.plan.edge_speed_limit(s) == pytest.approx(0.5)
+    assert nav.plan.edge_speed_limit(6.4) == pytest.approx(0.75)
     speed = lambda n, x: float(np.hypot(*n.command(np.array([x, 0.0, 0.0]), np.zeros((0, 2)), 0.0).velocity[:2]))  # noqa: E731
     assert speed(nav, 1.0) == pytest.approx(0.75) and speed(nav, 5.0) == pytest.approx(0.5)
     # Planned the other way round, the same edge limits too.
     nav.set_goal(0, np.array([10.0, 0.0, math.pi]))
-    assert nav.edge_speed_limit(5.0) == pytest.approx(0.5)
+    assert nav.plan.edge_speed_limit(5.0) == pytest.approx(0.5)
     off = Navigator(NavGraph(nodes=g.nodes, edges=edges), NavigatorConfig(edge_speed_limits=False))
     off.set_goal(5, np.zeros(3))
     assert speed(off, 5.0) == pytest.approx(0.75)
@@ -345,7 +347,7 @@ def test_honours_the_edges_max_speed() -> None:
     zero = tuple(NavEdge(s0_id=e.s0_id, s1_id=e.s1_id, max_speed=0.0) for e in g.edges)
     unlimited = Navigator(NavGraph(nodes=g.nodes, edges=zero))
     unlimited.set_goal(5, np.zeros(3))
-    assert unlimited.edge_speed_limit(5.0) == math.inf and speed(unlimited, 5.0) == pytest.approx(0.75)
+    assert unlimited.plan.edge_speed_limit(5.0) == math.inf and speed(unlimited, 5.0) == pytest.approx(0.75)
 
 
 def test_map_points_cache_matches_a_fresh_selection() -> None:
@@ -359,8 +361,8 @@ def test_map_points_cache_matches_a_fresh_selection() -> None:
         xy = xy + rng.normal(0.0, 0.15, 2)
         pose = np.array([*xy, rng.uniform(-math.pi, math.pi)])
         for r in (0.7, 1.6):
-            got = nav.map_points(pose, r)
-            want = Navigator(line_graph(), walls=walls).map_points(pose, r)
+            got = nav.surroundings.map_points(pose, r)
+            want = Navigator(line_graph(), walls=walls).surroundings.map_points(pose, r)
             np.testing.assert_allclose(np.sort(got, axis=0), np.sort(want, axis=0))
             assert np.all(np.hypot(got[:, 0], got[:, 1]) < r)
 
@@ -374,7 +376,7 @@ def test_map_walls_the_camera_cannot_see_steer_the_robot_off_them() -> None:
     wall = np.array([[-2.0, -0.33, 3.0, -0.33]])
     nav = Navigator(line_graph(), walls=wall)
     nav.set_goal(5, np.zeros(3))
-    pts = nav.map_blind_spots(np.zeros(3))
+    pts = nav.surroundings.map_blind_spots(np.zeros(3))
     assert len(pts) and np.all(np.hypot(pts[:, 0], pts[:, 1]) <= nav.cfg.map_blind_spots_m + 1e-9)
     cmd = nav.command(np.zeros(3), np.zeros((0, 2)), 0.0)
     assert cmd.state == "driving" and cmd.theta_star_rad > math.radians(5)
@@ -395,13 +397,13 @@ def test_walls_seen_before_count_with_the_map_in_the_blind_spots() -> None:
     nav.set_goal(5, np.zeros(3))
     cmd = nav.command(np.zeros(3), np.zeros((0, 2)), 0.0, seen=wall)
     assert cmd.state == "driving" and cmd.theta_star_rad > math.radians(5)
-    pts = nav.map_points(np.zeros(3), 1.0)
+    pts = nav.surroundings.map_points(np.zeros(3), 1.0)
     assert len(pts) and np.all(np.hypot(pts[:, 0], pts[:, 1]) < 1.0)
     nav2 = Navigator(line_graph(), NavigatorConfig(lane_shift_m=0.0), walls=np.zeros((0, 4)))
     nav2.set_goal(5, np.zeros(3))
     assert nav2.command(np.zeros(3), np.zeros((0, 2)), 0.0).theta_star_rad == pytest.approx(0.0)
     nav.command(np.zeros(3), np.zeros((0, 2)), 0.1)
-    assert len(nav.map_points(np.zeros(3), 1.0)) == 0
+    assert len(nav.surroundings.map_points(np.zeros(3), 1.0)) == 0
 
 
 def test_heads_for_a_direction_without_a_plan_or_the_map() -> None:
@@ -437,7 +439,7 @@ def test_slows_down_passing_close_to_an_obstacle() -> None:
     nav = Navigator(line_graph(), NavigatorConfig(memory_s=0.0, proximity_speed_mps=0.4))
     nav.set_goal(5, np.zeros(3))
     person = [[1.0, -0.55], [1.0, -0.6], [1.05, -0.55]]
-    assert nav.obstacle_near_path(np.array(person), 0.0)
+    assert nav.steering.obstacle_near_path(np.array(person), 0.0)
     assert speed(nav, person) == pytest.approx(nav.cfg.proximity_speed_mps)
     assert speed(nav, [[1.0, -0.8]]) == pytest.approx(0.75)
     assert speed(nav, [[-0.5, -0.5]]) == pytest.approx(0.75)
@@ -498,10 +500,10 @@ def test_backs_off_clear_of_furniture_seen_long_before() -> None:
         # The memory's check alone (no trail: trail_s = 0; it would not back off there either).
         nav = Navigator(line_graph(), NavigatorConfig(backoff_memory_s=backoff_memory_s, trail_s=0.0, memory_beside_s=0.0))
         nav.set_goal(5, np.zeros(3))
-        nav.remember(np.zeros(3), box, 0.0)
+        nav.surroundings.remember(np.zeros(3), box, 0.0)
         turned = np.array([0.0, 0.0, math.pi])
-        assert len(nav.remember(turned, np.zeros((0, 2)), 10.0)) == 0  # forgotten by the avoidance
-        v = nav._backoff_velocity(turned, np.zeros((0, 2)))
+        assert len(nav.surroundings.remember(turned, np.zeros((0, 2)), 10.0)) == 0  # forgotten by the avoidance
+        v = nav.recovery.backoff_velocity(turned, np.zeros((0, 2)), 10.0)
         assert np.allclose(v[:2], [-0.15, 0.0]) == straight, v
 
 
@@ -516,8 +518,8 @@ def test_the_navigator_sees_through_its_camera() -> None:
     far = Navigator(line_graph(), NavigatorConfig(map_blind_spots_m=1.5), walls=walls, camera=DepthCamera(min_range_m=1.5))
     pose = np.array([0.0, 0.0, 0.0])
     ahead = lambda pts: pts[np.abs(pts[:, 1]) < 0.05]  # noqa: E731
-    assert len(ahead(near.map_blind_spots(pose))) == 0
-    assert len(ahead(far.map_blind_spots(pose))) > 0
+    assert len(ahead(near.surroundings.map_blind_spots(pose))) == 0
+    assert len(ahead(far.surroundings.map_blind_spots(pose))) > 0
 
 
 # A corridor (y in [5.25, 7.4]) with a 0.906 m door in its south wall at x = 23.661,
@@ -597,7 +599,7 @@ def test_enters_a_door_straight_on_a_short_carrot() -> None:
     # On a graph whose edges are wide, the carrot stays long everywhere.
     wide = Navigator(door_graph(max_clearance=1.0, has_door=False))
     wide.set_goal(4, np.array([19.0, 6.325, 0.0]))
-    assert {wide.lookahead(s) for s in np.linspace(0.0, 8.0, 81)} == {0.8}
+    assert {wide.plan.lookahead(s) for s in np.linspace(0.0, 8.0, 81)} == {0.8}
     # The plan: 4.661 m along the corridor to the corner, where the door's edges begin,
     # 1.075 m to the door, then 0.75 m to the room's node. The jambs come within 0.55 m
     # (the robot's radius and the slack) of the edges from 0.31 m before the door to
@@ -605,13 +607,13 @@ def test_enters_a_door_straight_on_a_short_carrot() -> None:
     nav = Navigator(door_graph(), walls=DOOR_WALLS)
     nav.set_goal(4, np.array([19.0, 6.325, 0.0]))
     door, reach = 4.661 + 1.075, math.sqrt(0.55**2 - DOOR_HALF**2)
-    assert nav.lookahead(door - reach - 2.75 - 0.02) == 0.8 and nav.lookahead(door - reach - 2.75 + 0.02) == 0.3
-    assert nav.lookahead(door + reach + 0.3 - 0.02) == 0.3 and nav.lookahead(door + reach + 0.3 + 0.02) == 0.8
+    assert nav.plan.lookahead(door - reach - 2.75 - 0.02) == 0.8 and nav.plan.lookahead(door - reach - 2.75 + 0.02) == 0.3
+    assert nav.plan.lookahead(door + reach + 0.3 - 0.02) == 0.3 and nav.plan.lookahead(door + reach + 0.3 + 0.02) == 0.8
     # Without the map's walls the whole of each narrow edge is narrow.
     blind = Navigator(door_graph())
     blind.set_goal(4, np.array([19.0, 6.325, 0.0]))
-    assert blind.lookahead(4.661 - 2.75 - 0.05) == 0.8 and blind.lookahead(4.661 - 2.75 + 0.05) == 0.3
-    assert blind.lookahead(door + 0.75 + 0.25) == 0.3 and blind.lookahead(door + 0.75 + 0.35) == 0.8
+    assert blind.plan.lookahead(4.661 - 2.75 - 0.05) == 0.8 and blind.plan.lookahead(4.661 - 2.75 + 0.05) == 0.3
+    assert blind.plan.lookahead(door + 0.75 + 0.25) == 0.3 and blind.plan.lookahead(door + 0.75 + 0.35) == 0.8
     with pytest.raises(InputError, match="narrow_lookahead_m"):
         NavigatorConfig(narrow_lookahead_m=1.0)
 

@@ -12,7 +12,8 @@ from hypothesis import strategies as st
 
 from autonomy.common.errors import InputError
 from autonomy.maps.vectormap import NavEdge, NavGraph, NavNode
-from autonomy.navigation.navigator import Navigator, NavigatorConfig
+from autonomy.navigation.config import NavigatorConfig
+from autonomy.navigation.navigator import Navigator
 from autonomy.perception.camera import CameraIntrinsics, CameraMount
 from autonomy.perception.nearfield import NearField, NearFieldConfig, line_points
 
@@ -198,9 +199,9 @@ def test_navigator_ignores_near_field_a_mapped_wall_explains() -> None:
     assert len(lines)
     wall = np.array([[0.785, -2.0, 0.785, 2.0]])
     nav = _navigator(wall)
-    assert nav.near_points(np.array([0.0, 0.0, 0.0]), lines).shape == (0, 2)
+    assert nav.surroundings.near_points(np.array([0.0, 0.0, 0.0]), lines).shape == (0, 2)
     # Moved 0.3 m along the wall's normal (the estimate far off), the map no longer explains it.
-    assert len(nav.near_points(np.array([-0.3, 0.0, 0.0]), lines)) > 0
+    assert len(nav.surroundings.near_points(np.array([-0.3, 0.0, 0.0]), lines)) > 0
 
 
 def test_a_mount_tilted_up_shifts_the_band_to_the_nearest_floor_it_sees() -> None:

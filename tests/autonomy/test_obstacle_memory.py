@@ -12,13 +12,9 @@ from hypothesis import strategies as st
 
 from autonomy.common.errors import InputError
 from autonomy.maps.vectormap import NavEdge, NavGraph, NavNode
-from autonomy.navigation.navigator import (
-    WALL_STEP_M,
-    Navigator,
-    NavigatorConfig,
-    in_camera_view,
-    wall_points,
-)
+from autonomy.navigation.config import NavigatorConfig
+from autonomy.navigation.navigator import Navigator
+from autonomy.navigation.surroundings import WALL_STEP_M, in_camera_view, wall_points
 from autonomy.perception.camera import DepthCamera
 
 
@@ -134,19 +130,19 @@ def test_memory_kernel_matches_the_reference(frames, memory_s: float, backoff_s:
         # Points all round the robot, some beyond the memory's radius, some on shared cells.
         obs = np.column_stack([rng.uniform(-2.6, 2.6, n), rng.uniform(-2.6, 2.6, n)])
         obs[: n // 3] = np.round(obs[: n // 3] / 0.1) * 0.1
-        got = nav.remember(pose, obs, t)
+        got = nav.surroundings.remember(pose, obs, t)
         want_all, want = ref.remember(pose, obs, t)
-        np.testing.assert_allclose(nav._mem, ref.mem, atol=1e-12)
-        np.testing.assert_array_equal(nav._mem_t, ref.mem_t)
-        np.testing.assert_allclose(nav._mem_all, want_all, atol=1e-12)
+        np.testing.assert_allclose(nav.surroundings._mem, ref.mem, atol=1e-12)
+        np.testing.assert_array_equal(nav.surroundings._mem_t, ref.mem_t)
+        np.testing.assert_allclose(nav.surroundings.remembered, want_all, atol=1e-12)
         np.testing.assert_allclose(got, want, atol=1e-12)
 
 
 def test_memory_off_returns_the_frame() -> None:
     nav = Navigator(_graph(), NavigatorConfig(memory_s=0.0))
     obs = np.array([[1.0, 0.5], [0.0, 3.0]])
-    np.testing.assert_array_equal(nav.remember(np.zeros(3), obs, 0.0), obs)
-    assert nav._mem_all.shape == (0, 2)
+    np.testing.assert_array_equal(nav.surroundings.remember(np.zeros(3), obs, 0.0), obs)
+    assert nav.surroundings.remembered.shape == (0, 2)
 
 
 def test_non_finite_points_are_not_remembered() -> None:
@@ -154,9 +150,9 @@ def test_non_finite_points_are_not_remembered() -> None:
     cast to a grid cell would be an arbitrary cell)."""
     nav = Navigator(_graph(), NavigatorConfig(memory_s=2.0, shadow_m=0.0))
     obs = np.array([[np.nan, 0.5], [0.0, np.inf], [-0.5, 0.6]])
-    got = nav.remember(np.zeros(3), obs, 0.0)
+    got = nav.surroundings.remember(np.zeros(3), obs, 0.0)
     np.testing.assert_allclose(got, [[-0.5, 0.6]], atol=0.03)
-    assert len(nav._mem) == 1 and np.isfinite(nav._mem).all()
+    assert len(nav.surroundings._mem) == 1 and np.isfinite(nav.surroundings._mem).all()
 
 
 def test_memory_grid_settings_are_checked() -> None:

@@ -12,7 +12,7 @@ import pytest
 from autonomy.common.errors import InputError
 from autonomy.common.geometry import compose_pose
 from autonomy.maps.vectormap import NavEdge, NavGraph, NavNode, VectorMap
-from autonomy.navigation.navigator import NavigatorConfig
+from autonomy.navigation.config import NavigatorConfig
 from autonomy.perception.camera import DepthCamera
 from autonomy.stack import LocalizationConfig, RobotStack, StackConfig
 from tests.helpers import one_wall_depth

@@ -727,7 +727,7 @@ def test_kept_near_field_points_a_modes_map_explains_give_way_to_its_walls(build
     assert len(stack.lost.view.seen_now(12.0, truth)) - n_scan <= 0.15 * kept
     # A mode 3 m off along the corridor, with no wall within the near field's reach.
     wrong = truth + np.array([-3.0, 0.0, 0.0])
-    assert stack.navigator.map_points(wrong, 1.0, with_seen=False).shape[0] == 0
+    assert stack.navigator.surroundings.map_points(wrong, 1.0, with_seen=False).shape[0] == 0
     assert len(stack.lost.view.seen_now(12.0, wrong)) - n_scan == kept
 
 

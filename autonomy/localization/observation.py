@@ -312,13 +312,18 @@ def jacobi_eigh3(a, vecs):  # pragma: no cover - numba
     symmetric 3 x 3 matrix by cyclic Jacobi rotations (no LAPACK: numba's eigh needs
     SciPy). Converges quadratically; 12 sweeps reach machine precision. The matrix is
     first scaled by a power of two (exact) to a largest entry in [0.5, 1): the squared
-    entries of a matrix of 1e-160 would underflow and read as already diagonal."""
+    entries of a matrix of 1e-160 would underflow and read as already diagonal. Each
+    entry is scaled on its own (``ldexp``): the factor alone, 2^1038 for a subnormal
+    largest entry, is not a finite float."""
     big = 0.0
     for i in range(3):
         for j in range(3):
             big = max(big, abs(a[i, j]))
     e = math.frexp(big)[1] if big > 0.0 and math.isfinite(big) else 0
-    b = a * math.ldexp(1.0, -e)
+    b = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            b[i, j] = math.ldexp(a[i, j], -e)
     for i in range(3):
         for j in range(3):
             vecs[i, j] = 1.0 if i == j else 0.0
@@ -347,7 +352,7 @@ def jacobi_eigh3(a, vecs):  # pragma: no cover - numba
                     vkp, vkq = vecs[k, p], vecs[k, q]
                     vecs[k, p] = c * vkp - s * vkq
                     vecs[k, q] = s * vkp + c * vkq
-    return np.array([b[0, 0], b[1, 1], b[2, 2]]) * math.ldexp(1.0, e)
+    return np.array([math.ldexp(b[0, 0], e), math.ldexp(b[1, 1], e), math.ldexp(b[2, 2], e)])
 
 
 @numba.njit(cache=True)

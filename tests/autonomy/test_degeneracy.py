@@ -27,6 +27,7 @@ from tests.autonomy.test_localization import observe
     st.lists(st.floats(-6, 6), min_size=3, max_size=3),
 )
 @example([0.0, 0.0, 1.9308228994945364e-168, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0])  # squares underflow
+@example([0.0, 0.0, 0.0, 0.0, 0.0, 2.2250738585e-313], [0.0, 0.0, 0.0])  # a subnormal largest entry
 def test_jacobi_eigh3_matches_lapack(entries: list[float], log_scale: list[float]) -> None:
     a = np.array([[entries[0], entries[1], entries[2]], [entries[1], entries[3], entries[4]], [entries[2], entries[4], entries[5]]])
     d = np.diag(10.0 ** np.array(log_scale))

@@ -19,7 +19,7 @@ import numpy as np
 
 from autonomy.common.errors import InputError
 from autonomy.common.geometry import WallIndex
-from autonomy.maps.raycast import _segment_hit
+from autonomy.maps.ray_hits import _segment_hit
 from autonomy.maps.vectormap import NavGraph
 
 

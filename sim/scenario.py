@@ -23,7 +23,7 @@ from autonomy.stack import RecoveryConfig, StackConfig
 from sim.config import apply_overrides, from_dict, read_toml
 from sim.simulator.actors import Furniture, Person
 from sim.simulator.blueprints import ASSETS_DIR, BuildingConfig
-from sim.simulator.faults import FaultsConfig
+from sim.simulator.fault_config import FaultsConfig
 from sim.simulator.irregular import Irregularity
 from sim.simulator.kinect import KinectConfig
 from sim.simulator.robot import OdometryConfig, RobotConfig, avoidance_for_body
@@ -228,7 +228,7 @@ class Scenario:
     actors: ActorsConfig = field(default_factory=ActorsConfig)
     mission: MissionConfig = field(default_factory=MissionConfig)
     faults: FaultsConfig = field(default_factory=FaultsConfig)
-    """Injected faults (sim.simulator.faults): none by default."""
+    """Injected faults (sim.simulator.fault_config, applied by sim.simulator.faults): none by default."""
     recovery: RecoveryConfig = field(default_factory=RecoveryConfig)
     """The robot stack's lost detection, relocalization and mount check."""
     report: ReportConfig = field(default_factory=ReportConfig)

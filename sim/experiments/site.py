@@ -18,7 +18,8 @@ from sim.simulator import blueprints
 from sim.simulator.actors import Furniture, Person
 from sim.simulator.blueprints import ASSETS_DIR
 from sim.simulator.building import Building, navgraph_from_walls, random_furniture, random_people
-from sim.simulator.faults import FaultInjector, fault_actors, fault_rng
+from sim.simulator.fault_config import fault_actors, fault_rng
+from sim.simulator.faults import FaultInjector
 from sim.simulator.kinect import KinectCamera
 from sim.simulator.robot import Odometry
 from sim.simulator.step import EpisodeSeeds, SimStep

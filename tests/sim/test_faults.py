@@ -1,4 +1,4 @@
-"""Fault injection (sim/simulator/faults.py): the [faults] table, the schedule, and each
+"""Fault injection (sim/simulator/fault_config.py, faults.py): the [faults] table, the schedule, and each
 fault kind against what it should do to the world, the frames and the odometry."""
 
 from __future__ import annotations
@@ -20,17 +20,15 @@ from sim.simulator import blueprints
 from sim.simulator.actors import PARK_XY, Furniture
 from sim.simulator.blueprints import ASSETS_DIR
 from sim.simulator.building import Building
-from sim.simulator.faults import (
+from sim.simulator.fault_config import (
     FAULT_KINDS,
-    KEEP_OUT_M,
-    KIDNAP_CLEARANCE_M,
     FaultEvent,
-    FaultInjector,
     FaultSchedule,
     FaultsConfig,
     fault_actors,
     fault_rng,
 )
+from sim.simulator.faults import KEEP_OUT_M, KIDNAP_CLEARANCE_M, FaultInjector
 from sim.simulator.kinect import KinectCamera, KinectConfig
 from sim.simulator.robot import Odometry, OdometryConfig
 from sim.simulator.step import SimStep

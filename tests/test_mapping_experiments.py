@@ -158,7 +158,7 @@ def test_a_run_whose_summary_fails_still_writes_a_report(tmp_path, monkeypatch) 
     def broken(*args, **kwargs):
         raise ZeroDivisionError("no frames")
 
-    monkeypatch.setattr(wall, "_measure", broken)
+    monkeypatch.setattr(wall, "measure_wall", broken)
     _, cfg = load_experiment(SCENARIOS["mapping_wall"], ["frames=1"])
     with pytest.raises(RunCrashed, match="ZeroDivisionError: no frames"):
         EXPERIMENTS["mapping_wall"].run(cfg, tmp_path)

@@ -1,34 +1,7 @@
 """Analytic ray casting on a vector map: scene lines and the visibility grid (BV2012, Sec. IV-A).
 
-:func:`scene_lines` is Algorithm 2 ("AnalyticRayCast"): from a location x it returns the
-*scene lines* L, the non-intersecting, non-occluded pieces of the map's wall segments
-that x sees, each tagged with the index of the wall it came from.
-
-TrimOcclusion(x, l1, l2) (Fig. 3) is computed exactly: the part of l1 that l2 hides from
-x is l1's intersection with l2's *shadow*, the convex region inside the wedge from x
-through l2's end points and beyond the line of l2. Clipping l1's parameter interval
-[0, 1] against those three half-planes (each affine in the parameter) gives one occluded
-interval; what is left of l1 is 0, 1 or 2 pieces, which covers the four cases of Fig. 3
-(not occluded; fully occluded; partly occluded, with a second visible piece; l1 crossing
-l2). A second piece of a line under test goes back on the work list; a second piece of an
-existing scene line, cut by a newly accepted line, goes into the scene list.
-
-Readings and tolerances (the paper gives none):
-
-- Walls seen edge-on (x on the wall's line, zero angular width) are neither visible nor
-  occluders; so are walls through x itself.
-- A point only counts as occluded when it lies more than ``1e-9`` m beyond the occluder's
-  line, so walls meeting at a corner or a T-junction, and collinear pieces of one wall,
-  do not hide each other's shared end points. Collinear *overlapping* walls are the one
-  exception: the later one loses the overlap, so scene lines never overlap.
-- Occluded intervals and pieces shorter than ``1e-6`` m are ignored / dropped.
-- Speed-ups that do not change the result (Algorithm 2 trims a line by the union of the
-  shadows, whatever the order): candidates are taken roughly nearest first (one
-  counting-sort pass), so near walls hide far ones early; an angular depth buffer (256
-  pseudo-angle bins, each holding a distance within which every ray of the bin hits an
-  accepted wall) drops walls lying wholly behind without TrimOcclusion calls; and the
-  scene lines are linked into those bins, so a line is only trimmed against the scene
-  lines that share its angular range.
+:func:`scene_lines` is Algorithm 2 ("AnalyticRayCast"); its readings and tolerances are
+described in :mod:`autonomy.maps.analytic_raycast`.
 
 :class:`VisibilityGrid` stores, per cell of a regular grid, the walls that can be seen
 from some point of the cell within ``max_range_m`` (conservatively: every wall whose

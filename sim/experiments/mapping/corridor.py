@@ -27,7 +27,6 @@ from autonomy.planes import (
     detection_frame,
     register_planes,
 )
-from sim.experiments.kinds import Experiment
 from sim.experiments.mapping.common import (
     ALGORITHMS,
     MappingExperiment,
@@ -37,7 +36,7 @@ from sim.experiments.mapping.common import (
     progress_bar,
     until_stopped,
 )
-from sim.experiments.mapping.driver import run_experiment, run_trial, summarize, trials
+from sim.experiments.mapping.driver import mapping_experiment, run_trial
 from sim.experiments.mapping.loop_driver import LoopDriver
 from sim.experiments.mapping.plane_maps import draw_maps, map_wall_error
 from sim.scenes.corridor import (
@@ -271,19 +270,9 @@ def _measure(cfg: CorridorExperiment, seed: int, progress: bool | None, out_dir:
     return measure_corridor(cfg, seed, progress, out_dir, rec)
 
 
-def run_corridor(cfg: CorridorExperiment, out_dir: str | Path, *, seed: int | None = None, rrd=None, spawn: bool = False, progress: bool | None = None) -> dict:
-    """Experiment III: writes report.json, the maps (JSON, PLY, GLB) and map_top.png; returns the report."""
-    return run_experiment(KIND, PAPER, _measure, cfg, out_dir, seed=seed, rrd=rrd, spawn=spawn, progress=progress)
-
-
 def trial_corridor(cfg: CorridorExperiment, spec: dict) -> dict:
     """One seeded run of Experiment III (no files): its metrics."""
     return run_trial(_measure, dataclasses.replace(cfg, export=False), spec)
 
 
-def summarize_corridor(cfg: CorridorExperiment, results: list[dict], out_dir: Path) -> dict:
-    """Mean, std, min and max of every Experiment III metric over trials; writes report.json."""
-    return summarize(KIND, PAPER, cfg, results, out_dir)
-
-
-EXPERIMENTS = {KIND: Experiment(KIND, CorridorExperiment, run_corridor, trials, trial_corridor, summarize_corridor)}
+EXPERIMENTS = {KIND: mapping_experiment(KIND, PAPER, CorridorExperiment, _measure, trial_corridor)}

@@ -19,7 +19,6 @@ from autonomy.planes import (
     depth_to_cloud,
 )
 from sim.config import to_dict
-from sim.experiments.kinds import Experiment
 from sim.experiments.mapping.common import (
     ALGORITHMS,
     MappingExperiment,
@@ -29,7 +28,7 @@ from sim.experiments.mapping.common import (
     seeds,
     until_stopped,
 )
-from sim.experiments.mapping.driver import run_experiment, run_trial, summarize, trials
+from sim.experiments.mapping.driver import mapping_experiment
 from sim.scenes.cuboid import (
     TABLE_I_VIEWS,
     ArmView,
@@ -198,19 +197,4 @@ def _measure(cfg: CuboidExperiment, seed: int, progress: bool | None, out_dir: P
     return (*measure_cuboid(cfg, seed, progress, rec), [])
 
 
-def run_cuboid(cfg: CuboidExperiment, out_dir: str | Path, *, seed: int | None = None, rrd=None, spawn: bool = False, progress: bool | None = None) -> dict:
-    """Experiment I: writes out_dir/report.json; returns the report."""
-    return run_experiment(KIND, PAPER, _measure, cfg, out_dir, seed=seed, rrd=rrd, spawn=spawn, progress=progress)
-
-
-def trial_cuboid(cfg: CuboidExperiment, spec: dict) -> dict:
-    """One seeded draw of Experiment I: its metrics."""
-    return run_trial(_measure, cfg, spec)
-
-
-def summarize_cuboid(cfg: CuboidExperiment, results: list[dict], out_dir: Path) -> dict:
-    """Mean, std, min and max of every Experiment I metric over trials; writes report.json."""
-    return summarize(KIND, PAPER, cfg, results, out_dir)
-
-
-EXPERIMENTS = {KIND: Experiment(KIND, CuboidExperiment, run_cuboid, trials, trial_cuboid, summarize_cuboid)}
+EXPERIMENTS = {KIND: mapping_experiment(KIND, PAPER, CuboidExperiment, _measure)}

@@ -11,6 +11,7 @@ mean, std, min and max over trials.
 
 from __future__ import annotations
 
+import functools
 import os
 import platform
 import time
@@ -22,7 +23,7 @@ import numpy as np
 
 from autonomy.common.errors import InputError
 from sim.config import to_dict
-from sim.experiments.kinds import crash_block, stopped, write_crash
+from sim.experiments.kinds import Experiment, crash_block, stopped, write_crash
 from sim.experiments.mapping.common import MappingExperiment, Stop, finite, seeds
 from sim.experiments.report_file import write_json
 
@@ -66,10 +67,10 @@ def run_experiment(
     cfg: MappingExperiment,
     out_dir: str | Path,
     *,
-    seed: int | None,
-    rrd: str | Path | None,
-    spawn: bool,
-    progress: bool | None,
+    seed: int | None = None,
+    rrd: str | Path | None = None,
+    spawn: bool = False,
+    progress: bool | None = None,
 ) -> dict:
     """Measure ``cfg`` once and write ``out_dir/report.json`` (and, with ``rrd`` or
     ``spawn``, a rerun recording); the report."""
@@ -153,3 +154,19 @@ def summarize(kind: str, paper: dict[str, float], cfg: MappingExperiment, result
     }
     _write_report(out, report)
     return report
+
+
+def mapping_experiment(
+    kind: str, paper: dict[str, float], config_type: type, measure: Measure, trial: Callable[[Any, dict], dict] | None = None
+) -> Experiment:
+    """The :class:`Experiment` of a mapping kind: its run, trials and summary all go
+    through this driver with the kind's ``measure`` (``trial``: the kind's own, if it
+    differs from :func:`run_trial`)."""
+    return Experiment(
+        kind,
+        config_type,
+        functools.partial(run_experiment, kind, paper, measure),
+        trials,
+        trial if trial is not None else functools.partial(run_trial, measure),
+        functools.partial(summarize, kind, paper),
+    )

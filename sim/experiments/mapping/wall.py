@@ -13,7 +13,6 @@ import numpy as np
 
 from autonomy.common.errors import InputError, require_int, require_positive
 from autonomy.planes import PlaneDetection, SparseAccumulator, depth_to_cloud
-from sim.experiments.kinds import Experiment
 from sim.experiments.mapping.common import (
     ALGORITHMS,
     MappingExperiment,
@@ -23,7 +22,7 @@ from sim.experiments.mapping.common import (
     seeds,
     until_stopped,
 )
-from sim.experiments.mapping.driver import run_experiment, run_trial, summarize, trials
+from sim.experiments.mapping.driver import mapping_experiment
 from sim.scenes.wall import WallScene, build_wall_rig
 
 KIND = "mapping_wall"
@@ -155,19 +154,4 @@ def _measure(cfg: WallExperiment, seed: int, progress: bool | None, out_dir: Pat
     return (*measure_wall(cfg, seed, progress, rec), [])
 
 
-def run_wall(cfg: WallExperiment, out_dir: str | Path, *, seed: int | None = None, rrd=None, spawn: bool = False, progress: bool | None = None) -> dict:
-    """Experiment II: writes out_dir/report.json; returns the report."""
-    return run_experiment(KIND, PAPER, _measure, cfg, out_dir, seed=seed, rrd=rrd, spawn=spawn, progress=progress)
-
-
-def trial_wall(cfg: WallExperiment, spec: dict) -> dict:
-    """One seeded draw of Experiment II: its metrics."""
-    return run_trial(_measure, cfg, spec)
-
-
-def summarize_wall(cfg: WallExperiment, results: list[dict], out_dir: Path) -> dict:
-    """Mean, std, min and max of every Experiment II metric over trials; writes report.json."""
-    return summarize(KIND, PAPER, cfg, results, out_dir)
-
-
-EXPERIMENTS = {KIND: Experiment(KIND, WallExperiment, run_wall, trials, trial_wall, summarize_wall)}
+EXPERIMENTS = {KIND: mapping_experiment(KIND, PAPER, WallExperiment, _measure)}

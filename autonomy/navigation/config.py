@@ -219,6 +219,17 @@ class NavigatorConfig:
     the robot stays near them. 0 = off (``memory_s`` alone)."""
     memory_beside_m: float = 1.0
     """... this far from the robot's centre at most."""
+    memory_blind_s: float = 10.0
+    """Remembered points right in front of the robot, closer than the camera sees, count
+    until the camera sees their place again, but this long at most.
+    The memory covers the seconds between losing sight of something and getting away
+    from it (a back-off brings it into view); something standing that close for longer
+    hides the floor in front, which the near field checks every frame. A point the robot
+    cannot look at again (its back-off ended short, its own trail leading sideways)
+    would otherwise hold it for good: the edge of a person who walked across a 0.9 m
+    door, sensed as they went, blocks the door for a robot that needs 0.8 m long after
+    they have gone, and a robot that cannot back off far enough to see the place again
+    backs off and returns to it without end."""
     shadow_m: float = 0.6
     """Each sensed point within ``memory_radius_m`` also marks the space behind it, seen
     from the camera, this deep as occupied until the camera looks there
@@ -244,7 +255,7 @@ class NavigatorConfig:
             "trail_s", "trail_tolerance_m", "look_back_m", "blocked_edge_s", "blocked_wait_s", "blocked_check_m",
             "long_detour_m", "long_detour_wait_s",
             "narrow_lookahead_m", "narrow_slack_m", "narrow_before_m", "narrow_horizon_m",
-            "memory_beside_s", "memory_beside_m", "shadow_m", "coastal_weight",
+            "memory_beside_s", "memory_beside_m", "memory_blind_s", "shadow_m", "coastal_weight",
         )
         if self.narrow_lookahead_m > self.lookahead_m:
             raise InputError(

@@ -6,7 +6,8 @@ cell with the latest time it was sensed. Each frame
 
 1. remembered points the camera sees now are dropped (the current frame replaces them),
    and so are those older than ``keep_s`` unless they lie right in front of the robot,
-   closer than the camera can see, and those farther than ``keep_radius`` from it;
+   closer than the camera can see, and are at most ``blind_s`` old, and those farther
+   than ``keep_radius`` from it;
 2. this frame's points within ``sense_radius`` join, a new cell taking the current time,
    and so does each one's shadow: the cells every ``cell`` behind it along the camera's
    sight line, up to ``shadow_depth`` beyond it. The camera sees only an obstacle's near
@@ -17,7 +18,8 @@ cell with the latest time it was sensed. Each frame
    may be about to pass, and a wall's own points cast none;
 3. the memory is returned in the robot frame, with the mask of what the avoidance uses
    (seen within ``memory_s``; seen within ``beside_s`` and no farther than
-   ``beside_radius`` from the robot; or in the blind zone ahead).
+   ``beside_radius`` from the robot; or in the blind zone ahead and seen within
+   ``blind_s``).
 
 Everything kept lies within ``keep_radius`` of the robot, so the cells are merged on a
 dense local grid around it rather than by sorting a frame's few thousand sensed points;
@@ -78,6 +80,7 @@ def update_memory(
     blind_half_width: float,
     beside_s: float,
     beside_radius: float,
+    blind_s: float,
     shadow_depth: float,
     walls: np.ndarray,
     wall_reach: int,
@@ -120,7 +123,8 @@ def update_memory(
             continue
         if not math.hypot(rx, ry) <= keep_radius:
             continue
-        if t - mem_t[i] > keep_s and not _blind_ahead(bx, by, forward, blind_range, blind_half_width):
+        age = t - mem_t[i]
+        if age > keep_s and not (age <= blind_s and _blind_ahead(bx, by, forward, blind_range, blind_half_width)):
             continue
         k = _grid_index(mem[i, 0], mem[i, 1], cell, cx0, cy0, side)
         if k < 0:
@@ -175,7 +179,7 @@ def update_memory(
         recent[m] = (
             age <= memory_s
             or (age <= beside_s and math.hypot(ux, uy) <= beside_radius)
-            or _blind_ahead(ux - forward, uy, forward, blind_range, blind_half_width)
+            or (age <= blind_s and _blind_ahead(ux - forward, uy, forward, blind_range, blind_half_width))
         )
         m += 1
     return new_mem, new_t, rel, recent

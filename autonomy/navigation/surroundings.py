@@ -85,8 +85,9 @@ class Surroundings:
 
         Remembered points in the region the camera sees now are replaced by the current
         observation (people move on); points right in front of the robot but closer than
-        the camera's minimum range persist until that place is seen again; those near the
-        robot for ``memory_beside_s``; the others for ``memory_s``. Each sensed point's
+        the camera's minimum range persist until that place is seen again, for
+        ``memory_blind_s`` at most; those near the robot for ``memory_beside_s``; the
+        others for ``memory_s``. Each sensed point's
         shadow (``shadow_m``) is remembered with it. Points stay remembered for
         ``backoff_memory_s`` for the back-off's check of the way back only
         (:attr:`remembered`).
@@ -120,6 +121,7 @@ class Surroundings:
             self.avoid.radius_m + 0.2,
             cfg.memory_beside_s,
             cfg.memory_beside_m,
+            cfg.memory_blind_s,
             cfg.shadow_m,
             self._shadow_walls(pose, reach),
             reach,

@@ -56,8 +56,9 @@ class ReferenceMemory:
             by = -s * rel[:, 0] + c * rel[:, 1]
             in_view = in_camera_view(bx, by, self.camera, fov_fraction=0.9, near_pad_m=0.1, far_pad_m=0.2)
             near = np.hypot(rel[:, 0], rel[:, 1]) <= cfg.memory_radius_m + 0.5
-            young = t - self.mem_t <= max(cfg.memory_s, cfg.backoff_memory_s, cfg.memory_beside_s)
-            keep = (young | self._blind(bx, by)) & ~in_view & near
+            age = t - self.mem_t
+            young = age <= max(cfg.memory_s, cfg.backoff_memory_s, cfg.memory_beside_s)
+            keep = (young | ((age <= cfg.memory_blind_s) & self._blind(bx, by))) & ~in_view & near
             self.mem, self.mem_t = self.mem[keep], self.mem_t[keep]
         new = obs[np.hypot(obs[:, 0], obs[:, 1]) <= cfg.memory_radius_m]
         # Each point's shadow: every cell behind it along the camera's sight line, up to
@@ -88,7 +89,8 @@ class ReferenceMemory:
         out = np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]]).reshape(-1, 2)
         age = t - self.mem_t
         beside = (age <= cfg.memory_beside_s) & (np.hypot(out[:, 0], out[:, 1]) <= cfg.memory_beside_m)
-        recent = (age <= cfg.memory_s) | beside | self._blind(out[:, 0] - self.camera.forward_m, out[:, 1])
+        blind = (age <= cfg.memory_blind_s) & self._blind(out[:, 0] - self.camera.forward_m, out[:, 1])
+        recent = (age <= cfg.memory_s) | beside | blind
         return out, out[recent]
 
 
@@ -113,13 +115,18 @@ frame = st.tuples(
     st.sampled_from([0.05, 0.03, 0.2]),
     st.sampled_from([0.0, 0.6, 0.33]),
     st.sampled_from([0.0, 10.0]),
+    st.sampled_from([10.0, 2.5, 1000.0]),
     st.sampled_from([None, WALLS]),
 )
 # Wall points where a cell boundary falls (1.5 m on a 0.2 m grid): they must land on the
 # same cell as in the reference, whatever the robot's position.
-@example([(0.0, 0.0, 0.0, 1.0, 0, 0)] * 4 + [(0.25, 0.0, 0.0, 1.0, 0, 0), (0.0, 0.0, 0.0, 1.0, 33, 422)], 0.5, 0.0, 0.2, 0.6, 0.0, WALLS)
-def test_memory_kernel_matches_the_reference(frames, memory_s: float, backoff_s: float, cell: float, shadow_m: float, beside_s: float, walls) -> None:
-    cfg = NavigatorConfig(memory_s=memory_s, backoff_memory_s=backoff_s, memory_cell_m=cell, shadow_m=shadow_m, memory_beside_s=beside_s)
+@example([(0.0, 0.0, 0.0, 1.0, 0, 0)] * 4 + [(0.25, 0.0, 0.0, 1.0, 0, 0), (0.0, 0.0, 0.0, 1.0, 33, 422)], 0.5, 0.0, 0.2, 0.6, 0.0, 10.0, WALLS)
+def test_memory_kernel_matches_the_reference(
+    frames, memory_s: float, backoff_s: float, cell: float, shadow_m: float, beside_s: float, blind_s: float, walls
+) -> None:
+    cfg = NavigatorConfig(
+        memory_s=memory_s, backoff_memory_s=backoff_s, memory_cell_m=cell, shadow_m=shadow_m, memory_beside_s=beside_s, memory_blind_s=blind_s
+    )
     nav = Navigator(_graph(), cfg, walls=walls)
     ref = ReferenceMemory(cfg, nav.avoid.radius_m, walls)
     pose, t = np.array([0.3, -0.2, 0.4]), 0.0
@@ -167,7 +174,7 @@ def test_memory_grid_settings_are_checked() -> None:
     NavigatorConfig(memory_cell_m=0.01)
 
 
-@pytest.mark.parametrize("field", ["shadow_m", "memory_beside_s", "memory_beside_m"])
+@pytest.mark.parametrize("field", ["shadow_m", "memory_beside_s", "memory_beside_m", "memory_blind_s"])
 def test_shadow_and_beside_settings_are_checked(field: str) -> None:
     for bad in (-0.1, float("nan")):
         with pytest.raises(InputError, match=rf"^navigator\.{field}: expected a number >= 0"):

@@ -103,7 +103,8 @@ def cmd_map_graph(args: argparse.Namespace) -> int:
 
     from autonomy.maps.graph_builder import build_navgraph, graph_key, with_key
     from autonomy.maps.graph_quality import graph_quality
-    from autonomy.maps.vectormap import format_navgraph_json, load_vectormap
+    from autonomy.maps.navgraph import format_navgraph_json
+    from autonomy.maps.vectormap import load_vectormap
 
     cfg = _graph_config(args)
     src = _map_arg(args.file)
@@ -132,7 +133,7 @@ def cmd_map_graph(args: argparse.Namespace) -> int:
               "(the largest is where missions and env episodes run)")
     graphs = [("generated", gb.graph)] if args.quality or args.compare else []
     if args.compare:
-        from autonomy.maps.vectormap import load_navgraph
+        from autonomy.maps.navgraph import load_navgraph
 
         graphs.append((str(args.compare), load_navgraph(args.compare)))
     for label, g in graphs:
@@ -160,7 +161,8 @@ def cmd_map_convert(args: argparse.Namespace) -> int:
 
 
 def cmd_map_render(args: argparse.Namespace) -> int:
-    from autonomy.maps.vectormap import load_navgraph, load_vectormap
+    from autonomy.maps.navgraph import load_navgraph
+    from autonomy.maps.vectormap import load_vectormap
     from sim.viz.maps import render_map
 
     vm = load_vectormap(args.file)

@@ -320,7 +320,7 @@ def cmd_scenarios(args: argparse.Namespace) -> int:
 def cmd_eval(args: argparse.Namespace) -> int:
     from autonomy.common.files import output_path
     from sim.rl.evaluate import compare, comparison_table
-    from sim.rl.policies import make_policy
+    from sim.rl.policy_specs import make_policy
     from sim.rl.splits import get_split
 
     split = get_split(args.split)
@@ -344,7 +344,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 def cmd_demos_record(args: argparse.Namespace) -> int:
     from autonomy.common.files import output_path
-    from sim.rl.demos import record_demonstrations
+    from sim.rl.demo_recording import record_demonstrations
     from sim.rl.splits import get_split
 
     get_split(args.split)

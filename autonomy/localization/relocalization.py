@@ -474,7 +474,7 @@ class GlobalLocalizer:
         ``accept_cost``, accepted on its lead alone, is not taken while the prior still
         scores within ``prior_lead_cost``: a hall's clutter can fit an office elsewhere
         better than the hall, whereas a robot carried away leaves a prior that scores
-        worse than that (1.0 or more on the measured kidnapping)."""
+        worse than that (1.0 or more on the kidnappings measured)."""
         return mode.score <= self.cfg.accept_cost or prior is None or prior.score > self.cfg.prior_lead_cost
 
     def _decide(self, modes: list[Mode], n_points: int) -> tuple[Mode | None, str]:

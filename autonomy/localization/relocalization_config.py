@@ -21,9 +21,9 @@ class RelocalizationConfig:
     """Scan points scored per coarse hypothesis (an even subsample)."""
     coarse_seeds: int = 4000
     """The best this-many coarse hypotheses are re-ranked with their sight through walls
-    (and of the floor) before the distinct ones are refined. A scan of furniture and one
-    long wall at an open hall's edge ranked the true place 1,727th on cost alone (a
-    kidnapped run), behind offices whose walls the furniture fits."""
+    (and of the floor) before the distinct ones are refined. On cost alone, a scan of
+    furniture and one long wall at an open hall's edge can rank the true place more than
+    a thousand places down, behind offices whose walls the furniture fits."""
     cost_seeds: int = 20
     """... and the best this-many by cost alone are refined as well, unthinned: at a
     coarse pose, half a grid step and half a heading step off, rays slip past pillars
@@ -80,8 +80,9 @@ class RelocalizationConfig:
     accept_lead: float = 0.15
     """The lead a mode scoring between ``accept_cost`` and ``accept_lead_cost`` needs over
     every other mode (and the belief before the alarm must be ruled out:
-    :meth:`autonomy.localization.relocalization.GlobalLocalizer.lead_allowed`). Wrong
-    modes led by up to 0.14 on the tuning runs, each scoring under ``accept_cost``."""
+    :meth:`autonomy.localization.relocalization.GlobalLocalizer.lead_allowed`). It lies
+    above the lead of every wrong mode measured on the tuning seeds (up to 0.14, each
+    scoring under ``accept_cost``)."""
     max_through: float = 0.1
     """... and at most this fraction of the latest frame's points may lie beyond the map's
     walls seen from it."""
@@ -107,7 +108,7 @@ class RelocalizationConfig:
     """... or, scoring worse than ``prior_cost`` (up to this: a hall full of furniture the
     map lacks), when every mode elsewhere scores worse by the acceptance margins. A
     kidnapped robot's old belief loses to the place it is at by far more (0.5 or more
-    on the tuning runs)."""
+    on the tuning seeds)."""
     through_weight: float = 3.0
     """A mode's score is its cost plus this times the fraction of the scan's points it
     sees through the map's walls (each point's ray from where the camera stood when it
@@ -129,18 +130,18 @@ class RelocalizationConfig:
     """A mode's score adds this times the fraction of the floor points seen while
     looking (:mod:`autonomy.perception.floor_rays`) whose sight line crosses one of the mode's
     walls (0: the floor is not used) ... The floor is seen only
-    where no wall stands in between: a kidnapped robot at an open hall's edge, facing
-    furniture the map lacks, fit offices elsewhere (0.16) better than its true place
-    (0.29), and their walls stood across 26-46 % of the sight lines into the hall (none
-    at the true place) ..."""
+    where no wall stands in between: at an open hall's edge, facing furniture the map
+    lacks, a scan can fit offices elsewhere better than its true place (0.16 against
+    0.29), but their walls stand across a quarter to a half of the sight lines into the
+    hall, and the true place's across none ..."""
     floor_jamb_m: float = 0.15
     """... counting a wall only where the sight line crosses it this far from its ends.
     The scan is placed by dead reckoning, and a sight line through a door passes its
-    jamb within centimetres: from the true places of two kidnapped runs' office landings,
-    2-7 % of the sight lines crossed a wall, every one within 0.1 m of a door's jamb,
-    and counted, that let the office next door, or its mirror image in the other block,
-    win. At 0.2 m, a place along the atrium's south wall from the true one kept enough
-    of its crossings to stay within the acceptance lead of it."""
+    jamb within centimetres: from an office's true place a few per cent of the sight
+    lines cross a wall, every one within 0.1 m of a door's jamb, and counted, they let
+    the office next door, or its mirror image in the other block, win. A larger margin
+    leaves a wrong place too few of its crossings: at 0.2 m, a place along the atrium's
+    south wall stays within the acceptance lead of the true one."""
     floor_stride_px: int = 16
     """One floor point per this-many image columns and frame (40 on a 640-pixel row) ..."""
     floor_cell_m: float = 0.25

@@ -103,7 +103,8 @@ def cmd_map_graph(args: argparse.Namespace) -> int:
 
     from autonomy.maps.graph_builder import build_navgraph, graph_key, with_key
     from autonomy.maps.graph_quality import graph_quality
-    from autonomy.maps.vectormap import format_navgraph_json, load_vectormap
+    from autonomy.maps.navgraph import format_navgraph_json
+    from autonomy.maps.vectormap import load_vectormap
 
     cfg = _graph_config(args)
     src = _map_arg(args.file)
@@ -132,7 +133,7 @@ def cmd_map_graph(args: argparse.Namespace) -> int:
               "(the largest is where missions and env episodes run)")
     graphs = [("generated", gb.graph)] if args.quality or args.compare else []
     if args.compare:
-        from autonomy.maps.vectormap import load_navgraph
+        from autonomy.maps.navgraph import load_navgraph
 
         graphs.append((str(args.compare), load_navgraph(args.compare)))
     for label, g in graphs:
@@ -160,7 +161,8 @@ def cmd_map_convert(args: argparse.Namespace) -> int:
 
 
 def cmd_map_render(args: argparse.Namespace) -> int:
-    from autonomy.maps.vectormap import load_navgraph, load_vectormap
+    from autonomy.maps.navgraph import load_navgraph
+    from autonomy.maps.vectormap import load_vectormap
     from sim.viz.maps import render_map
 
     vm = load_vectormap(args.file)
@@ -318,7 +320,7 @@ def cmd_scenarios(args: argparse.Namespace) -> int:
 def cmd_eval(args: argparse.Namespace) -> int:
     from autonomy.common.files import output_path
     from sim.rl.evaluate import compare, comparison_table
-    from sim.rl.policies import make_policy
+    from sim.rl.policy_specs import make_policy
     from sim.rl.splits import get_split
 
     split = get_split(args.split)
@@ -342,7 +344,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 def cmd_demos_record(args: argparse.Namespace) -> int:
     from autonomy.common.files import output_path
-    from sim.rl.demos import record_demonstrations
+    from sim.rl.demo_recording import record_demonstrations
     from sim.rl.splits import get_split
 
     get_split(args.split)

@@ -15,8 +15,8 @@ import pytest
 
 from autonomy.common.errors import InputError
 from autonomy.common.geometry import wrap_angles
+from autonomy.maps.navgraph import NavEdge, NavGraph, NavNode
 from autonomy.maps.planner import NoPathError, astar, edge_key
-from autonomy.maps.vectormap import NavEdge, NavGraph, NavNode
 from autonomy.navigation.config import NavigatorConfig
 from autonomy.navigation.navigator import Navigator
 from autonomy.navigation.surroundings import in_camera_view, wall_points

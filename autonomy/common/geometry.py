@@ -168,8 +168,9 @@ def segments_near_points(segments: np.ndarray, points: np.ndarray, tol_m: float)
     start, ``d`` the segment, and ``s = clip(r . d / max(d . d, 1e-12), 0, 1)``, in that
     order; a segment stops at its first point that is near. This is the navigator's near
     field test's own expression (a zero-length segment through the 1e-12 floor, not
-    :func:`_point_segment_nb`'s branch), kept so its sight lines stay bit-for-bit what the
-    earlier numpy code gave."""
+    :func:`_point_segment_nb`'s branch), computed to the last bit as the same expression
+    in numpy gives it, so a point at ``tol_m`` to the last bit is near or not exactly as
+    the expression says."""
     seg = np.ascontiguousarray(segments, dtype=np.float64).reshape(-1, 4)
     pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
     out = np.zeros(len(seg), dtype=np.bool_)

@@ -3,8 +3,8 @@
 The map tests of :mod:`autonomy.localization.health` judge FSPF's plane points, which leave out the
 floor. In an open hall a robot may see nothing but floor within the camera's range:
 with no plane points there is no evidence, and a belief a few metres away beside a wall
-goes unquestioned while the robot drives on it (a robot put down in an atrium drove
-23 m on its old belief, a kidnapped run replayed). Yet the floor is evidence too. A
+goes unquestioned while the robot drives on it, for tens of metres. Yet the floor is
+evidence too. A
 pixel whose ray, from the belief, meets a mapped wall before the floor should return
 that wall, or something nearer (people and furniture the map does not hold); a return
 from farther away, the floor beyond where the wall should stand, says that the wall is

@@ -44,179 +44,24 @@ The scan is then matched against the whole map (ours; the papers re-localized by
    false alarm ends where it began.
 """
 
+
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 
-from autonomy.common.errors import require_int, require_non_negative, require_positive
 from autonomy.common.geometry import points_from_frame, points_in_frame, sensor_view, wrap_angle
 from autonomy.localization.health import explain_points
+from autonomy.localization.likelihood_field import _cost, _grid_costs, _refine
+from autonomy.localization.relocalization_config import RelocalizationConfig
+from autonomy.localization.sight_through_walls import (
+    SEGMENT_INDEX_CELL_M,
+    _through_counts,
+    segment_index,
+)
 from autonomy.maps.freespace import FreeSpace
-
-
-@dataclass(frozen=True)
-class RelocalizationConfig:
-    """Scan, search and decision parameters of the global relocalization."""
-
-    grid_step_m: float = 0.4
-    """Coarse search: hypothesis positions every this far over the free space."""
-    heading_step_deg: float = 5.0
-    """Coarse search: hypothesis headings every this many degrees."""
-    coarse_points: int = 160
-    """Scan points scored per coarse hypothesis (an even subsample)."""
-    coarse_seeds: int = 4000
-    """The best this-many coarse hypotheses are re-ranked with their sight through walls
-    (and of the floor) before the distinct ones are refined. A scan of furniture and one
-    long wall at an open hall's edge ranked the true place 1,727th on cost alone (a
-    kidnapped run), behind offices whose walls the furniture fits."""
-    cost_seeds: int = 20
-    """... and the best this-many by cost alone are refined as well, unthinned: at a
-    coarse pose, half a grid step and half a heading step off, rays slip past pillars
-    and the ends of walls, so in a hall of pillars the ranking by sight through walls
-    can sink the true place behind open spaces the scan fits loosely; and two seeds a
-    grid step apart can fall into different basins (a doubled wall line), which only
-    the refinement tells apart. 0: the ranked seeds alone."""
-    coarse_robust_m: float = 0.5
-    """Cost saturation distance c of the coarse search (a coarse hypothesis is up to half
-    a grid step and half a heading step off)."""
-    fine_robust_m: float = 0.2
-    """Cost saturation distance of the refinement and the decision."""
-    modes: int = 40
-    """Modes kept and refined."""
-    mode_separation_m: float = 1.0
-    """Modes closer than this ..."""
-    mode_separation_deg: float = 25.0
-    """... and this in heading are the same mode."""
-    scan_cell_m: float = 0.05
-    """The scan keeps one point per cell of this size."""
-    max_scan_points: int = 6000
-    """The scan keeps at most this many points (the newest)."""
-    min_scan_points: int = 150
-    """No search before the scan has this many points ..."""
-    min_wall_m: float = 1.5
-    """A wall: a straight run of the scan's points at least this long
-    (:mod:`autonomy.localization.straight_runs`); the faces of the atrium's pillars and of the
-    furniture the map lacks are shorter."""
-    min_wall_points: int = 40
-    """Looked round, the robot drives to find walls while fewer of the scan's points than
-    this lie on walls (2 m of wall at 5 cm cells; 0: only while the scan is too small to
-    search). A scan of pillars and furniture fits no place clearly, the true one
-    included, however long the robot looks there."""
-    min_sweep_deg: float = 300.0
-    """... and the robot has turned this far (or moved ``min_travel_m``) while looking."""
-    min_travel_m: float = 2.0
-    """Distance that counts as looking as much as the sweep."""
-    accept_cost: float = 0.2
-    """The best mode must explain the scan this well (its score: the mean robust cost, 0 =
-    every point on a wall, plus the sight-through-walls term), or up to
-    ``accept_lead_cost`` with a clear lead ..."""
-    accept_margin_points: float = 40.0
-    """... and every other mode must cost at least this much more in total over the scan
-    (the mean cost difference times the scan's points: what that many points lying on a
-    wall in one mode and off every wall in the other add up to) ..."""
-    accept_margin: float = 0.02
-    """... and at least this much more per point."""
-    accept_lead_cost: float = 0.4
-    """A best mode scoring worse than ``accept_cost`` (up to this) is accepted when every
-    other mode scores worse by ``accept_lead`` per point (and ``accept_margin_points``
-    over the scan): a long look's scan, placed by dead reckoning over metres of
-    exploring, fits no place sharply, and clutter raises every mode's score alike; what
-    tells the place is the lead."""
-    accept_lead: float = 0.15
-    """The lead a mode scoring between ``accept_cost`` and ``accept_lead_cost`` needs over
-    every other mode (and the belief before the alarm must be ruled out:
-    :meth:`GlobalLocalizer.lead_allowed`). Wrong modes led by up to 0.14 on the tuning
-    runs, each scoring under ``accept_cost``."""
-    max_through: float = 0.1
-    """... and at most this fraction of the latest frame's points may lie beyond the map's
-    walls seen from it."""
-    search_every_s: float = 1.0
-    """Repeat the search this often while undecided (the scan grows)."""
-    explain_m: float = 0.15
-    """The check of the latest frame from a mode: a point within this of the first wall
-    on its ray is explained ... (as :class:`autonomy.localization.health.HealthConfig`)"""
-    through_m: float = 0.4
-    """... and one this far beyond it is seen through the wall (the scan's points: this
-    far along their ray behind a wall it crosses, and ``through_depth_m`` ...)"""
-    through_depth_m: float = 0.2
-    """... from the wall's line. The scan is placed by dead reckoning: a degree of drift
-    moves a point 4 m away 7 cm off its wall, 0.4 m along its ray when the wall is seen
-    10 degrees off it. 0 counts along the ray alone."""
-    confirmations: int = 2
-    """A mode is accepted once it has passed the decision in this many searches in a row
-    (within ``mode_separation_m`` and ``mode_separation_deg`` of itself)."""
-    prior_cost: float = 0.45
-    """A false alarm: the belief before the alarm is kept when it explains the scan at
-    least this well and within ``accept_margin`` of the best mode."""
-    prior_lead_cost: float = 0.8
-    """... or, scoring worse than ``prior_cost`` (up to this: a hall full of furniture the
-    map lacks), when every mode elsewhere scores worse by the acceptance margins. A
-    kidnapped robot's old belief loses to the place it is at by far more (0.5 or more
-    on the tuning runs)."""
-    through_weight: float = 3.0
-    """A mode's score is its cost plus this times the fraction of the scan's points it
-    sees through the map's walls (each point's ray from where the camera stood when it
-    saw it). Clutter can only hide walls, so one point seen through a wall speaks
-    against a mode more than an unexplained one: scans in open halls full of furniture
-    otherwise fit the many walls of offices elsewhere better than the hall itself."""
-    piece_s: float = 10.0
-    """A mode is scored on the scan in pieces: the points last seen within each span of
-    this many seconds, each piece refined on its own from the mode's pose (0: the scan
-    as one piece). The scan is placed by dead reckoning, and after a minute of turning
-    and driving its older walls lie a degree or two off the newer ones: a room's true
-    place then fits no better than the same room turned round."""
-    piece_shift_m: float = 0.3
-    """A piece's own refinement is kept only within this of the mode's position ..."""
-    piece_turn_deg: float = 3.0
-    """... and this of its heading (else the piece is scored at the mode's pose):
-    what a minute of dead reckoning drifts, not a different place."""
-    floor_weight: float = 3.0
-    """A mode's score adds this times the fraction of the floor points seen while
-    looking (:mod:`autonomy.perception.floor_rays`) whose sight line crosses one of the mode's
-    walls (0: the floor is not used) ... The floor is seen only
-    where no wall stands in between: a kidnapped robot at an open hall's edge, facing
-    furniture the map lacks, fit offices elsewhere (0.16) better than its true place
-    (0.29), and their walls stood across 26-46 % of the sight lines into the hall (none
-    at the true place) ..."""
-    floor_jamb_m: float = 0.15
-    """... counting a wall only where the sight line crosses it this far from its ends.
-    The scan is placed by dead reckoning, and a sight line through a door passes its
-    jamb within centimetres: from the true places of two kidnapped runs' office landings,
-    2-7 % of the sight lines crossed a wall, every one within 0.1 m of a door's jamb,
-    and counted, that let the office next door, or its mirror image in the other block,
-    win. At 0.2 m, a place along the atrium's south wall from the true one kept enough
-    of its crossings to stay within the acceptance lead of it."""
-    floor_stride_px: int = 16
-    """One floor point per this-many image columns and frame (40 on a 640-pixel row) ..."""
-    floor_cell_m: float = 0.25
-    """... and the scan keeps one per cell of this size (the newest): a look round sees
-    the floor on a ring about 4 m round, some 500 cells."""
-
-    def __post_init__(self) -> None:
-        require_positive(
-            self, "recovery.relocalization.", "grid_step_m", "heading_step_deg", "coarse_robust_m", "fine_robust_m",
-            "mode_separation_m", "mode_separation_deg", "scan_cell_m", "accept_cost", "search_every_s", "min_travel_m",
-            "accept_margin_points", "accept_margin", "accept_lead_cost", "accept_lead",
-        )
-        require_non_negative(
-            self, "recovery.relocalization.", "min_sweep_deg", "max_through", "prior_cost", "prior_lead_cost", "explain_m", "through_m",
-            "through_depth_m", "through_weight", "piece_s", "piece_shift_m", "piece_turn_deg", "floor_weight", "floor_jamb_m",
-        )
-        require_int(self, "recovery.relocalization.", "floor_stride_px", minimum=1)
-        require_int(self, "recovery.relocalization.", "coarse_seeds", minimum=1)
-        require_int(self, "recovery.relocalization.", "cost_seeds", minimum=0)
-        require_positive(self, "recovery.relocalization.", "floor_cell_m")
-        require_int(self, "recovery.relocalization.", "coarse_points", minimum=10)
-        require_int(self, "recovery.relocalization.", "modes", minimum=1)
-        require_int(self, "recovery.relocalization.", "confirmations", minimum=1)
-        require_int(self, "recovery.relocalization.", "max_scan_points", minimum=100)
-        require_int(self, "recovery.relocalization.", "min_scan_points", minimum=10)
-        require_int(self, "recovery.relocalization.", "min_wall_points", minimum=0)
-        require_positive(self, "recovery.relocalization.", "min_wall_m")
 
 
 @dataclass(frozen=True)
@@ -258,190 +103,6 @@ class SearchResult:
     """Why it was accepted or not."""
     hypotheses: int
     """Coarse hypotheses scored."""
-
-
-# --------------------------------------------------------------------------- kernels
-
-
-@numba.njit(cache=True, inline="always")
-def _point_cost(dist, ox, oy, inv_cell, qx, qy, robust2):  # pragma: no cover - numba
-    """Robust cost min(d^2, c^2) / c^2 of one world point (1 off the grid)."""
-    ny, nx = dist.shape
-    j = int(math.floor((qx - ox) * inv_cell))
-    k = int(math.floor((qy - oy) * inv_cell))
-    if j < 0 or k < 0 or j >= nx or k >= ny:
-        return 1.0
-    d = dist[k, j]
-    d2 = d * d
-    return d2 / robust2 if d2 < robust2 else 1.0
-
-
-@numba.njit(cache=True)
-def _cost(dist, ox, oy, inv_cell, x, y, c, s, pts, robust2):  # pragma: no cover - numba
-    acc = 0.0
-    for i in range(pts.shape[0]):
-        acc += _point_cost(dist, ox, oy, inv_cell, x + c * pts[i, 0] - s * pts[i, 1], y + s * pts[i, 0] + c * pts[i, 1], robust2)
-    return acc / max(pts.shape[0], 1)
-
-
-@numba.njit(cache=True, parallel=True)
-def _grid_costs(dist, ox, oy, inv_cell, xy, rot, robust2, out):  # pragma: no cover - numba
-    """out[h, k]: mean robust cost of the points pre-rotated by heading k (rot[k]) at
-    position xy[h] (a translation only: the rotation is shared by all positions). The
-    positions are shared out over the cores (each writes its own rows)."""
-    n = rot.shape[1]
-    for h in numba.prange(xy.shape[0]):
-        x, y = xy[h, 0], xy[h, 1]
-        for k in range(rot.shape[0]):
-            acc = 0.0
-            for i in range(n):
-                acc += _point_cost(dist, ox, oy, inv_cell, x + rot[k, i, 0], y + rot[k, i, 1], robust2)
-            out[h, k] = acc / max(n, 1)
-
-
-#: Cell size of the segment index that confirms the grid's wall hits exactly.
-SEGMENT_INDEX_CELL_M = 1.0
-
-
-def segment_index(seg: np.ndarray, x0: float, y0: float, cell: float, ny: int, nx: int) -> tuple[np.ndarray, np.ndarray]:
-    """CSR index (start (ny * nx + 1,), ids) of the segments passing through each cell of
-    a (ny, nx) grid with lower-left corner (x0, y0): the segments of cell k are
-    ``ids[start[k]:start[k + 1]]``."""
-    seg = np.asarray(seg, dtype=np.float64).reshape(-1, 4)
-    n = np.maximum(2, np.ceil(np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1]) / (0.25 * cell)).astype(np.int64) + 1)
-    sid = np.repeat(np.arange(len(seg)), n)
-    t = np.concatenate([np.linspace(0.0, 1.0, k) for k in n]) if len(seg) else np.zeros(0)
-    px = seg[sid, 0] + t * (seg[sid, 2] - seg[sid, 0])
-    py = seg[sid, 1] + t * (seg[sid, 3] - seg[sid, 1])
-    j = np.clip(np.floor((px - x0) / cell).astype(np.int64), 0, nx - 1)
-    k = np.clip(np.floor((py - y0) / cell).astype(np.int64), 0, ny - 1)
-    key = np.unique((k * nx + j) * max(len(seg), 1) + sid)
-    cells, ids = key // max(len(seg), 1), key % max(len(seg), 1)
-    start = np.searchsorted(cells, np.arange(ny * nx + 1)).astype(np.int64)
-    return start, ids.astype(np.int64)
-
-
-@numba.njit(cache=True, inline="always")
-def _crosses(seg, start, ids, ix0, iy0, inv_icell, iny, inx, ax, ay, ux, uy, hx, hy, end, qx, qy, depth, end_m):  # pragma: no cover - numba
-    """Whether the ray from (ax, ay) along unit (ux, uy) meets a segment before ``end``,
-    at least ``end_m`` from the segment's ends, that the ray's point (qx, qy) lies more
-    than ``depth`` behind (from the segment's line), among the indexed segments around
-    (hx, hy) (the cell of a grid wall hit and its eight neighbours)."""
-    cj = int(math.floor((hx - ix0) * inv_icell))
-    ck = int(math.floor((hy - iy0) * inv_icell))
-    for dk in range(-1, 2):
-        for dj in range(-1, 2):
-            j, k = cj + dj, ck + dk
-            if j < 0 or k < 0 or j >= inx or k >= iny:
-                continue
-            cell = k * inx + j
-            for q in range(start[cell], start[cell + 1]):
-                m = ids[q]
-                px, py = seg[m, 0], seg[m, 1]
-                ex, ey = seg[m, 2] - px, seg[m, 3] - py
-                den = ux * ey - uy * ex
-                if den == 0.0:
-                    continue
-                wx, wy = px - ax, py - ay
-                tt = (wx * ey - wy * ex) / den
-                lam = (wx * uy - wy * ux) / den
-                if 0.0 <= tt <= end and -1e-9 <= lam <= 1.0 + 1e-9:
-                    length = math.sqrt(ex * ex + ey * ey)
-                    if end_m > 0.0 and (lam * length < end_m or (1.0 - lam) * length < end_m):
-                        continue
-                    if abs(ex * (qy - py) - ey * (qx - px)) > depth * length:
-                        return True
-    return False
-
-
-@numba.njit(cache=True)
-def _through_count(
-    dist, ox, oy, inv_cell, x, y, c, s, origins, pts, margin, depth, seg, start, ids, ix0, iy0, inv_icell, iny, inx, end_m
-):  # pragma: no cover - numba
-    """How many robot-frame points ``pts``, seen from robot-frame ``origins``, lie behind
-    a wall their ray crosses at pose (x, y, theta = atan2(s, c)): more than ``margin``
-    along the ray and more than ``depth`` from the wall's line. The scan's points are
-    placed through dead reckoning: a degree of drift moves a point 4 m away 7 cm off
-    its wall, which is 0.4 m along its ray when the wall is seen 10 degrees off it.
-    The ray is marched over the distance transform (sphere tracing: each step is the
-    free distance around the sample less a cell, so no wall cell is stepped over); a
-    wall cell has distance 0. A grid wall is a cell thick, so a ray through a door
-    beside its jamb can clip one: each hit is confirmed on the map's segments around
-    it (``segment_index``; none given, ``start`` empty: the grid decides, along the
-    ray), crossing it at least ``end_m`` from its ends. Rays leaving the grid meet no
-    wall."""
-    ny, nx = dist.shape
-    cell = 1.0 / inv_cell
-    exact = start.shape[0] > 1
-    n = 0
-    for i in range(pts.shape[0]):
-        ax = x + c * origins[i, 0] - s * origins[i, 1]
-        ay = y + s * origins[i, 0] + c * origins[i, 1]
-        dx = c * (pts[i, 0] - origins[i, 0]) - s * (pts[i, 1] - origins[i, 1])
-        dy = s * (pts[i, 0] - origins[i, 0]) + c * (pts[i, 1] - origins[i, 1])
-        r = math.sqrt(dx * dx + dy * dy)
-        if r <= margin:
-            continue
-        ux, uy = dx / r, dy / r
-        t, end = 0.0, r - margin
-        # A wall just before ``end`` can lie in a grid cell the ray enters just after it.
-        limit = end + 2.0 * cell if exact else end
-        while t < limit:
-            j = int(math.floor((ax + t * ux - ox) * inv_cell))
-            k = int(math.floor((ay + t * uy - oy) * inv_cell))
-            if j < 0 or k < 0 or j >= nx or k >= ny:
-                break
-            d = dist[k, j]
-            if d < 0.5 * cell:
-                if not exact or _crosses(
-                    seg, start, ids, ix0, iy0, inv_icell, iny, inx, ax, ay, ux, uy, ax + t * ux, ay + t * uy, end,
-                    ax + r * ux, ay + r * uy, depth, end_m,
-                ):
-                    n += 1
-                    break
-            t += max(d - cell, 0.5 * cell)
-    return n
-
-
-@numba.njit(cache=True, parallel=True)
-def _through_counts(
-    dist, ox, oy, inv_cell, poses, origins, pts, margin, depth, seg, start, ids, ix0, iy0, inv_icell, iny, inx, end_m, out
-):  # pragma: no cover - numba
-    """:func:`_through_count` at each of ``poses`` (shared out over the cores)."""
-    for i in numba.prange(poses.shape[0]):
-        out[i] = _through_count(
-            dist, ox, oy, inv_cell, poses[i, 0], poses[i, 1], math.cos(poses[i, 2]), math.sin(poses[i, 2]), origins, pts,
-            margin, depth, seg, start, ids, ix0, iy0, inv_icell, iny, inx, end_m,
-        )
-
-
-@numba.njit(cache=True)
-def _refine(dist, ox, oy, inv_cell, pose, pts, robust2, step_m, step_rad, levels):  # pragma: no cover - numba
-    """Coarse-to-fine pattern search around ``pose``: at each level try the 26 neighbours
-    (+-step in x, y, theta), move to the best while it improves, then halve the steps."""
-    best = pose.copy()
-    bc = _cost(dist, ox, oy, inv_cell, best[0], best[1], math.cos(best[2]), math.sin(best[2]), pts, robust2)
-    sm, sr = step_m, step_rad
-    for _ in range(levels):
-        for _it in range(8):
-            improved = False
-            cx, cy, ct = best[0], best[1], best[2]
-            for a in range(-1, 2):
-                for b in range(-1, 2):
-                    for g in range(-1, 2):
-                        if a == 0 and b == 0 and g == 0:
-                            continue
-                        x, y, t = cx + a * sm, cy + b * sm, ct + g * sr
-                        cst = _cost(dist, ox, oy, inv_cell, x, y, math.cos(t), math.sin(t), pts, robust2)
-                        if cst < bc - 1e-12:
-                            bc = cst
-                            best[0], best[1], best[2] = x, y, t
-                            improved = True
-            if not improved:
-                break
-        sm *= 0.5
-        sr *= 0.5
-    return best, bc
 
 
 # --------------------------------------------------------------------------- the scan
@@ -813,7 +474,7 @@ class GlobalLocalizer:
         ``accept_cost``, accepted on its lead alone, is not taken while the prior still
         scores within ``prior_lead_cost``: a hall's clutter can fit an office elsewhere
         better than the hall, whereas a robot carried away leaves a prior that scores
-        worse than that (1.0 or more on the measured kidnapping)."""
+        worse than that (1.0 or more on the kidnappings measured)."""
         return mode.score <= self.cfg.accept_cost or prior is None or prior.score > self.cfg.prior_lead_cost
 
     def _decide(self, modes: list[Mode], n_points: int) -> tuple[Mode | None, str]:

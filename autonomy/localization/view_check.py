@@ -4,8 +4,8 @@ A robot that is carried away (kidnapped) or pushed sees a new view while its whe
 report no such motion. The map-based tests of :mod:`autonomy.localization.health` notice that only
 once the short-term averages have fallen for seconds, and for those seconds the
 navigator keeps placing the map's walls beside the robot, where the camera cannot see,
-through a belief that is somewhere else: a robot put down beside a door jamb drove into
-it. This check needs no map: the structure the camera saw in the last frame, moved by
+through a belief that is somewhere else, so a robot put down beside a door jamb can
+drive into it. This check needs no map: the structure the camera saw in the last frame, moved by
 the odometry since then, must appear where the current frame shows it (ours, the
 frame-to-frame consistency behind visual odometry, used here only as a yes/no test).
 
@@ -67,19 +67,18 @@ class ViewCheckConfig:
     lag_s: float = 0.0
     """Compare with the newest stored frame at least this old: 0, the last fresh frame.
     A person walking in front of the camera moves a few centimetres between two frames
-    but a few decimetres in 0.3 s, where the agreement with a view close to a person fell
-    to 0.2 on a tuning run; a robot put down elsewhere changes its view between two
-    frames ..."""
+    but a few decimetres in 0.3 s, enough to make a view close to a person disagree with
+    the belief right; a robot put down elsewhere changes its view between two frames ..."""
     max_lag_s: float = 0.5
     """... and no older than this (after a blackout there is nothing to compare with)."""
     max_gap_frames: int = 1
     """At most this many frames between the stored one and this one were not stored
     (blocked, or compared without evidence); after more, nothing is compared and this
-    frame starts afresh. People walk on while nothing is compared: in a crowd, after
-    people close in front had blocked the view for 0.2-0.35 s, the frames then agreed on
-    0.0-0.28 with the frame before the blockage, the belief right (a faulted 4 km run
-    replayed); 15 of the 16 kidnappings the test noticed on two kidnapped runs were
-    noticed against the frame just before the landing."""
+    frame starts afresh. People walk on while nothing is compared: in a crowd, people
+    close in front block the view for a few tenths of a second, and the first frames
+    after it disagree with the frame before the blockage although the belief is right.
+    Nearly every kidnapping the test notices is noticed against the frame just before
+    the landing, so a longer gap would add false alarms and few kidnappings noticed."""
     floor_m: float = 0.1
     """Points lower than this above the floor are the floor, dropped."""
     tol_m: float = 0.05
@@ -91,20 +90,20 @@ class ViewCheckConfig:
     count_empty: bool = True
     """A point predicted onto pixels that all returned nothing disagrees, when its depth
     there lies ``empty_margin_m`` inside the camera's range and its image column returned
-    the floor at least that deep (counting any return lower in the column instead, a
-    robot turning to face a wall 0.8 m away, whose lower part the pitched camera still
-    sees, was lost for nothing on the demo). A view of an open hall holds
-    nothing but floor within the camera's 4 m: compared only where both frames returned,
-    a robot carried from such a view to a corridor, or the other way, compared too few
-    points to be judged, and one put down beside a door drove on its old belief for 10 s
-    (a kidnapped run) ..."""
+    the floor at least that deep. Only the floor counts: counting any return lower in
+    the column, a robot turning to face a wall 0.8 m away, whose lower part the pitched
+    camera still sees while points of the last frame fall on its unseen upper part,
+    would be lost for nothing. A view of an open hall holds nothing but floor within the camera's
+    4 m: compared only where both frames returned, a robot carried from such a view to a
+    corridor, or the other way, would compare too few points to be judged and drive on
+    its old belief ..."""
     empty_margin_m: float = 0.3
     """... so far inside the range: nearer the ends the Kinect's noise or a few
     centimetres of motion take a point in or out of range."""
     min_points: int = 300
     """With fewer compared points (both ways) the frame carries no evidence (NaN): a
-    robot turning towards a person a metre away compared 102 points, most of them on
-    the person, and agreed on 28 % (a tuning run); a view of a room's or a corridor's
+    robot turning towards a person a metre away compares about a hundred points, most of
+    them on the person, and few of them agree; a view of a room's or a corridor's
     walls compares a thousand or more."""
 
     def __post_init__(self) -> None:

@@ -55,15 +55,15 @@ from autonomy.maps.graph_cover import (
 )
 from autonomy.maps.graph_edges import _Builder, _simplify, graph_components
 from autonomy.maps.graph_skeleton import _branches, thin
-from autonomy.maps.vectormap import (
+from autonomy.maps.navgraph import (
     DEFAULT_MAX_SPEED,
     NavEdge,
     NavGraph,
     NavNode,
-    VectorMap,
     format_navgraph_json,
     parse_navgraph_json,
 )
+from autonomy.maps.vectormap import VectorMap
 
 __all__ = [
     "GraphBuildConfig",

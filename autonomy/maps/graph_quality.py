@@ -22,8 +22,9 @@ import numpy as np
 from autonomy.common.geometry import WallIndex
 from autonomy.maps.freespace import FreeSpace
 from autonomy.maps.graph_builder import distance_to_segments, graph_components
+from autonomy.maps.navgraph import NavGraph
 from autonomy.maps.planner import adjacency, dijkstra
-from autonomy.maps.vectormap import NavGraph, VectorMap
+from autonomy.maps.vectormap import VectorMap
 
 __all__ = ["GraphQuality", "graph_quality", "grid_distances", "coverage"]
 

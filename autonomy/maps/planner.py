@@ -19,8 +19,8 @@ import numpy as np
 
 from autonomy.common.errors import InputError
 from autonomy.common.geometry import WallIndex
+from autonomy.maps.navgraph import NavGraph
 from autonomy.maps.ray_hits import _segment_hit
-from autonomy.maps.vectormap import NavGraph
 
 
 class NoPathError(InputError):

@@ -1,5 +1,8 @@
 """Policy-research tooling around ``DepthNav-v0``: building splits and the benchmark task
-(:mod:`sim.rl.splits`), policies (:mod:`sim.rl.policies`), the standard evaluation
-(:mod:`sim.rl.evaluate`), and PPO, demonstrations and behaviour cloning. Nothing here
-imports torch or stable-baselines3 at package import; docs/rl.md has the overview.
+(:mod:`sim.rl.splits`), policies (:mod:`sim.rl.policies`, made from a spec by
+:mod:`sim.rl.policy_specs`), the standard evaluation (:mod:`sim.rl.evaluate`), PPO
+(:mod:`sim.rl.ppo`, saved as :mod:`sim.rl.sb3` loads it), demonstrations (the dataset,
+:mod:`sim.rl.demos`; its recording, :mod:`sim.rl.demo_recording`) and behaviour cloning
+(:mod:`sim.rl.bc`). Nothing here imports torch or stable-baselines3 at package import;
+docs/rl.md has the overview.
 """

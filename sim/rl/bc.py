@@ -31,13 +31,12 @@ from torch import nn
 from autonomy.common.errors import InputError
 from autonomy.common.files import atomic_write, atomic_write_text, output_path
 from sim.rl.demos import Demonstrations
-from sim.rl.sb3 import FORMAT as SB3_FORMAT
-from sim.rl.sb3 import MODEL_FILE as SB3_MODEL_FILE
-from sim.rl.sb3 import POLICY_FILE, env_value, observation_kwargs
+from sim.rl.policy_files import BC_MODEL_FILE, POLICY_FILE, SB3_FORMAT, SB3_MODEL_FILE
+from sim.rl.sb3 import env_value, observation_kwargs
 
 #: Observation settings BC needs (the learned-policy ones); checked against the dataset.
 REQUIRED_OBS = {"depth_dtype": "uint8", "goal_format": "polar"}
-MODEL_FILE = "model.pt"
+MODEL_FILE = BC_MODEL_FILE
 
 
 def goal_features(goal: np.ndarray) -> np.ndarray:

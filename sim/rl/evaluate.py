@@ -28,7 +28,8 @@ import numpy as np
 
 from autonomy.common.files import output_path
 from sim.experiments.report_file import json_safe, write_json
-from sim.rl.policies import Policy, make_policy
+from sim.rl.policies import Policy
+from sim.rl.policy_specs import make_policy
 from sim.rl.splits import BENCHMARK_TASK, TASK_KEYS, EpisodeSpec, Split, episode_specs, get_split
 
 #: 95 % two-sided normal quantile, for the confidence half-widths of the summary.

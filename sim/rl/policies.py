@@ -1,14 +1,13 @@
-"""Policies that :func:`sim.rl.evaluate.evaluate` runs: the random and classical-stack
-baselines, and learned policies by spec (``make_policy("ppo:PATH")``)."""
+"""What a policy is to :func:`sim.rl.evaluate.evaluate` (:class:`Policy`), and the random
+and classical-stack baselines. The learned policies (:mod:`sim.rl.sb3`, :mod:`sim.rl.bc`)
+follow the same protocol; :func:`sim.rl.policy_specs.make_policy` makes any of them from
+a spec such as ``"ppo:PATH"``."""
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
-
-from autonomy.common.errors import InputError
 
 
 @runtime_checkable
@@ -63,38 +62,3 @@ class ClassicalPolicy:
 
     def act(self, obs: dict[str, np.ndarray], info: dict[str, Any]) -> np.ndarray:
         return info["stack_action"]
-
-
-POLICY_SPECS = "'random', 'random:SEED', 'classical', 'ppo:PATH' or 'bc:PATH' (a saved model directory)"
-
-
-def make_policy(spec: str) -> Policy:
-    """A policy from its spec: 'random' (or 'random:SEED'), 'classical', 'ppo:PATH'
-    (``sim.rl.sb3.SB3Policy.load(PATH)``) or 'bc:PATH' (``sim.rl.bc.BCPolicy.load(PATH)``),
-    the last two imported only then."""
-    kind, _, arg = str(spec).partition(":")
-    if kind == "random":
-        if not arg:
-            return RandomPolicy()
-        try:
-            seed = int(arg)
-        except ValueError:
-            seed = -1
-        if seed < 0:
-            raise InputError(f"policy {spec!r}: expected random:SEED with an integer SEED >= 0")
-        return RandomPolicy(seed)
-    if kind == "classical" and not arg:
-        return ClassicalPolicy()
-    if kind in ("ppo", "bc"):
-        if not arg:
-            raise InputError(f"policy {spec!r}: expected {kind}:PATH, the directory of a saved model")
-        if not Path(arg).exists():
-            raise InputError(f"policy {spec!r}: {arg} not found (expected the directory of a saved model)")
-        if kind == "bc":
-            from sim.rl.bc import BCPolicy
-
-            return BCPolicy.load(arg)
-        from sim.rl.sb3 import SB3Policy
-
-        return SB3Policy.load(arg)
-    raise InputError(f"policy {spec!r} unknown (expected {POLICY_SPECS})")

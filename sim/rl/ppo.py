@@ -37,11 +37,13 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv,
 
 from autonomy.common.errors import InputError
 from autonomy.common.files import atomic_write, atomic_write_text, output_path
+from sim.rl.evaluate import evaluate
 from sim.rl.sb3 import (
     FORMAT,
     FORMAT_VERSION,
     MODEL_FILE,
     POLICY_FILE,
+    SB3Policy,
     env_value,
     observation_kwargs,
     read_policy_json,
@@ -474,9 +476,6 @@ def train_ppo(cfg: PPOTrainConfig, resume: bool = False, progress: bool = False,
 def evaluate_saved(out: Path, episodes: int, env_kwargs: Mapping[str, Any] | None = None,
                    progress: bool = False) -> dict[str, Any]:
     """Evaluate the saved policy in ``out`` on the val split, write eval.json, return its summary."""
-    from sim.rl.evaluate import evaluate
-    from sim.rl.sb3 import SB3Policy
-
     report = evaluate(SB3Policy.load(out), split="val", episodes=episodes, env_kwargs=env_kwargs or None,
                       progress=progress, out=out / EVAL_FILE)
     return dict(report.summary)

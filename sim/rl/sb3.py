@@ -21,11 +21,11 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.base_class import BaseAlgorithm
 
 from autonomy.common.errors import InputError
+from sim.rl.policy_files import BC_MODEL_FILE, POLICY_FILE, SB3_FORMAT, SB3_MODEL_FILE
 
-MODEL_FILE = "model.zip"
-POLICY_FILE = "policy.json"
+MODEL_FILE = SB3_MODEL_FILE
 #: Written into policy.json; a reader refuses other formats.
-FORMAT = "depthnav-sb3-policy"
+FORMAT = SB3_FORMAT
 FORMAT_VERSION = 1
 #: EnvConfig fields that shape what a policy observes: a saved policy's env_kwargs() are
 #: the ones of these it was trained with (the task and buildings are the evaluation's).
@@ -93,8 +93,6 @@ class SB3Policy:
         d = Path(path)
         if not d.is_dir():
             raise InputError(f"{d}: no such policy directory (expected one with {MODEL_FILE} and {POLICY_FILE}, as `depthnav train ppo` writes)")
-        from sim.rl.bc import MODEL_FILE as BC_MODEL_FILE
-
         if not (d / MODEL_FILE).exists() and (d / BC_MODEL_FILE).is_file():
             raise InputError(f"{d}: a behaviour-cloning model, not a stable-baselines3 policy (evaluate it as bc:{d})")
         for name in (POLICY_FILE, MODEL_FILE):

@@ -25,14 +25,8 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from autonomy.common.geometry import segment_distances
-from autonomy.maps.vectormap import (
-    MapFormatError,
-    VectorMap,
-    load_navgraph,
-    load_vectormap,
-    save_navgraph,
-    save_vectormap,
-)
+from autonomy.maps.navgraph import load_navgraph, save_navgraph
+from autonomy.maps.vectormap import MapFormatError, VectorMap, load_vectormap, save_vectormap
 from sim.simulator.floor_generator import BuildingConfig, generate_building
 from sim.simulator.floorplan import (
     Blueprint,

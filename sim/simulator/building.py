@@ -27,8 +27,9 @@ from autonomy.common.errors import InputError
 from autonomy.common.geometry import point_segment_distance
 from autonomy.maps.freespace import FreeSpace, FreeSpaceConfig, build_free_space
 from autonomy.maps.graph_builder import GraphBuildConfig, cached_navgraph, graph_components
+from autonomy.maps.navgraph import NavGraph
 from autonomy.maps.planner import astar, path_points
-from autonomy.maps.vectormap import NavGraph, VectorMap
+from autonomy.maps.vectormap import VectorMap
 from autonomy.navigation.avoidance import AvoidanceConfig
 from sim.simulator.actors import Furniture, Person
 

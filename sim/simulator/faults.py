@@ -56,8 +56,8 @@ from autonomy.common.geometry import (
     segment_distances,
 )
 from autonomy.maps.graph_builder import graph_components
+from autonomy.maps.navgraph import NavGraph
 from autonomy.maps.planner import adjacency, astar, dijkstra, path_points
-from autonomy.maps.vectormap import NavGraph
 from sim.simulator.actors import Person, furniture_body, parked_person
 from sim.simulator.building import Building, random_people
 from sim.simulator.fault_config import (

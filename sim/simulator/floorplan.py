@@ -24,7 +24,8 @@ import numpy as np
 
 from autonomy.common.errors import InputError
 from autonomy.common.geometry import WallIndex
-from autonomy.maps.vectormap import NavEdge, NavGraph, NavNode, VectorMap
+from autonomy.maps.navgraph import NavEdge, NavGraph, NavNode
+from autonomy.maps.vectormap import VectorMap
 from sim.simulator.irregular import Door, Piece
 
 Box = tuple[float, float, float, float]

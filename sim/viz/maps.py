@@ -19,7 +19,8 @@ from matplotlib.collections import LineCollection  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
 from autonomy.common.errors import InputError  # noqa: E402
-from autonomy.maps.vectormap import NavGraph, VectorMap  # noqa: E402
+from autonomy.maps.navgraph import NavGraph  # noqa: E402
+from autonomy.maps.vectormap import VectorMap  # noqa: E402
 
 __all__ = ["render_map"]
 

@@ -40,7 +40,8 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from autonomy.common.errors import InputError
-from autonomy.maps.vectormap import NavGraph, VectorMap
+from autonomy.maps.navgraph import NavGraph
+from autonomy.maps.vectormap import VectorMap
 from autonomy.perception.camera import CameraIntrinsics, CameraMount
 
 TRUTH_COLOR = (40, 170, 60)

@@ -12,7 +12,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from autonomy.maps.vectormap import NavGraph, VectorMap
+from autonomy.maps.navgraph import NavGraph
+from autonomy.maps.vectormap import VectorMap
 from autonomy.navigation.config import NavCommand
 from autonomy.stack import RobotStack
 from sim.scenario import Scenario

@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 
 from autonomy.common.errors import InputError
+from autonomy.maps.navgraph import NavEdge, NavGraph, NavNode
 from autonomy.maps.planner import NoPathError, parts
-from autonomy.maps.vectormap import NavEdge, NavGraph, NavNode, VectorMap
+from autonomy.maps.vectormap import VectorMap
 from autonomy.navigation.navigator import Navigator
 from autonomy.stack import RobotStack, StackConfig
 from tests.helpers import box_segments

@@ -22,8 +22,8 @@ from autonomy.maps.graph_builder import (
     thin,
 )
 from autonomy.maps.graph_quality import coverage, graph_quality, grid_distances
+from autonomy.maps.navgraph import load_navgraph, parse_navgraph_json
 from autonomy.maps.planner import astar, path_length
-from autonomy.maps.vectormap import load_navgraph, parse_navgraph_json
 from sim.simulator import blueprints
 from tests.helpers import box_segments, segments_map
 

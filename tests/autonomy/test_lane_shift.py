@@ -9,7 +9,7 @@ import numpy as np
 from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 
-from autonomy.maps.vectormap import NavEdge, NavGraph, NavNode
+from autonomy.maps.navgraph import NavEdge, NavGraph, NavNode
 from autonomy.navigation.config import NavigatorConfig
 from autonomy.navigation.navigator import Navigator
 

@@ -398,8 +398,9 @@ def test_a_sliver_only_a_tail_sample_explains_does_not_take_the_belief() -> None
     """At the mean the sliver's rays pass the face's end and meet a wall 0.2 m behind
     it; refined onto that wall, the points lose their line, and the association check
     leaves the 19 samples round the mean nothing to be scored on. One sample 1.2 m off
-    (and 8 degrees) puts the sliver on another wall and used to take every weight: the
-    belief jumped 1.0 m from the truth in one frame. Now nobody is scored on the frame."""
+    (and 8 degrees) puts the sliver on another wall; scored alone, it would take every
+    weight and the belief would jump 1.0 m from the truth in one frame. Nobody is scored
+    on the frame."""
     loc, pts, nrm, truth = _sliver_frame(CGRConfig())
     before = loc.estimate().pose.copy()
     assert math.hypot(*(before[:2] - truth[:2])) < 0.2

@@ -11,7 +11,7 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from autonomy.common.errors import InputError
-from autonomy.maps.vectormap import NavEdge, NavGraph, NavNode
+from autonomy.maps.navgraph import NavEdge, NavGraph, NavNode
 from autonomy.navigation.config import NavigatorConfig
 from autonomy.navigation.navigator import Navigator
 from autonomy.navigation.surroundings import WALL_STEP_M, in_camera_view, wall_points

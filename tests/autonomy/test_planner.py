@@ -11,9 +11,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from autonomy.common.errors import InputError
+from autonomy.maps.navgraph import NavEdge, NavGraph, NavNode
 from autonomy.maps.planner import NoPathError, astar, blind_lengths, edge_key, path_length
 from autonomy.maps.raycast import rays_hit
-from autonomy.maps.vectormap import NavEdge, NavGraph, NavNode
 
 
 def _graph(xy: np.ndarray, edges: list[tuple[int, int]], stairs: set[int] = frozenset()) -> NavGraph:

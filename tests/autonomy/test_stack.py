@@ -11,7 +11,8 @@ import pytest
 
 from autonomy.common.errors import InputError
 from autonomy.common.geometry import compose_pose
-from autonomy.maps.vectormap import NavEdge, NavGraph, NavNode, VectorMap
+from autonomy.maps.navgraph import NavEdge, NavGraph, NavNode
+from autonomy.maps.vectormap import VectorMap
 from autonomy.navigation.config import NavigatorConfig
 from autonomy.perception.camera import DepthCamera
 from autonomy.stack import LocalizationConfig, RobotStack, StackConfig

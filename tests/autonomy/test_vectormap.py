@@ -12,21 +12,23 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from autonomy.common.errors import InputError
-from autonomy.maps.vectormap import (
-    MapFormatError,
+from autonomy.maps.navgraph import (
     NavEdge,
     NavGraph,
     NavNode,
-    VectorMap,
     format_navgraph_json,
+    load_navgraph,
+    parse_navgraph_json,
+    save_navgraph,
+)
+from autonomy.maps.vectormap import (
+    MapFormatError,
+    VectorMap,
     format_vectormap_json,
     format_vectormap_text,
-    load_navgraph,
     load_vectormap,
-    parse_navgraph_json,
     parse_vectormap_json,
     parse_vectormap_text,
-    save_navgraph,
     save_vectormap,
 )
 

@@ -273,10 +273,10 @@ def test_a_robot_carried_from_walls_into_an_open_hall_disagrees(scene) -> None:
 def test_a_landing_after_seconds_of_open_hall_is_caught_on_its_first_frame(scene, hall_frames: int) -> None:
     """The robot drove across an open hall (each frame nothing but floor, so nothing to
     compare) and was put down beside a door: whatever the number of hall frames, the
-    landing is judged against the last of them. Before, frames without evidence were not
-    kept, the reference was forgotten every few frames, and a landing that came on such a
-    frame became the next one's reference unjudged (a kidnapped run drove on its old belief
-    for 10 s)."""
+    landing is judged against the last of them. Frames without evidence are kept as the
+    reference: were they dropped, the reference would be forgotten every few frames, and
+    a landing that came on such a frame would become the next one's reference unjudged,
+    the robot driving on its old belief."""
     check = ViewCheck(CFG, CAM.intrinsics, RC, CAM.min_range_m, CAM.max_range_m)
     step = np.array([0.01, 0.0, 0.0])
     odom = np.zeros(3)

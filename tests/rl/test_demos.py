@@ -18,7 +18,8 @@ torch = pytest.importorskip("torch")  # the rl extra
 from autonomy.common.errors import InputError  # noqa: E402
 from sim.cli import main  # noqa: E402
 from sim.rl.bc import BCPolicy, train_bc  # noqa: E402
-from sim.rl.demos import Demonstrations, load_demonstrations, record_demonstrations  # noqa: E402
+from sim.rl.demo_recording import record_demonstrations  # noqa: E402
+from sim.rl.demos import Demonstrations, load_demonstrations  # noqa: E402
 from sim.rl.splits import BENCHMARK_TASK, LEARNER_OBS, SPLITS, episode_specs  # noqa: E402
 from tests.helpers import GL, err_line  # noqa: E402
 
@@ -145,9 +146,9 @@ def test_the_loader_names_the_file_and_the_problem(recorded, tmp_path: Path) -> 
 
 @needs_gl
 def test_an_interrupted_recording_keeps_the_finished_episodes(tmp_path: Path, monkeypatch) -> None:
-    import sim.rl.evaluate as ev
+    import sim.rl.demo_recording as rec
 
-    real = ev.run_episode
+    real = rec.run_episode
     calls = []
 
     def run_episode(env, policy, spec, on_step=None):
@@ -162,7 +163,7 @@ def test_an_interrupted_recording_keeps_the_finished_episodes(tmp_path: Path, mo
             return real(env, policy, spec, interrupting)
         return real(env, policy, spec, on_step)
 
-    monkeypatch.setattr(ev, "run_episode", run_episode)
+    monkeypatch.setattr(rec, "run_episode", run_episode)
     out = tmp_path / "cut.npz"
     with pytest.raises(KeyboardInterrupt):
         record_demonstrations("train", episodes=3, seed=0, out=out, env_kwargs={"max_steps": 15}, progress=False)
@@ -218,7 +219,7 @@ def test_bc_cli_arguments_and_a_saved_policy(recorded, tmp_path: Path, capsys) -
     pol, hist = train_bc(d, epochs=2, batch_size=32, seed=0, lr=1e-3)
     loaded = BCPolicy.load(tmp_path / "m")
     np.testing.assert_array_equal(loaded.predict(d.observations), pol.predict(d.observations))
-    from sim.rl.policies import make_policy
+    from sim.rl.policy_specs import make_policy
 
     by_spec = make_policy(f"bc:{tmp_path / 'm'}")
     np.testing.assert_array_equal(by_spec.predict(d.observations), pol.predict(d.observations))

@@ -26,7 +26,8 @@ from sim.rl.evaluate import (
     spl,
     summarize,
 )
-from sim.rl.policies import ClassicalPolicy, RandomPolicy, make_policy
+from sim.rl.policies import ClassicalPolicy, RandomPolicy
+from sim.rl.policy_specs import make_policy
 from sim.rl.splits import BENCHMARK_TASK, LEARNER_OBS, episode_specs
 from tests.helpers import GL, err_line
 

@@ -17,7 +17,8 @@ import torch
 import sim  # noqa: F401  (registers DepthNav-v0)
 from autonomy.common.errors import InputError
 from sim.cli import build_parser, main
-from sim.rl.policies import Policy, make_policy
+from sim.rl.policies import Policy
+from sim.rl.policy_specs import make_policy
 from sim.rl.ppo import PPOTrainConfig, config_with, resume_config, train_ppo
 from sim.rl.sb3 import SB3Policy
 from sim.rl.splits import BENCHMARK_TASK, LEARNER_OBS, SPLITS, split_env_kwargs

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from autonomy.common.errors import InputError
-from autonomy.maps.vectormap import MapFormatError, NavGraph
+from autonomy.maps.navgraph import NavGraph
+from autonomy.maps.vectormap import MapFormatError
 from sim.simulator.blueprints import (
     ASSETS_DIR,
     SHIPPED,

@@ -58,7 +58,7 @@ def test_map_render(tmp_path: Path) -> None:
 
 
 def test_snapshot_writes_depth(tmp_path: Path) -> None:
-    from autonomy.maps.vectormap import load_navgraph
+    from autonomy.maps.navgraph import load_navgraph
 
     g = load_navgraph(ASSETS_DIR / "small_floor.navigation.json")
     x, y = g.node_xy()[0]

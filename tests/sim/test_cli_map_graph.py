@@ -5,7 +5,8 @@ from __future__ import annotations
 import json
 
 from autonomy.common.geometry import WallIndex
-from autonomy.maps.vectormap import load_navgraph, load_vectormap, save_vectormap
+from autonomy.maps.navgraph import load_navgraph
+from autonomy.maps.vectormap import load_vectormap, save_vectormap
 from sim.cli import main
 from sim.scenario import ASSETS_DIR
 from tests.helpers import box_segments, err_line, segments_map

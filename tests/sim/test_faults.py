@@ -12,8 +12,8 @@ import pytest
 
 from autonomy.common.errors import InputError
 from autonomy.common.geometry import compose_pose, point_segment_distance, relative_pose
+from autonomy.maps.navgraph import NavEdge, NavGraph, NavNode
 from autonomy.maps.planner import astar, path_points
-from autonomy.maps.vectormap import NavEdge, NavGraph, NavNode
 from autonomy.perception.camera import CameraIntrinsics, CameraMount
 from sim.config import from_dict, to_dict
 from sim.simulator import blueprints

@@ -8,14 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from autonomy.maps.vectormap import (
-    NavEdge,
-    NavGraph,
-    NavNode,
-    VectorMap,
-    save_navgraph,
-    save_vectormap,
-)
+from autonomy.maps.navgraph import NavEdge, NavGraph, NavNode, save_navgraph
+from autonomy.maps.vectormap import VectorMap, save_vectormap
 from sim.experiments.runner import run_scenario
 from sim.scenario import load_scenario
 

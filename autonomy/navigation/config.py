@@ -29,14 +29,14 @@ class NavigatorConfig:
     """Carrot distance on and before narrow edges (ours, as nav2's regulated pure pursuit
     shortens its lookahead where it must track closely; 0 = off, ``lookahead_m``
     everywhere): carrot following cuts a plan's corner by about a third of its lookahead
-    and closes the offset over a few lookaheads, so a robot turning off a corridor 1 m
-    before a 0.91 m door entered it 0.16 m off its centre, with 0.15 m beside the robot
-    at the centre, and a pose estimate 6 cm off put it onto the jamb."""
+    and closes the offset over a few lookaheads. With the long carrot a robot turning off
+    a corridor 1 m before a 0.91 m door enters it about 0.16 m off its centre, where a
+    centred robot has 0.15 m to spare on each side; the short carrot lines it up first."""
     narrow_horizon_m: float = 1.0
     """While the carrot is short, Eq. 5 scores open lengths only up to this (ours; 0 =
     uncapped): leaving a door towards a corridor's wall 1.8 m ahead, the corridor's two
-    ways, open 4 m at 35 degrees off the carrot, out-scored it, and the robot turned to
-    one and the other in turn rather than drive out."""
+    ways, open 4 m at 35 degrees off the carrot, would out-score the carrot's direction,
+    and the robot would turn to one and the other in turn rather than drive out."""
     narrow_slack_m: float = 0.25
     """An edge is narrow when it passes a door (``has_door``) or its ``max_clearance``
     leaves less than this beside the robot's radius ..."""
@@ -47,7 +47,7 @@ class NavigatorConfig:
     corridor's centre line has its stretch from 0.31 m before the door, so the corner
     before it is taken tightly too, and the carrot is long again 0.3 m past the jambs
     rather than 1 m on at the corridor's centre, where a short carrot pointing at the
-    far wall left the robot turning to and fro between the corridor's two ways."""
+    far wall would leave the robot turning to and fro between the corridor's two ways."""
     arrival_radius_m: float = 0.35
     """The goal counts as reached within this distance."""
     heading_gain: float = 2.0
@@ -77,9 +77,9 @@ class NavigatorConfig:
     backoff_clearance_m: float = 0.08
     """... and must keep this clearance (beyond the robot radius) from them. The map's
     walls are placed through the pose estimate, and nothing behind the robot corrects
-    it: the margin covers the localization's usual error (a few cm; 6 cm across a door
-    once put a robot backing 3 cm clear of the map's jamb onto the real one). A 0.92 m
-    door leaves 0.16 m beside the robot, so it backs through one within 8 cm of its
+    it: the margin covers the localization's usual error (a few cm; an estimate 6 cm off
+    across a door puts a robot backing 3 cm clear of the map's jamb onto the real one). A
+    0.92 m door leaves 0.16 m beside the robot, so it backs through one within 8 cm of its
     centre; elsewhere it turns towards its plan or looks back, which the camera sees."""
     trail_s: float = 30.0
     """A back-off needs the evidence driving forward has, that the space is free: the
@@ -118,9 +118,9 @@ class NavigatorConfig:
     long_detour_wait_s: float = 10.0
     """... is taken only once the block has held this long since such a re-plan was
     first put off (ours; 0 = at once): a person stepping out at a corridor's corner
-    made the robot give that corridor up for ``blocked_edge_s`` and drive 100 m round
-    the building, where the person had gone a few seconds later. Meanwhile it waits,
-    backs off and tries the way again, as without marks."""
+    blocks it for a few seconds, and giving that corridor up for ``blocked_edge_s`` can
+    mean 100 m round the building. Meanwhile the robot waits, backs off and tries the
+    way again, as without marks."""
     look_turn_rate_rad_s: float = 0.6
     """Yaw rate of :meth:`Navigator.look_around` (turning in place so that the camera
     sweeps the walls, e.g. while the localization searches for the robot)."""
@@ -199,7 +199,7 @@ class NavigatorConfig:
     within ``lane_check_m``), the carrot moves sideways to the nearest offset whose line
     is clear, keeping to the side chosen before. Eq. 5 alone steers towards the carrot on
     the plan, right behind an obstacle standing in the middle of a corridor: both ways
-    round score alike, and the robot swung from one to the other and never passed."""
+    round score alike, and the robot would swing from one to the other and never pass."""
     lane_check_m: float = 2.5
     """... looking this far ahead along a straight stretch of the plan."""
     side_hysteresis: float = 1.0
@@ -213,16 +213,15 @@ class NavigatorConfig:
     memory_beside_s: float = 10.0
     """Remembered points out of the camera's view within ``memory_beside_m`` of the robot
     count this long for the avoidance, past ``memory_s``: a robot rounding furniture
-    drives beside what it saw of it for several seconds (an unmapped chair, out of view
-    for 5 s as the robot turned round its end, was forgotten, and the robot's side met
-    it). People who walk on leave their points behind this long at most, and only while
+    drives beside what it saw of it for several seconds (turning round an unmapped
+    chair's end keeps the chair out of view for about 5 s, longer than ``memory_s``,
+    while the robot's side passes it). People who walk on leave their points behind this long at most, and only while
     the robot stays near them. 0 = off (``memory_s`` alone)."""
     memory_beside_m: float = 1.0
     """... this far from the robot's centre at most."""
     memory_blind_s: float = 10.0
     """Remembered points right in front of the robot, closer than the camera sees, count
-    until the camera sees their place again, but this long at most.
-    The memory covers the seconds between losing sight of something and getting away
+    until the camera sees their place again, but this long at most. The memory covers the seconds between losing sight of something and getting away
     from it (a back-off brings it into view); something standing that close for longer
     hides the floor in front, which the near field checks every frame. A point the robot
     cannot look at again (its back-off ended short, its own trail leading sideways)
@@ -233,9 +232,9 @@ class NavigatorConfig:
     shadow_m: float = 0.6
     """Each sensed point within ``memory_radius_m`` also marks the space behind it, seen
     from the camera, this deep as occupied until the camera looks there
-    (:mod:`autonomy.navigation.obstacle_memory`): the camera sees only an obstacle's near faces, and
-    a robot rounding it meets the far ones (an unmapped chair's far corner, never seen,
-    met the robot's side as it turned round the chair). 0.6 m covers the far side of the
+    (:mod:`autonomy.navigation.obstacle_memory`): the camera sees only an obstacle's near
+    faces, and a robot rounding it meets the far ones (an unmapped chair's far corner,
+    never seen, is where the robot's side passes as it turns round the chair). 0.6 m covers the far side of the
     building's chairs and boxes and most of its tables; 0 = off."""
     memory_cell_m: float = 0.05
     """Remembered points are kept on a grid of this size (one point per cell)."""

@@ -78,9 +78,7 @@ def drive(run: Run, recorder: RunLogger | None, progress: bool | None, checkpoin
         plan = run.stack.set_goal(mission.goal, 0.0, mission.start_pose)
         start_leg(mission, scn.mission, plan.remaining_m, plan.nodes, 0.0, scn.navigator.cruise_speed_mps)
         # The first frame, so the navigator sees before it moves.
-        run.out = run.stack.step(
-            first.depth, None, 0.0, None if run.use_estimate else first.pose, localize=False, operator=lambda s: _note_route(run, s)
-        )
+        run.out = run.stack.step(first.depth, None, 0.0, None if run.use_estimate else first.pose, localize=False)
         while run.frames < max_frames and not mission.done:
             if not tick(run, recorder):
                 break
@@ -119,7 +117,7 @@ def tick(run: Run, recorder: RunLogger | None) -> bool:
     world, out = run.world, run.out
     t = float(world.data.time)
     if run.faults is not None:
-        run.faults.before_step(t, run.distance_m, run.route)
+        run.faults.before_step(t, run.distance_m, run.mission.goal)
     pose = world.robot.pose(world.data)
     control_pose = out.estimate if run.use_estimate else pose
     if out.plan is not None:
@@ -143,7 +141,7 @@ def tick(run: Run, recorder: RunLogger | None) -> bool:
     heavy = recorder is not None and recorder.heavy(run.frames + 1)
     run.out = out = run.stack.step(
         frame.depth, frame.increment, frame.t, None if run.use_estimate else frame.pose,
-        operator=lambda sensed: _note_route(run, sensed) or check_localization(run, frame, sensed), correspondences=heavy,
+        operator=lambda sensed: check_localization(run, frame, sensed), correspondences=heavy,
     )
     run.fspf_counts.append(fspf_counts(out))
     if out.frame_fault:
@@ -188,12 +186,6 @@ def next_leg(
     plan = stack.set_goal(mission.goal, t, control_pose)
     start_leg(mission, scn.mission, plan.remaining_m, plan.nodes, t, scn.navigator.cruise_speed_mps)
     return stack.redecide(t, None if run.use_estimate else pose)
-
-
-def _note_route(run: Run, sensed: StackOutput) -> None:
-    """Keep the robot's plan before its decision, where a blockage fault goes."""
-    plan = sensed.plan
-    run.route = None if plan is None or len(plan.path) < 2 else plan.path
 
 
 def note_crash(run: Run, exc: Exception) -> None:

@@ -67,7 +67,7 @@ def truth_at(run: Run, t: float) -> list[float] | None:
 
 def fault_report(run: Run) -> list[dict]:
     """Per injected fault: when it happened and the true pose before and after it started
-    (a kidnapping's two places), when the stack noticed it (its first lost, blind or
+    (a kidnapping's two places), where a blockage stood, when the stack noticed it (its first lost, blind or
     mount-corrected event, or a frame it refused, after the start) and the true pose
     then, when it was over for the robot (kidnap: its relocalization; the others: the
     fault's end, then the error back below ``recovered_error_m``), the true error before
@@ -83,7 +83,7 @@ def fault_report(run: Run) -> list[dict]:
     for ev in fault_events(run):
         t0 = float(ev["t_start"])
         end = float(ev["t_end"]) if ev.get("t_end") is not None else (float(run.times[-1]) if ev["kind"] != "kidnap" else t0)
-        rec = {k: ev[k] for k in ("kind", "t_start", "t_end", "distance_m", "truth_before", "truth_after") if k in ev}
+        rec = {k: ev[k] for k in ("kind", "t_start", "t_end", "distance_m", "truth_before", "truth_after", "where") if k in ev}
         if ev.get("skipped"):
             rec["skipped"] = ev["skipped"]
         seen = [(t, what) for t, what in signals if t0 <= t <= t0 + NOTICE_WINDOW_S]

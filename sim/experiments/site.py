@@ -103,8 +103,6 @@ class Run:
     """... and the longest such stretch of the run."""
     faults: FaultInjector | None = None
     """The fault injector when the scenario has faults."""
-    route: np.ndarray | None = None
-    """The robot's plan (K, 2) before its last decision, where a blockage fault goes."""
     crash: dict | None = None
     """Where and how the loop stopped on an error (None when it did not)."""
     crash_exc: Exception | None = None

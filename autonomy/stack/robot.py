@@ -41,7 +41,7 @@ from autonomy.common.geometry import compose_pose
 from autonomy.localization.cgr import CGRLocalizer, UpdateStats
 from autonomy.localization.health import HealthMonitor, HealthSample
 from autonomy.localization.observation import correspond
-from autonomy.localization.relocalization import GlobalLocalizer, Scan
+from autonomy.localization.relocalization import Scan
 from autonomy.localization.view_check import ViewCheck
 from autonomy.maps.planner import NoPathError
 from autonomy.maps.raycast import SceneQuery, load_or_build
@@ -427,10 +427,6 @@ class RobotStack:
         """Build the relocalization's map search now rather than at the first alarm
         (:meth:`autonomy.stack.lost.LostRecovery.prepare`)."""
         self.lost.prepare()
-
-    def global_localizer(self) -> GlobalLocalizer:
-        """The relocalization's map search on this stack's map (built on first use)."""
-        return self.lost.global_localizer()
 
     # -- deciding ------------------------------------------------------------------------
     def decide(self, t: float, pose: np.ndarray | None = None) -> NavCommand:

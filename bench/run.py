@@ -225,7 +225,7 @@ def _stack_frame_samples(vm, graph, frames: list[np.ndarray], poses: list[np.nda
     and the stack would be timed relocalizing instead. Raises if it leaves tracking."""
     from autonomy.common.geometry import relative_pose
     from autonomy.maps.raycast import SceneQuery, VisibilityGrid
-    from autonomy.stack import LOCALIZATION_GRID, RobotStack, StackConfig
+    from autonomy.stack import LOCALIZATION_GRID, RobotStack, StackConfig, StackOutput
 
     scene = SceneQuery(vm, VisibilityGrid.build(vm, LOCALIZATION_GRID))
     stack = RobotStack(vm, graph, StackConfig(camera=cfg.depth_camera()), rng=np.random.default_rng(0), scene=scene)
@@ -241,6 +241,7 @@ def _stack_frame_samples(vm, graph, frames: list[np.ndarray], poses: list[np.nda
     order = list(range(len(frames))) + list(range(len(frames) - 2, 0, -1))
     it = iter(range(10**6))
     last = [0]
+    out: list[StackOutput | None] = [None]
 
     def stack_frame() -> None:
         k = next(it)
@@ -248,12 +249,14 @@ def _stack_frame_samples(vm, graph, frames: list[np.ndarray], poses: list[np.nda
         inc = np.zeros(3) if k == 0 else relative_pose(poses[last[0]], poses[j])
         last[0] = j
         # Time advances at 30 Hz as in the loop (remembered obstacles expire after memory_s).
-        stack.step(frames[j], inc, k / 30.0)
+        out[0] = stack.step(frames[j], inc, k / 30.0)
 
     samples = timeit(stack_frame, n, warmup=3)
-    lost = [e for e in stack.events if e.get("event") == "lost"]
-    if stack.health_state != "ok" or lost:
-        raise RuntimeError(f"stack_frame: the stack left tracking ({stack.health_state}; {lost[:1]}): the timing is not the tracking path's")
+    end = out[0]
+    assert end is not None
+    lost = [e for e in end.events if e.get("event") == "lost"]
+    if end.health_state != "ok" or lost:
+        raise RuntimeError(f"stack_frame: the stack left tracking ({end.health_state}; {lost[:1]}): the timing is not the tracking path's")
     return samples
 
 
@@ -315,7 +318,7 @@ def bench_sim(results: dict[str, Result], quick: bool) -> None:
 
     def closed_frame() -> None:
         frame = sim.step(np.array([0.5, 0.0, 0.3]))
-        sensing.perceive(frame.depth)
+        sensing.step(frame.depth, frame.increment, frame.t)
 
     # Real-time factor >= 2 at 30 Hz: physics + render + noise + FSPF <= 16.7 ms a frame.
     results["demo_frame"] = entry(timeit(closed_frame, n, warmup=3), target=round(1000 / 30 / 2, 2))

@@ -108,3 +108,8 @@ class StackConfig:
     recovery: RecoveryConfig = field(default_factory=RecoveryConfig)
     """Lost detection and global relocalization (needs localization)."""
 
+    @property
+    def recovers(self) -> bool:
+        """Whether the stack watches its localization and relocalizes when lost (recovery
+        on, with localization to watch): needed to start with an unknown pose."""
+        return self.recovery.enabled and self.localization.enabled

@@ -13,9 +13,13 @@ One frame is three steps, callable separately where a user needs only some of th
    localization is off);
 3. :meth:`RobotStack.decide` -- the navigator's velocity command on the estimate.
 
-:meth:`RobotStack.step` runs all three and returns a :class:`StackOutput` with the command,
-the estimate and what a viewer or a report needs (planes, particles, the avoidance fan,
-per-stage timings).
+:meth:`RobotStack.step` runs all three and returns a :class:`StackOutput`
+(:mod:`autonomy.stack.output`): the command for the motion until the next frame, the
+belief, the plan, the health and the events, and what a viewer needs. A program that
+drives the robot with the stack reads it through these outputs alone; what it tells the
+stack are commands (:meth:`~RobotStack.reset`, :meth:`~RobotStack.set_goal` and
+:meth:`~RobotStack.redecide` after it, :meth:`~RobotStack.relocalize`,
+:meth:`~RobotStack.prepare_recovery`).
 
 Its parts: the frame guard (:mod:`autonomy.stack.frames`), the recovery when lost
 (:mod:`autonomy.stack.lost`, :mod:`autonomy.stack.lost_view`,
@@ -27,7 +31,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -37,7 +41,7 @@ from autonomy.common.geometry import compose_pose
 from autonomy.localization.cgr import CGRLocalizer, UpdateStats
 from autonomy.localization.health import HealthMonitor, HealthSample
 from autonomy.localization.observation import correspond
-from autonomy.localization.relocalization import GlobalLocalizer, Scan
+from autonomy.localization.relocalization import Scan
 from autonomy.localization.view_check import ViewCheck
 from autonomy.maps.planner import NoPathError
 from autonomy.maps.raycast import SceneQuery, load_or_build
@@ -52,31 +56,11 @@ from autonomy.perception.nearfield import NearField
 from autonomy.stack.config import StackConfig
 from autonomy.stack.frames import FrameGuard, moved_more_than_noise
 from autonomy.stack.lost import Accepted, LostRecovery
+from autonomy.stack.output import PlanView, Refinement, StackOutput
 from autonomy.stack.state import Perception, StackState, empty_perception
 
 #: Seeds of the FSPF sampling stream stay below this (the kernel's xorshift seed range).
 FSPF_SEED_MODULUS = 2**31
-
-
-@dataclass
-class StackOutput:
-    """One frame of the stack: the command, the belief, and what viewers and reports read."""
-
-    command: NavCommand | None
-    """The navigator's decision (None when the stack does not navigate)."""
-    estimate: np.ndarray
-    """Pose estimate (x, y, theta) in the map frame."""
-    spread: tuple[float, float]
-    """(position spread m, heading spread rad) of the belief; (0, 0) for dead reckoning."""
-    perception: Perception
-    """This frame's FSPF result, observation points, obstacles and near field."""
-    timings_s: dict[str, float]
-    """Seconds spent in each stage this frame: fspf, obstacles, localization, navigation."""
-
-    @property
-    def velocity(self) -> np.ndarray:
-        """Body-frame velocity command (vx, vy, omega); zero when not navigating."""
-        return np.zeros(3) if self.command is None else self.command.velocity
 
 
 class RobotStack:
@@ -123,7 +107,7 @@ class RobotStack:
         self.guard = FrameGuard()
         self.mount_check = MountCheck(cam.mount, cfg.recovery.mount_check) if (cfg.recovery.enabled and cfg.recovery.check_mount) else None
         rec = cfg.recovery
-        self.health: HealthMonitor | None = HealthMonitor(rec.health) if (rec.enabled and self.localizer is not None) else None
+        self.health: HealthMonitor | None = HealthMonitor(rec.health) if cfg.recovers else None
         self.view_check: ViewCheck | None = None
         if self.health is not None and rec.view.enabled:
             self.view_check = ViewCheck(rec.view, cam.intrinsics, cam.mount.robot_from_camera(), cam.min_range_m, cam.max_range_m)
@@ -135,6 +119,8 @@ class RobotStack:
         self._cgr_lines: np.ndarray | None = None
         self._cgr_stats: UpdateStats | None = None
         self._correction: tuple[float, float] | None = None
+        self._events_out: tuple[dict, ...] = ()
+        """The event log as the last output gave it (made again only when it grew)."""
 
     # -- the shared belief and frame, read and set by callers ---------------------------
     @property
@@ -215,14 +201,16 @@ class RobotStack:
         return self.lost.last_search
 
     # -- belief ------------------------------------------------------------------------
-    def reset(self, pose: np.ndarray | None) -> None:
+    def reset(self, pose: np.ndarray | None) -> StackOutput:
         """Start at a known pose (the mission's start): belief and dead reckoning there.
         ``None``: the pose is unknown; the robot looks round and relocalizes on the map
-        first (needs localization with recovery)."""
+        first (needs localization with recovery). Returns the output at the start (no
+        frame seen, no command)."""
         st = self.state
         self.frame = 0
         st.perception = None
         st.events = []
+        self._events_out = ()
         self.guard.reset()
         st.odom = np.zeros(3) if pose is None else np.asarray(pose, dtype=np.float64).copy()
         self._home = None if pose is None else st.odom[:2].copy()
@@ -232,8 +220,9 @@ class RobotStack:
             st.pose = np.zeros(3)
             st.spread = (math.inf, math.inf)
             self.lost.start(0.0, prior=None, why="start with an unknown pose")
-            return
-        self.relocalize(pose)
+        else:
+            self.relocalize(pose)
+        return self._output(None, None)
 
     def relocalize(self, pose: np.ndarray) -> None:
         """Re-initialise the belief around ``pose`` (an operator's reset, or a
@@ -439,10 +428,6 @@ class RobotStack:
         (:meth:`autonomy.stack.lost.LostRecovery.prepare`)."""
         self.lost.prepare()
 
-    def global_localizer(self) -> GlobalLocalizer:
-        """The relocalization's map search on this stack's map (built on first use)."""
-        return self.lost.global_localizer()
-
     # -- deciding ------------------------------------------------------------------------
     def decide(self, t: float, pose: np.ndarray | None = None) -> NavCommand:
         """The navigator's command at time ``t`` from the last perception, on the estimate
@@ -469,19 +454,95 @@ class RobotStack:
         return cmd
 
     def step(
-        self, depth: np.ndarray | None, increment: np.ndarray | None, t: float, pose: np.ndarray | None = None
+        self,
+        depth: np.ndarray | None,
+        increment: np.ndarray | None,
+        t: float,
+        pose: np.ndarray | None = None,
+        *,
+        seed: int | None = None,
+        localize: bool = True,
+        operator: Callable[[StackOutput], np.ndarray | None] | None = None,
+        correspondences: bool = False,
     ) -> StackOutput:
-        """One frame: perceive, localize, and (when navigating) decide."""
-        per = self.perceive(depth)
-        self.localize(increment, t)
+        """One frame: perceive ``depth`` (``seed`` as :meth:`perceive`'s), localize on the
+        odometry ``increment`` at time ``t``, and (when navigating) decide at ``t`` on the
+        estimate, or on ``pose`` (a simulation's ground-truth follower). The output's
+        command is for the motion until the next frame.
+
+        ``localize`` False: the frame is perceived and decided on, not localized on (the
+        first frame after :meth:`reset`, seen before anything moved: the belief is the
+        reset pose, and the recovery's clocks start with the next frame).
+
+        ``operator``: someone watching the belief between the localizing and the deciding
+        (a simulation's truth reset; the paper's operator reset the robot by hand). Given
+        the frame's output so far (no command), it returns a pose to re-initialise the
+        belief at (:meth:`relocalize`) before the decision, or None.
+
+        ``correspondences``: also associate the observation points with the scene lines
+        for a viewer that draws them this frame (:meth:`correspondences`: one association
+        pass, which no other reader needs); else the output has none."""
+        self.perceive(depth, seed)
+        if localize:
+            self.localize(increment, t)
+        if operator is not None:
+            reset_to = operator(self._output(None, None))
+            if reset_to is not None:
+                self.relocalize(reset_to)
         cmd = self.decide(t, pose) if self.navigator is not None else None
-        return StackOutput(cmd, self.state.pose.copy(), self.state.spread, per, dict(self.timings_s))
+        return self._output(cmd, pose, correspondences)
+
+    def redecide(self, t: float, pose: np.ndarray | None = None) -> StackOutput:
+        """Decide again on the last frame (after :meth:`set_goal` at the end of a leg): the
+        last :meth:`step`'s output with the new command and plan."""
+        return self._output(self.decide(t, pose), pose)
+
+    def _output(self, cmd: NavCommand | None, pose: np.ndarray | None, correspondences: bool = False) -> StackOutput:
+        """The stack now as a :class:`StackOutput` (``pose``: the pose decided on, None:
+        the estimate)."""
+        st, loc = self.state, self.localizer
+        if len(st.events) != len(self._events_out):
+            self._events_out = tuple(st.events)
+        return StackOutput(
+            command=cmd,
+            estimate=st.pose.copy(),
+            spread=st.spread,
+            perception=empty_perception() if st.perception is None else st.perception,
+            timings_s=dict(self.timings_s),
+            plan=self._plan_view(st.pose if pose is None else pose),
+            localizing=loc is not None,
+            relocalizing=self.lost.relocalizing,
+            health_state=self.health_state,
+            health_sample=self.health_sample,
+            events=self._events_out,
+            frame_fault=self.guard.fault,
+            frames_rejected=dict(self.guard.rejected),
+            cgr_stats=self._cgr_stats,
+            correction=self._correction,
+            odometry=st.odom.copy(),
+            particles=None if loc is None else loc.particles.copy(),
+            refinement=None if loc is None else Refinement(loc.before_refinement, loc.after_refinement, loc.refined_weights),
+            last_search=self.lost.last_search,
+            correspondences=self.correspondences() if correspondences else None,
+        )
+
+    def _plan_view(self, pose: np.ndarray, length_m: float | None = None) -> PlanView | None:
+        """The navigator's plan, its metres ahead measured from ``pose`` (or given as
+        ``length_m``), and its counters; None without a navigator."""
+        nav = self.navigator
+        if nav is None:
+            return None
+        at = None if length_m is not None else np.array(pose[:2], dtype=np.float64)
+        return PlanView(
+            nav.plan, at, math.nan if length_m is None else float(length_m), nav.replans, nav.recoveries, nav.blocked_edges
+        )
 
     # -- goals ---------------------------------------------------------------------------
-    def set_goal(self, node_id: int, t: float, pose: np.ndarray | None = None) -> float:
-        """Plan to a navigation-graph node from the estimate (or ``pose``); returns the
-        plan's length in metres. While relocalizing the goal is kept for when the robot
-        knows where it is again (the length is then the best mode's).
+    def set_goal(self, node_id: int, t: float, pose: np.ndarray | None = None) -> PlanView:
+        """Plan to a navigation-graph node from the estimate (or ``pose``); returns the plan
+        with its length as the metres ahead. While relocalizing the goal is kept for when
+        the robot knows where it is again: the plan returned is the one followed until
+        then, the length the best mode's plan's.
 
         A goal that the place the robot was started at (:meth:`reset`; unknown there,
         the first goal) has no path to is the user's mistake:
@@ -501,8 +562,12 @@ class RobotStack:
         self.lost.goal = int(node_id)
         at = self.state.pose if pose is None else pose
         if self.lost.relocalizing and pose is None:
-            return nav.plan_length(int(node_id), at)
-        return nav.set_goal(node_id, at, t)
+            length = nav.plan_length(int(node_id), at)
+        else:
+            length = nav.set_goal(node_id, at, t)
+        plan = self._plan_view(at, length)
+        assert plan is not None
+        return plan
 
     # -- for viewers ---------------------------------------------------------------------
     def correspondences(self) -> tuple[np.ndarray, np.ndarray]:

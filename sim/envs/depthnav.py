@@ -25,7 +25,7 @@ from gymnasium import spaces
 from autonomy.common.errors import InputError
 from autonomy.common.geometry import wrap_angle
 from autonomy.perception.camera import CameraIntrinsics
-from autonomy.stack import RobotStack
+from autonomy.stack import RobotStack, StackOutput
 from sim.envs.config import EnvConfig
 from sim.envs.geometry import GeodesicField, KCScanner
 from sim.envs.render import (
@@ -238,6 +238,8 @@ class DepthNavEnv(gym.Env):
         self._ready = False
         self._sim: SimStep | None = None
         self._stack: RobotStack | None = None
+        self._out: StackOutput | None = None
+        """The stack's output on the last frame (None without a stack)."""
         self._episode: Episode | None = None
         self._recorder = None
         self._rrd_frame = 0
@@ -412,20 +414,28 @@ class DepthNavEnv(gym.Env):
         self._increment = np.zeros(3) if frame.increment is None else frame.increment
         self._pose = frame.pose
         self._stack_command = None
-        stack, ep = self._stack, self._episode
-        assert ep is not None
+        self._out = None
+        stack = self._stack
         if stack is None:
             assert self._sim is not None
             self._estimate, self._spread = self._sim.odometry.pose.copy(), (0.0, 0.0)
             return
-        stack.perceive(self._depth)
-        stack.localize(frame.increment, frame.t)
-        if stack.localizer is not None and math.hypot(*(stack.pose[:2] - frame.pose[:2])) > cfg.localization.reset_error_m:
-            ep.loc_resets += 1
-            stack.relocalize(frame.pose)
-        self._estimate, self._spread = stack.pose.copy(), stack.spread
+        out = stack.step(self._depth, frame.increment, frame.t, operator=lambda sensed: self._reset_far_belief(sensed, frame.pose))
+        self._out = out
+        self._estimate, self._spread = out.estimate, out.spread
         if cfg.stack_policy:
-            self._stack_command = stack.decide(frame.t).velocity.copy()
+            self._stack_command = out.velocity.copy()
+
+    def _reset_far_belief(self, sensed: StackOutput, truth: np.ndarray) -> np.ndarray | None:
+        """The episode's localization reset, between the stack's localizing and deciding:
+        a belief farther than ``localization.reset_error_m`` from the ``truth`` is
+        re-initialised there (counted in ``loc_resets``)."""
+        ep = self._episode
+        assert ep is not None
+        if not sensed.localizing or math.hypot(*(sensed.estimate[:2] - truth[:2])) <= self.config.localization.reset_error_m:
+            return None
+        ep.loc_resets += 1
+        return truth
 
     def _observation(self) -> dict[str, np.ndarray]:
         cfg = self.config
@@ -437,7 +447,7 @@ class DepthNavEnv(gym.Env):
             "odometry": odometry_observation(self._increment),
         }
         if cfg.observe_points:
-            planes = self._stack.perception.planes if self._stack is not None and self._stack.perception is not None else None
+            planes = None if self._out is None else self._out.perception.planes
             obs["points"] = points_observation(planes, cfg.observe_points, self._points_low, self._points_high, self.np_random)
         if cfg.observe_scan:
             assert self._scanner is not None
@@ -515,8 +525,8 @@ class DepthNavEnv(gym.Env):
         gu, gv = cv.px(self.goal)[0]
         draw_disk(img, gu, gv, max(3.0, 0.15 * s), GOAL)
         draw_disk(img, gu, gv, max(4.0, cfg.goal_radius_m * s), GOAL, ring=True)
-        if self._stack is not None and self._stack.localizer is not None:
-            draw_points(img, cv.px(self._stack.localizer.particles[:, :2]), PARTICLE)
+        if self._out is not None and self._out.particles is not None:
+            draw_points(img, cv.px(self._out.particles[:, :2]), PARTICLE)
         e = self._estimate
         eu, ev = cv.px(e[:2])[0]
         draw_disk(img, eu, ev, max(2.0, 0.1 * s), ESTIMATE)
@@ -532,7 +542,7 @@ class DepthNavEnv(gym.Env):
         """Stream this step to the rerun recording (sim.viz.recording.Recorder), made on first use."""
         from sim.viz.recording import Recorder
 
-        site, ep, stack = self._site, self._episode, self._stack
+        site, ep, out = self._site, self._episode, self._out
         assert site is not None and ep is not None
         if self._recorder is None:
             self._recorder = Recorder(path, every=self.config.rrd_every, depth_downsample=1, application_id="depthnav-env")
@@ -550,15 +560,14 @@ class DepthNavEnv(gym.Env):
         self._rrd_time += self.frame_dt
         rec.set_time(self._rrd_frame, self._rrd_time)
         rec.log_pose(self._rrd_frame, self._pose)
-        loc = stack.localizer if stack is not None else None
-        if loc is not None:
+        if out is not None and out.localizing:
             rec.log_estimate(self._rrd_frame, self._estimate)
         if rec.heavy(self._rrd_frame):
             rec.log_depth(self._depth)
-            if stack is not None and stack.perception is not None:
-                rec.log_fspf(stack.perception.planes)
-            if loc is not None:
-                rec.log_localization(loc.before_refinement, loc.after_refinement, loc.refined_weights)
+            if out is not None:
+                rec.log_fspf(out.perception.planes)
+                if out.refinement is not None:
+                    rec.log_localization(out.refinement.before, out.refinement.after, out.refinement.weights)
             rec.log_people(site.world.people.positions())
             rec.log_scalars({"env/steps": float(ep.steps), "env/collisions": float(ep.collisions)})
 

@@ -13,7 +13,7 @@ import numpy as np
 from autonomy.common.geometry import wrap_angle
 from autonomy.navigation.config import NavCommand
 from autonomy.navigation.surroundings import in_camera_view
-from autonomy.stack import RobotStack
+from autonomy.stack import StackOutput
 from sim.experiments.site import Run
 from sim.simulator.actors import furniture_body, person_index
 from sim.simulator.step import SimFrame
@@ -69,56 +69,58 @@ def furniture_now(run: Run) -> list[tuple[float, float, float, tuple[float, floa
 def _people_in_view(run: Run, people: np.ndarray, pose: np.ndarray) -> np.ndarray:
     """Which people stand inside the camera's horizontal view (field of view, minimum and
     maximum range; occlusion ignored), for the collision log's ``person_in_view_s_ago``."""
-    cam = run.stack.cfg.camera
+    cam = run.robot_camera
     c, s = math.cos(float(pose[2])), math.sin(float(pose[2]))
     rel = people[:, :2] - pose[None, :2]
     x = c * rel[:, 0] + s * rel[:, 1] - cam.forward_m
     return in_camera_view(x, -s * rel[:, 0] + c * rel[:, 1], cam)
 
 
-def fspf_counts(stack: RobotStack) -> tuple[int, int, int, int]:
+def fspf_counts(out: StackOutput) -> tuple[int, int, int, int]:
     """The frame's FSPF counts: plane points, outliers, planes, 2D points."""
-    per = stack.perception
-    assert per is not None
+    per = out.perception
     return (len(per.planes.points), len(per.planes.outliers), per.planes.planes, len(per.points_2d))
 
 
-def check_localization(run: Run, frame: SimFrame) -> None:
-    """Errors against the truth, and the failures they make: above
+def check_localization(run: Run, frame: SimFrame, sensed: StackOutput) -> np.ndarray | None:
+    """Errors of the stack's belief on the frame (``sensed``: its output before it
+    decides) against the truth, and the failures they make: above
     ``localization.reset_error_m`` a failure starts; it ends when the error is back below
     ``recovered_error_m`` (the robot recovered by itself), or after
-    ``truth_reset_after_s`` by re-initialising the belief at the true pose (counted in
-    ``truth_resets_needed``; the paper's operator did this at once)."""
-    stack, loc = run.stack, run.scn.localization
-    if stack.localizer is None:
-        return
-    est = stack.pose
+    ``truth_reset_after_s`` by re-initialising the belief at the true pose, which this
+    returns for the stack to reset to before it decides (counted in
+    ``truth_resets_needed``; the paper's operator did this at once). None: no reset."""
+    loc = run.scn.localization
+    if not sensed.localizing:
+        return None
+    est = sensed.estimate
     err = float(np.hypot(*(est[:2] - frame.pose[:2])))
     run.loc_errors.append(err)
     run.heading_errors.append(abs(wrap_angle(est[2] - frame.pose[2])))
-    run.estimates.append(est.copy())
-    run.health_frames[stack.health_state] = run.health_frames.get(stack.health_state, 0) + 1
+    run.estimates.append(est)
+    run.health_frames[sensed.health_state] = run.health_frames.get(sensed.health_state, 0) + 1
     open_ = run.failures[-1] if run.failures and run.failures[-1]["end_t"] is None else None
     t = frame.t
     if open_ is None:
         if err > loc.reset_error_m:
             run.failures.append(
                 {"t": round(t, 3), "x": round(float(frame.pose[0]), 3), "y": round(float(frame.pose[1]), 3), "max_error_m": round(err, 3),
-                 "noticed_t": round(t, 3) if stack.relocalizing else None, "end_t": None, "ended_by": None,
-                 "fault": fault_at(run, t) or unknown_start(run)}
+                 "noticed_t": round(t, 3) if sensed.relocalizing else None, "end_t": None, "ended_by": None,
+                 "fault": fault_at(run, t) or unknown_start(run, sensed.events)}
             )
             open_ = run.failures[-1]
     if open_ is None:
-        return
+        return None
     open_["max_error_m"] = max(open_["max_error_m"], round(err, 3))
-    if open_["noticed_t"] is None and stack.relocalizing:
+    if open_["noticed_t"] is None and sensed.relocalizing:
         open_["noticed_t"] = round(t, 3)
-    if err < loc.recovered_error_m and not stack.relocalizing:
+    if err < loc.recovered_error_m and not sensed.relocalizing:
         open_.update(end_t=round(t, 3), ended_by="robot")
     elif t - open_["t"] >= loc.truth_reset_after_s:
         open_.update(end_t=round(t, 3), ended_by="truth")
         run.truth_resets += 1
-        stack.relocalize(frame.pose)
+        return frame.pose
+    return None
 
 
 def note_blind(run: Run, step_m: float) -> None:
@@ -126,13 +128,13 @@ def note_blind(run: Run, step_m: float) -> None:
     tracked without an observation update, and the longest such stretch. Where the floor
     shows the camera no wall for metres on end, the belief dead-reckons and its error
     grows with the odometry's (a degree of heading costs 17 cm over 10 m)."""
-    stack = run.stack
-    if stack.localizer is None or stack.relocalizing:
+    out = run.out
+    if not out.localizing or out.relocalizing:
         # The search, not CGR, holds the belief; what it accepts is a fix.
         run.blind_stretch_m = 0.0
         return
     run.tracked_m += step_m
-    stats = stack.cgr_stats  # None on a refused frame: dead reckoning as well
+    stats = out.cgr_stats  # None on a refused frame: dead reckoning as well
     if stats is not None and stats.observation:
         run.blind_stretch_m = 0.0
         return
@@ -156,9 +158,10 @@ def fault_at(run: Run, t: float) -> str | None:
     return None
 
 
-def unknown_start(run: Run) -> str | None:
+def unknown_start(run: Run, events: tuple[dict, ...]) -> str | None:
     """"unknown start" while a robot started without its pose has not yet found itself
-    (its error then is the search's, not a failure of the paper's kind); else None."""
-    if run.scn.localization.start_known or any(e["event"] == "relocalized" for e in run.stack.events) or run.truth_resets:
+    (no relocalization among the stack's ``events``; its error then is the search's, not
+    a failure of the paper's kind); else None."""
+    if run.scn.localization.start_known or any(e["event"] == "relocalized" for e in events) or run.truth_resets:
         return None
     return "unknown start"

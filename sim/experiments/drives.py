@@ -362,15 +362,17 @@ def record_log(cfg: RecordingConfig, path: str | Path, *, progress: bool = False
 
         bar = tqdm(total=max_frames, unit="frame", desc="recording the drive", leave=False, file=sys.stderr)
     wall0 = time.perf_counter()
-    stack.perceive(rec.add(sim.first(), world.people.positions()))
     current = 1
     stack.set_goal(nodes[current], 0.0, start)
+    frame = sim.first()
+    out = stack.step(rec.add(frame, world.people.positions()), None, frame.t, frame.pose)
     leg_start = 0.0
     try:
         while len(rec.t) < max_frames:
             t = float(world.data.time)
             pose = world.robot.pose(world.data)
-            cmd = stack.decide(t, pose)
+            cmd = out.command
+            assert cmd is not None
             if cmd.state == "arrived" or t - leg_start > cfg.waypoint_timeout_s:
                 events.append({"t": round(t, 3), "node": nodes[current], "status": "reached" if cmd.state == "arrived" else "timeout"})
                 current += 1
@@ -378,10 +380,12 @@ def record_log(cfg: RecordingConfig, path: str | Path, *, progress: bool = False
                     break
                 stack.set_goal(nodes[current], t, pose)
                 leg_start = t
-                cmd = stack.decide(t, pose)
+                cmd = stack.redecide(t, pose).command
+                assert cmd is not None
             frame = sim.step(cmd.velocity)
             collisions += frame.new_contacts
-            stack.perceive(rec.add(frame, world.people.positions()))
+            # Decided on the true pose of the frame (the recording robot does not localize).
+            out = stack.step(rec.add(frame, world.people.positions()), frame.increment, frame.t, frame.pose)
             if bar is not None:
                 bar.update(1)
     finally:

@@ -256,7 +256,7 @@ def replay(ctx: Context, cfg: LocComparisonConfig, approach: str, seed: int) -> 
         t0 = time.thread_time()
         if approach in ("fspf", "mcl"):
             np.multiply(log.depth_mm[k], np.float32(0.001), out=depth_m, casting="unsafe")
-            res = sensing.perceive(depth_m, seed=sense_base + k).planes
+            res = sensing.step(depth_m, None, float(log.t[k]), seed=sense_base + k).perception.planes
             # The lasers' height band applies to FSPF's points too: the approaches differ
             # in how they sample the depth image, not in what they may see.
             p3, n3 = drop_floor(res.points, res.normals, scfg)

@@ -1,11 +1,13 @@
 """The closed loop of a mission run: one tick is one Kinect frame (1/30 s).
 
-The robot stack decides on the last frame (:class:`autonomy.stack.RobotStack`), the
-simulator steps once with its command (:class:`sim.simulator.step.SimStep`: people,
-physics, the noisy depth frame, odometry), and the stack perceives and localizes on the
-new frame; :mod:`sim.experiments.accounting` keeps what each frame adds, and every stage
-is timed. Ctrl-C ends the loop early; an error inside it is kept on the run
-(:func:`note_crash`) with every record cut back to the last whole frame.
+The simulator steps once with the command the robot stack decided on the last frame
+(:class:`sim.simulator.step.SimStep`: people, physics, the noisy depth frame, odometry),
+and the stack steps on the new frame (:meth:`autonomy.stack.RobotStack.step`: perceive,
+localize, decide); the loop reads the stack only through that step's output.
+:mod:`sim.experiments.accounting` keeps what each frame adds (its localization check
+watches the belief between the stack's localizing and deciding, as the paper's operator
+did), and every stage is timed. Ctrl-C ends the loop early; an error inside it is kept
+on the run (:func:`note_crash`) with every record cut back to the last whole frame.
 """
 
 from __future__ import annotations
@@ -18,8 +20,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from autonomy.navigation.config import NavCommand
-from autonomy.stack import RobotStack
+from autonomy.stack import StackOutput
 from sim.experiments.accounting import check_localization, fspf_counts, note_blind, note_contacts
 from sim.experiments.kinds import crash_block
 from sim.experiments.memory import release_free_memory, resident_mb
@@ -74,10 +75,10 @@ def drive(run: Run, recorder: RunLogger | None, progress: bool | None, checkpoin
             print(f"{scn.name}: depth camera {depth_backend_line(run.camera.backend_name, run.camera.cfg.render_process)}", file=sys.stderr)
         run.truth.append(first.pose)
         run.times.append(0.0)
+        plan = run.stack.set_goal(mission.goal, 0.0, mission.start_pose)
+        start_leg(mission, scn.mission, plan.remaining_m, plan.nodes, 0.0, scn.navigator.cruise_speed_mps)
         # The first frame, so the navigator sees before it moves.
-        run.stack.perceive(first.depth)
-        length = run.stack.set_goal(mission.goal, 0.0, mission.start_pose)
-        start_leg(mission, scn.mission, length, _plan_nodes(run.stack), 0.0, scn.navigator.cruise_speed_mps)
+        run.out = run.stack.step(first.depth, None, 0.0, None if run.use_estimate else first.pose, localize=False)
         while run.frames < max_frames and not mission.done:
             if not tick(run, recorder):
                 break
@@ -110,43 +111,43 @@ def drive(run: Run, recorder: RunLogger | None, progress: bool | None, checkpoin
 
 
 def tick(run: Run, recorder: RunLogger | None) -> bool:
-    """One frame: decide on the last frame, step the simulator, perceive and localize.
-    False when the mission has ended this frame."""
-    world, stack = run.world, run.stack
+    """One frame: the mission's bookkeeping on the last decision, the simulator step with
+    its command, the stack's step on the new frame. False when the mission has ended
+    this frame."""
+    world, out = run.world, run.out
     t = float(world.data.time)
     if run.faults is not None:
-        nav_ = stack.navigator
-        run.faults.before_step(t, run.distance_m, None if nav_ is None or len(nav_.path) < 2 else nav_.path)
+        run.faults.before_step(t, run.distance_m, run.mission.goal)
     pose = world.robot.pose(world.data)
-    control_pose = stack.pose.copy() if run.use_estimate else pose
-    override = None if run.use_estimate else pose
-    nav = stack.decide(t, override)
-    nav_ms = stack.timings_s["navigation"]
-    if stack.navigator is not None:
-        follow_plan(
-            run.mission, run.scn.mission, stack.navigator.plan_nodes, stack.navigator.remaining_m(control_pose), t,
-            run.scn.navigator.cruise_speed_mps,
-        )
+    control_pose = out.estimate if run.use_estimate else pose
+    if out.plan is not None:
+        follow_plan(run.mission, run.scn.mission, out.plan.nodes, out.plan.remaining_m, t, run.scn.navigator.cruise_speed_mps)
+    nav = out.command
+    assert nav is not None
     run.nav_states[nav.state] = run.nav_states.get(nav.state, 0) + 1
     run.near_frames += int(nav.near_points > 0)
     timed_out = t - run.mission.started_at > run.mission.timeout_s
     if nav.state == "arrived" or timed_out:
-        nav = next_leg(run, nav, timed_out, pose, control_pose, t, override)
-        if nav is None:
+        again = next_leg(run, nav.state == "arrived", timed_out, pose, control_pose, t)
+        if again is None:
             return False
-    obstacles = stack.perception.obstacles
+        run.out, nav = again, again.command
+        assert nav is not None
+    obstacles = run.out.perception.obstacles
     frame = run.sim.step(nav.velocity)
     if run.faults is not None:
         frame = run.faults.filter_frame(frame)
     note_contacts(run, frame, pose, t, nav, control_pose, obstacles)
-    stack.perceive(frame.depth)
-    run.fspf_counts.append(fspf_counts(stack))
-    stack.localize(frame.increment, frame.t)
-    if stack.frame_fault:
-        run.rejected.append((frame.t, stack.frame_fault))
-    check_localization(run, frame)
+    heavy = recorder is not None and recorder.heavy(run.frames + 1)
+    run.out = out = run.stack.step(
+        frame.depth, frame.increment, frame.t, None if run.use_estimate else frame.pose,
+        operator=lambda sensed: check_localization(run, frame, sensed), correspondences=heavy,
+    )
+    run.fspf_counts.append(fspf_counts(out))
+    if out.frame_fault:
+        run.rejected.append((frame.t, out.frame_fault))
     if in_window(run.scn.report.trace_s, frame.t):
-        run.trace.append(trace_record(frame.t, frame.pose, stack, nav))
+        run.trace.append(trace_record(frame.t, frame.pose, out, nav))
     step_m = float(np.hypot(*(frame.pose[:2] - pose[:2])))
     run.distance_m += step_m
     note_blind(run, step_m)
@@ -156,10 +157,10 @@ def tick(run: Run, recorder: RunLogger | None) -> bool:
     t_viz = time.perf_counter()
     if recorder is not None:
         recorder.frame(
-            run.frames, frame, stack, nav, world, estimate=run.estimates[-1] if run.localizing else None,
+            run.frames, frame, out, nav, world, estimate=run.estimates[-1] if run.localizing else None,
             error_m=run.loc_errors[-1] if run.loc_errors else float("nan"), collisions=run.collisions,
         )
-    timings = {**frame.timings_s, **stack.timings_s, "navigation": nav_ms, "viz": time.perf_counter() - t_viz}
+    timings = {**frame.timings_s, **out.timings_s, "viz": time.perf_counter() - t_viz}
     for k in STAGES:
         run.timing[k].append(timings[k])
     if run.frames % RSS_EVERY == 1:
@@ -171,25 +172,20 @@ def tick(run: Run, recorder: RunLogger | None) -> bool:
 
 
 def next_leg(
-    run: Run, nav: NavCommand, timed_out: bool, pose: np.ndarray, control_pose: np.ndarray, t: float, override: np.ndarray | None
-) -> NavCommand | None:
-    """Close the leg that ended; plan the next one and decide again (None: no more)."""
+    run: Run, arrived: bool, timed_out: bool, pose: np.ndarray, control_pose: np.ndarray, t: float
+) -> StackOutput | None:
+    """Close the leg that ended; plan the next one and decide again (None: no more legs)."""
     scn, mission, stack = run.scn, run.mission, run.stack
     close_leg(
-        mission, scn.mission, run.building.navgraph, arrived=nav.state == "arrived", timed_out=timed_out, truth_xy=pose[:2],
+        mission, scn.mission, run.building.navgraph, arrived=arrived, timed_out=timed_out, truth_xy=pose[:2],
         t=t, distance_m=run.distance_m, arrival_radius_m=scn.navigator.arrival_radius_m, rng=run.seeds.mission,
         recovering=run.recovering,
     )
     if mission.done:
         return None
-    length = stack.set_goal(mission.goal, t, control_pose)
-    start_leg(mission, scn.mission, length, _plan_nodes(stack), t, scn.navigator.cruise_speed_mps)
-    return stack.decide(t, override)
-
-
-def _plan_nodes(stack: RobotStack) -> list[int]:
-    """The navigator's plan (graph nodes); none without a navigator."""
-    return [] if stack.navigator is None else stack.navigator.plan_nodes
+    plan = stack.set_goal(mission.goal, t, control_pose)
+    start_leg(mission, scn.mission, plan.remaining_m, plan.nodes, t, scn.navigator.cruise_speed_mps)
+    return stack.redecide(t, None if run.use_estimate else pose)
 
 
 def note_crash(run: Run, exc: Exception) -> None:

@@ -67,7 +67,7 @@ def truth_at(run: Run, t: float) -> list[float] | None:
 
 def fault_report(run: Run) -> list[dict]:
     """Per injected fault: when it happened and the true pose before and after it started
-    (a kidnapping's two places), when the stack noticed it (its first lost, blind or
+    (a kidnapping's two places), where a blockage stood, when the stack noticed it (its first lost, blind or
     mount-corrected event, or a frame it refused, after the start) and the true pose
     then, when it was over for the robot (kidnap: its relocalization; the others: the
     fault's end, then the error back below ``recovered_error_m``), the true error before
@@ -76,14 +76,14 @@ def fault_report(run: Run) -> list[dict]:
     times = np.array(run.times[1 : 1 + len(run.loc_errors)])
     errs = np.array(run.loc_errors)
     ok_m = run.scn.localization.recovered_error_m
-    signals = [(e["t"], e["event"]) for e in run.stack.events if e["event"] in ("lost", "blind", "mount corrected")]
+    signals = [(e["t"], e["event"]) for e in run.out.events if e["event"] in ("lost", "blind", "mount corrected")]
     signals += [(t, f"frame {why}") for t, why in run.rejected]
     signals.sort()
-    relocs = [e["t"] for e in run.stack.events if e["event"] == "relocalized"]
+    relocs = [e["t"] for e in run.out.events if e["event"] == "relocalized"]
     for ev in fault_events(run):
         t0 = float(ev["t_start"])
         end = float(ev["t_end"]) if ev.get("t_end") is not None else (float(run.times[-1]) if ev["kind"] != "kidnap" else t0)
-        rec = {k: ev[k] for k in ("kind", "t_start", "t_end", "distance_m", "truth_before", "truth_after") if k in ev}
+        rec = {k: ev[k] for k in ("kind", "t_start", "t_end", "distance_m", "truth_before", "truth_after", "where") if k in ev}
         if ev.get("skipped"):
             rec["skipped"] = ev["skipped"]
         seen = [(t, what) for t, what in signals if t0 <= t <= t0 + NOTICE_WINDOW_S]
@@ -121,10 +121,10 @@ def recovery_metrics(run: Run) -> dict:
     """Lost alarms against the truth (false alarms: raised while the error was below
     ``FALSE_ALARM_ERROR_M``; misses: failures the robot never noticed before they ended),
     relocalizations, rejected frames, and the failures' detection and recovery times."""
-    stack = run.stack
+    out = run.out
     times = np.array(run.times[1 : 1 + len(run.loc_errors)])
     errs = np.array(run.loc_errors)
-    lost = [e for e in stack.events if e["event"] == "lost"]
+    lost = [e for e in out.events if e["event"] == "lost"]
     false_alarms = 0
     for e in lost:
         k = int(np.searchsorted(times, e["t"] - 1e-9)) if len(times) else 0
@@ -139,15 +139,15 @@ def recovery_metrics(run: Run) -> dict:
         "lost_alarms": len(lost),
         "lost_false_alarms": false_alarms,
         "lost_misses": sum(f["noticed_t"] is None for f in failures),
-        "relocalizations": sum(e["event"] == "relocalized" for e in stack.events),
+        "relocalizations": sum(e["event"] == "relocalized" for e in out.events),
         "recovered_by_robot": sum(f["ended_by"] == "robot" for f in failures),
         "recovery_time_median_s": round(float(np.median(recovered)), 2) if recovered else None,
         "recovery_time_max_s": round(float(np.max(recovered)), 2) if recovered else None,
         "notice_time_median_s": round(float(np.median(noticed)), 2) if noticed else None,
-        "frames_dropped": stack.frames_rejected["dropped"],
-        "frames_stale": stack.frames_rejected["stale"],
-        "frames_invalid": stack.frames_rejected["invalid"],
-        "frames_corrupt": stack.frames_rejected["corrupt"],
+        "frames_dropped": out.frames_rejected["dropped"],
+        "frames_stale": out.frames_rejected["stale"],
+        "frames_invalid": out.frames_rejected["invalid"],
+        "frames_corrupt": out.frames_rejected["corrupt"],
         "relocalizing_frames": run.health_frames.get("relocalizing", 0),
         "blind_frames": run.health_frames.get("blind", 0),
         **fault_metrics(fault_report(run)),

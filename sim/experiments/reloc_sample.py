@@ -70,20 +70,20 @@ def parse_region(text: str) -> tuple[float, float, float, float]:
 
 
 def start_poses(
-    stack: RobotStack, region: tuple[float, float, float, float] | None, n: int, rng: np.random.Generator, pieces: tuple[Furniture, ...] = ()
+    building: Building, radius_m: float, region: tuple[float, float, float, float] | None, n: int, rng: np.random.Generator,
+    pieces: tuple[Furniture, ...] = (),
 ) -> np.ndarray:
-    """``n`` poses (n, 3) uniform over the free space the relocalization searches (where
-    the robot fits), inside ``region`` (None: anywhere), clear of the furniture ``pieces``,
-    with uniform headings."""
-    gl = stack.global_localizer()
-    fs = gl.fs
-    rows, cols = fs.free_cells(stack.cfg.avoidance.robot_radius_m, region=None, cache=False)
+    """``n`` poses (n, 3) uniform over the building's free space for a robot of radius
+    ``radius_m`` (the free space the relocalization searches), inside ``region`` (None:
+    anywhere), clear of the furniture ``pieces``, with uniform headings."""
+    fs = building.free_space(radius_m)
+    rows, cols = fs.free_cells(radius_m, region=None, cache=False)
     xy = fs.centres(rows, cols)
     if region is not None:
         x0, y0, x1, y1 = region
         xy = xy[(xy[:, 0] >= x0) & (xy[:, 0] <= x1) & (xy[:, 1] >= y0) & (xy[:, 1] <= y1)]
     for f in pieces:
-        xy = xy[np.hypot(xy[:, 0] - f.x, xy[:, 1] - f.y) > f.half_diagonal + stack.cfg.avoidance.robot_radius_m]
+        xy = xy[np.hypot(xy[:, 0] - f.x, xy[:, 1] - f.y) > f.half_diagonal + radius_m]
     if not len(xy):
         raise InputError(f"--region: no free place of the map inside {region}")
     pick = xy[rng.integers(0, len(xy), size=n)]
@@ -95,7 +95,7 @@ def run_trial(stack: RobotStack, scene: SceneQuery, depth: MapDepth, start: np.n
     """One unknown start at ``start`` (see the module docstring); ``clutter``: (K, 4)
     segments the camera sees besides the map; ``odometry``: the noisy odometry the stack
     dead-reckons on (None: the commanded motion, exactly)."""
-    stack.reset(None)
+    out = stack.reset(None)
     truth, inc, t = np.asarray(start, dtype=np.float64).copy(), None, 0.0
     if odometry is not None:
         odometry.reset(truth)
@@ -103,17 +103,16 @@ def run_trial(stack: RobotStack, scene: SceneQuery, depth: MapDepth, start: np.n
         frame = depth.render(scene, truth, clutter)
         if noise_m > 0:
             frame = np.where(frame > 0, frame + rng.normal(0.0, noise_m, frame.shape), 0.0).astype(np.float32)
-        stack.perceive(frame)
-        stack.localize(inc, t)
-        if not stack.relocalizing:
+        out = stack.step(frame, inc, t)
+        if not out.relocalizing:
             break
-        move = stack.decide(t).velocity / RATE_HZ
+        move = out.velocity / RATE_HZ
         truth = compose_pose(truth, move)
         inc = move if odometry is None else odometry.update(truth)
         t += 1.0 / RATE_HZ
-    found = not stack.relocalizing
-    err = relative_pose(truth, stack.pose) if found else np.full(3, math.nan)
-    last = stack.last_search
+    found = not out.relocalizing
+    err = relative_pose(truth, out.estimate) if found else np.full(3, math.nan)
+    last = out.last_search
     return Trial(
         start=(round(float(start[0]), 3), round(float(start[1]), 3), round(float(start[2]), 3)),
         relocalized=found,
@@ -141,26 +140,28 @@ def sample(map_name: str, region: tuple[float, float, float, float] | None, n: i
         raise InputError(f"--odometry-noise: expected a relative error from 0 to below 1, got {odometry_noise}")
     bp = load_blueprint(map_name)
     scene = SceneQuery(bp.vectormap, load_or_build(bp.vectormap, None, LOCALIZATION_GRID))
-    stack = RobotStack(bp.vectormap, bp.navgraph, StackConfig(), rng=np.random.default_rng(seed), scene=scene)
+    cfg = StackConfig()
+    radius = cfg.avoidance.robot_radius_m
+    stack = RobotStack(bp.vectormap, bp.navgraph, cfg, rng=np.random.default_rng(seed), scene=scene)
     stack.prepare_recovery()
+    building = Building(bp.vectormap, bp.navgraph, tuple(bp.open_areas), tuple(bp.rooms))
     pieces: tuple[Furniture, ...] = ()
     if furniture:
         # Their own stream: a seed's pieces are the same whatever --n and --region.
-        building = Building(bp.vectormap, bp.navgraph, tuple(bp.open_areas), tuple(bp.rooms))
         try:
-            pieces = random_furniture(building, furniture, np.random.default_rng([seed, 1]), stack.cfg.avoidance.robot_radius_m)
+            pieces = random_furniture(building, furniture, np.random.default_rng([seed, 1]), radius)
         except InputError as e:
             # The scenario key the placement names is not what the user typed.
             raise InputError(f"--furniture: {str(e).removeprefix('actors.random_furniture: ')}") from None
     clutter = np.vstack([f.outline() for f in pieces]) if pieces else None
     rng = np.random.default_rng(seed)
-    depth = MapDepth(stack.cfg.camera)
+    depth = MapDepth(cfg.camera)
     # Its own stream too: the places and headings are the same with and without it.
     odometry = None
     if odometry_noise > 0:
         odometry = Odometry(OdometryConfig(odometry_noise, odometry_noise), np.random.default_rng([seed, 2]), np.zeros(3))
     out = []
-    for start in start_poses(stack, region, n, rng, pieces):
+    for start in start_poses(building, radius, region, n, rng, pieces):
         out.append(run_trial(stack, scene, depth, start, seconds, noise_m, rng, clutter, odometry))
         if progress is not None:
             progress(out[-1])

@@ -147,7 +147,7 @@ def write_outputs(run: Run, out: Path, metrics: dict, rrd: str | Path | None) ->
 
 def build_report(run: Run, metrics: dict, files: dict[str, str], interrupted: bool) -> dict:
     """The report.json contract (README)."""
-    scn, graph, nav = run.scn, run.building.navgraph, run.stack.navigator
+    scn, graph, nav = run.scn, run.building.navgraph, run.out.plan
     assert nav is not None
     return {
         "version": REPORT_VERSION,
@@ -168,7 +168,7 @@ def build_report(run: Run, metrics: dict, files: dict[str, str], interrupted: bo
             "blocked_edges": nav.blocked_edges,
         },
         "events": run.mission.events,
-        "recovery": {"events": run.stack.events, "failures": run.failures, "faults": fault_report(run)},
+        "recovery": {"events": list(run.out.events), "failures": run.failures, "faults": fault_report(run)},
         "collision_events": run.world.collision_log,
         "files": files,
         "config": {k: v for k, v in to_dict(scn).items() if k != "base_dir"},

@@ -1,15 +1,18 @@
 """A mission run's site, set up from its scenario and seed: the building, the actors, the
 mission, the MuJoCo world, the simulator step and the robot stack, and the
-:class:`Run` record the closed loop (:mod:`sim.experiments.loop`) fills in."""
+:class:`Run` record the closed loop (:mod:`sim.experiments.loop`) fills in. The run
+reads the stack only through its outputs (:class:`autonomy.stack.StackOutput`)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
 from autonomy.maps.vectormap import load_navgraph, load_vectormap
-from autonomy.stack import RobotStack
+from autonomy.perception.camera import DepthCamera
+from autonomy.stack import RobotStack, StackOutput
 from sim.experiments.blackbox import FlightRecorder
 from sim.experiments.columns import Column
 from sim.experiments.waypoints import Mission, plan_mission
@@ -60,6 +63,8 @@ class Run:
     world: World
     sim: SimStep
     stack: RobotStack
+    out: StackOutput
+    """The stack's last output (its command drives the next physics step)."""
     use_estimate: bool
     """The navigator drives on the CGR estimate (else on the truth: ``ground_truth`` follower)."""
     # What the loop records.
@@ -118,15 +123,20 @@ class Run:
     def recovering(self) -> bool:
         """A localization failure is open (by the truth) or the robot is relocalizing."""
         open_failure = bool(self.failures) and self.failures[-1]["end_t"] is None
-        return open_failure or self.stack.relocalizing
+        return open_failure or self.out.relocalizing
 
     @property
     def localizing(self) -> bool:
-        return self.stack.localizer is not None
+        return self.out.localizing
 
     @property
     def camera(self) -> KinectCamera:
         return self.sim.camera
+
+    @cached_property
+    def robot_camera(self) -> DepthCamera:
+        """The camera as the robot stack knows it (field of view, mount, range)."""
+        return self.scn.kinect.depth_camera()
 
 
 def build_run(scn: Scenario, seed: int) -> Run:
@@ -148,13 +158,12 @@ def build_run(scn: Scenario, seed: int) -> Run:
     )
     camera = KinectCamera(world.model, world.camera_id, scn.kinect)
     sim = SimStep(world, camera, Odometry(scn.odometry, seeds.odometry, mission.start_pose), seeds.noise_seed)
-    stack = RobotStack(
-        building.vectormap, graph, scn.stack_config(), rng=seeds.localization, fspf_seed=seeds.fspf_seed, map_path=building.map_path
-    )
+    scfg = scn.stack_config()
+    stack = RobotStack(building.vectormap, graph, scfg, rng=seeds.localization, fspf_seed=seeds.fspf_seed, map_path=building.map_path)
     stack.prepare_recovery()
-    stack.reset(mission.start_pose if scn.localization.start_known or stack.health is None else None)
-    use_estimate = scn.mission.follower == "navigator" and stack.localizer is not None
-    run = Run(scn, seed, seeds, building, furniture, people, mission, world, sim, stack, use_estimate)
+    out = stack.reset(mission.start_pose if scn.localization.start_known or not scfg.recovers else None)
+    use_estimate = scn.mission.follower == "navigator" and out.localizing
+    run = Run(scn, seed, seeds, building, furniture, people, mission, world, sim, stack, out, use_estimate)
     run.last_in_view = np.full(len(world.people.people), -np.inf)
     run.blackbox = FlightRecorder(scn.report.incident_seconds, scn.kinect.rate_hz)
     if scn.faults.enabled:

@@ -22,6 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from autonomy.common.geometry import wrap_angle
+from autonomy.navigation.config import NavCommand
+from autonomy.stack import StackOutput
 
 __all__ = ["TRACE_FILE", "in_window", "trace_record", "write_trace"]
 
@@ -43,32 +45,32 @@ def _vec(a, nd: int = 4) -> list[float | None]:
     return [_num(v, nd) for v in np.asarray(a, dtype=np.float64).ravel()]
 
 
-def trace_record(t: float, truth: np.ndarray, stack, nav) -> str:
-    """One frame's record as a JSON line: ``truth`` the true pose after the frame, ``stack`` the
-    :class:`autonomy.stack.RobotStack` after it perceived and localized, ``nav`` the
-    :class:`autonomy.navigation.config.NavCommand` it was driven by."""
-    est = np.asarray(stack.pose, dtype=np.float64)
+def trace_record(t: float, truth: np.ndarray, out: StackOutput, nav: NavCommand) -> str:
+    """One frame's record as a JSON line: ``truth`` the true pose after the frame, ``out``
+    the stack's output on it, ``nav`` the command the robot was driven by into it."""
+    est = np.asarray(out.estimate, dtype=np.float64)
+    per = out.perception
     rec: dict = {
         "t": _num(t),
         "truth": _vec(truth),
         "estimate": _vec(est),
-        "odometry": _vec(stack.odom),
+        "odometry": _vec(out.odometry),
         "error_m": _num(math.hypot(est[0] - truth[0], est[1] - truth[1])),
         "heading_error_deg": _num(math.degrees(wrap_angle(est[2] - truth[2])), 3),
-        "spread": _vec(stack.spread),
-        "correction": None if stack.correction is None else _vec(stack.correction),
-        "health": stack.health_state,
-        "frame_fault": stack.frame_fault,
-        "points_2d": 0 if stack.perception is None else int(len(stack.perception.points_2d)),
-        "obstacles": 0 if stack.perception is None else int(len(stack.perception.obstacles)),
+        "spread": _vec(out.spread),
+        "correction": None if out.correction is None else _vec(out.correction),
+        "health": out.health_state,
+        "frame_fault": out.frame_fault,
+        "points_2d": int(len(per.points_2d)),
+        "obstacles": int(len(per.obstacles)),
         "nav_state": nav.state,
         "command": _vec(nav.velocity),
         "desired_deg": _num(math.degrees(nav.desired_rad), 2),
         "theta_star_deg": _num(math.degrees(nav.theta_star_rad), 2),
     }
-    if stack.cgr_stats is not None:
-        rec["cgr"] = dataclasses.asdict(stack.cgr_stats)
-    h = stack.health_sample
+    if out.cgr_stats is not None:
+        rec["cgr"] = dataclasses.asdict(out.cgr_stats)
+    h = out.health_sample
     if h is not None:
         rec["monitor"] = {
             "reason": h.reason,

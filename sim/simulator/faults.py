@@ -33,10 +33,12 @@ Fault kinds (the names in the TOML):
   within ``crowd_radius_m`` of it, for ``crowd_s``; then they walk away and are parked
   once out of the camera's range.
 - ``blockage``: a door slab (or a row of boxes, ``blockage_depth_m``) of corridor width
-  across the robot's planned path, 4-8 m ahead of it, where the navigation graph has
-  another way to the plan's goal (while there is no such place, in an open hall, it
-  waits for one, up to ``BLOCKAGE_WAIT_M`` driven); it stays ``blockage_s`` (0: the
-  rest of the run).
+  across the robot's way to the mission's waypoint, 4-8 m ahead of it, where the
+  navigation graph has another way to the waypoint (while there is no such place, in an
+  open hall, it waits for one, up to ``BLOCKAGE_WAIT_M`` driven); it stays
+  ``blockage_s`` (0: the rest of the run). The way is the simulator's own: the graph's
+  shortest path from the node nearest the true pose to the waypoint, never the robot's
+  plan, so where a blockage lands does not depend on what the robot believes.
 """
 
 from __future__ import annotations
@@ -84,13 +86,13 @@ KIDNAP_TRIES = 500
 BUMP_CLEARANCE_M = 0.05
 #: Directions tried for a bump (evenly spaced from a random one).
 BUMP_DIRECTIONS = 16
-#: A blockage stands this far ahead of the robot along its plan (min, max) ...
+#: A blockage stands this far ahead of the robot along its way to the waypoint (min, max) ...
 BLOCKAGE_AHEAD_M = (4.0, 8.0)
 #: ... at one of the places this far apart.
 BLOCKAGE_STEP_M = 0.25
 #: A blockage keeps this much beyond the robot's radius from the robot.
 BLOCKAGE_ROBOT_GAP_M = 0.5
-#: A blockage due where there is no such place (an open hall, no plan) waits for one,
+#: A blockage due where there is no such place (an open hall, no waypoint) waits for one,
 #: looking every this many seconds ...
 BLOCKAGE_RETRY_S = 0.5
 #: ... while the robot drives up to this far (then it is recorded as skipped).
@@ -149,10 +151,10 @@ def ray_to_walls(origin: np.ndarray, direction: np.ndarray, walls: np.ndarray) -
 class FaultInjector:
     """Applies a run's faults (see the module docstring) around the simulator step.
 
-    Per tick, in this order: :meth:`before_step` (before the pose is read and the stack
-    decides), the simulator step, :meth:`filter_frame` on its frame. Every draw comes from
-    ``rng``; with no fault configured nothing is drawn, the world is never touched and
-    frames pass unchanged.
+    Per tick, in this order: :meth:`before_step` (before the pose is read), the simulator
+    step, :meth:`filter_frame` on its frame. It reads the world and the mission, never
+    the robot stack. Every draw comes from ``rng``; with no fault configured nothing is
+    drawn, the world is never touched and frames pass unchanged.
     """
 
     def __init__(
@@ -208,9 +210,11 @@ class FaultInjector:
         """Kinds active now."""
         return list(self._active)
 
-    def before_step(self, t: float, distance_m: float, plan_xy: np.ndarray | None) -> list[dict]:
-        """Called once per tick before the simulator steps: starts due faults (teleports,
-        tilts, places actors), ends finished ones. Returns the events that started this tick."""
+    def before_step(self, t: float, distance_m: float, goal: int | None) -> list[dict]:
+        """Called once per tick before the simulator steps, with the distance driven and
+        the mission's current waypoint (a graph node; None: none): starts due faults
+        (teleports, tilts, places actors), ends finished ones. Returns the events that
+        started this tick."""
         self._t = float(t)
         for kind in [k for k, a in self._active.items() if t >= a.end_t - TIME_EPS_S]:
             self._end(kind, t)
@@ -221,9 +225,9 @@ class FaultInjector:
             if kind == "blockage":
                 self._waiting, self._next_try = (params, trigger, float(t), float(distance_m)), -math.inf
             else:
-                started.append(self._start(kind, params, trigger, t, distance_m, plan_xy))
+                started.append(self._start(kind, params, trigger, t, distance_m))
         if self._waiting is not None and t >= self._next_try - TIME_EPS_S:
-            started += self._try_blockage(t, distance_m, plan_xy)
+            started += self._try_blockage(t, distance_m, goal)
         if "slip" in self._active:
             self._odom_before = self.odometry.pose.copy()
         return started
@@ -266,23 +270,23 @@ class FaultInjector:
     def _pose(self) -> np.ndarray:
         return self.world.robot.pose(self.world.data)
 
-    def _try_blockage(self, t: float, distance_m: float, plan_xy: np.ndarray | None) -> list[dict]:
-        """Place the waiting blockage if there is a place for it now; record it as skipped
-        once the robot has driven ``BLOCKAGE_WAIT_M`` without one."""
+    def _try_blockage(self, t: float, distance_m: float, goal: int | None) -> list[dict]:
+        """Place the waiting blockage if there is a place for it now on the way to the
+        waypoint ``goal``; record it as skipped once the robot has driven
+        ``BLOCKAGE_WAIT_M`` without one."""
         assert self._waiting is not None
         params, trigger, due_t, due_m = self._waiting
-        spot = self._blockage_spot(self._pose(), plan_xy)
+        pose = self._pose()
+        spot = self._blockage_spot(pose, self._route(pose, goal))
         if spot is None and distance_m - due_m < BLOCKAGE_WAIT_M:
             self._next_try = t + BLOCKAGE_RETRY_S
             return []
         self._waiting = None
-        rec = self._start("blockage", params, trigger, t, distance_m, plan_xy, spot=spot)
+        rec = self._start("blockage", params, trigger, t, distance_m, spot=spot)
         rec.update(due_t=due_t, due_distance_m=due_m)
         return [rec]
 
-    def _start(
-        self, kind: str, params: FaultParams, trigger: str, t: float, distance_m: float, plan_xy: np.ndarray | None, **extra
-    ) -> dict:
+    def _start(self, kind: str, params: FaultParams, trigger: str, t: float, distance_m: float, **extra) -> dict:
         if kind in self._active:
             self._active[kind].record["replaced"] = True
             self._end(kind, t)
@@ -297,7 +301,7 @@ class FaultInjector:
             "truth_after": None,
             "params": {k: getattr(params, k) for k in KIND_PARAMS[kind]},
         }
-        ok = getattr(self, f"_start_{kind}")(rec, params, before, plan_xy, **extra)
+        ok = getattr(self, f"_start_{kind}")(rec, params, before, **extra)
         rec["truth_after"] = _pose_list(self._pose())
         self.events.append(rec)
         duration = DURATION_PARAM.get(kind)
@@ -329,7 +333,7 @@ class FaultInjector:
 
     # ------------------------------------------------------------------ kinds
 
-    def _start_kidnap(self, rec: dict, params: FaultParams, pose: np.ndarray, plan_xy: np.ndarray | None) -> bool:
+    def _start_kidnap(self, rec: dict, params: FaultParams, pose: np.ndarray) -> bool:
         clearance = self.robot_radius_m + KIDNAP_CLEARANCE_M
         for _ in range(KIDNAP_TRIES):
             xy = self.building.free_spot(self.rng, clearance, self.robot_radius_m)
@@ -341,12 +345,12 @@ class FaultInjector:
         rec["skipped"] = f"no place {clearance:.2f} m from the walls and {KEEP_OUT_M} m from furniture and people"
         return False
 
-    def _start_blackout(self, rec: dict, params: FaultParams, pose: np.ndarray, plan_xy: np.ndarray | None) -> bool:
+    def _start_blackout(self, rec: dict, params: FaultParams, pose: np.ndarray) -> bool:
         return True
 
     _start_dropped = _start_corrupt_nan = _start_stale = _start_blackout
 
-    def _start_slip(self, rec: dict, params: FaultParams, pose: np.ndarray, plan_xy: np.ndarray | None) -> bool:
+    def _start_slip(self, rec: dict, params: FaultParams, pose: np.ndarray) -> bool:
         rec["bump"] = None
         if params.bump_m <= 0 and params.bump_deg <= 0:
             return True
@@ -362,7 +366,7 @@ class FaultInjector:
         rec["bump_skipped"] = "no direction clear of walls, furniture and people"
         return True
 
-    def _start_tilt(self, rec: dict, params: FaultParams, pose: np.ndarray, plan_xy: np.ndarray | None) -> bool:
+    def _start_tilt(self, rec: dict, params: FaultParams, pose: np.ndarray) -> bool:
         phi = self.rng.uniform(0.0, 2.0 * math.pi)
         pitch, roll = math.radians(params.tilt_deg) * math.cos(phi), math.radians(params.tilt_deg) * math.sin(phi)
         # Pitch about the robot's y axis (positive: further down, as CameraMount's pitch),
@@ -375,7 +379,7 @@ class FaultInjector:
         rec["robot_from_optical"] = [[float(v) for v in row] for row in self._robot_from_optical]
         return True
 
-    def _start_crowd(self, rec: dict, params: FaultParams, pose: np.ndarray, plan_xy: np.ndarray | None) -> bool:
+    def _start_crowd(self, rec: dict, params: FaultParams, pose: np.ndarray) -> bool:
         graph = self.building.navgraph
         dist = self._graph_distance(pose[:2])
         ids = graph.node_ids()
@@ -406,13 +410,11 @@ class FaultInjector:
             rec["skipped"] = f"no graph route of {len(self._crowd)} near the robot"
         return placed > 0
 
-    def _start_blockage(
-        self, rec: dict, params: FaultParams, pose: np.ndarray, plan_xy: np.ndarray | None, spot: tuple | None = None
-    ) -> bool:
+    def _start_blockage(self, rec: dict, params: FaultParams, pose: np.ndarray, spot: tuple | None = None) -> bool:
         if spot is None:
             rec["skipped"] = (
                 f"no corridor up to {self.cfg.blockage_max_width_m} m wide {BLOCKAGE_AHEAD_M[0]}-{BLOCKAGE_AHEAD_M[1]} m "
-                f"ahead on the plan with another route to its goal within {BLOCKAGE_WAIT_M} m driven"
+                f"ahead on the way to the waypoint with another route to it within {BLOCKAGE_WAIT_M} m driven"
             )
             return False
         a, b, d, ahead, cut = spot
@@ -531,17 +533,30 @@ class FaultInjector:
             model.body_quat[bid] = _yaw_quat(f.yaw)
         mujoco.mj_forward(model, self.world.data)
 
-    def _blockage_spot(
-        self, pose: np.ndarray, plan_xy: np.ndarray | None
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, np.ndarray] | None:
-        """Ends (a, b) of a wall-to-wall line across the plan 4-8 m ahead, the plan's
-        direction there, the distance ahead and the graph edges it cuts; None when no place
-        there is a corridor (up to ``blockage_max_width_m``) whose blocking leaves the
-        graph a way from the robot to the plan's goal."""
-        if plan_xy is None or len(plan_xy) < 2 or not len(self._panels):
+    def _route(self, pose: np.ndarray, goal: int | None) -> np.ndarray | None:
+        """The way (K, 2) from the true pose to the waypoint ``goal``: the pose, then the
+        navigation graph's shortest path from the node nearest it (:func:`astar`); None
+        without a waypoint or a path."""
+        if goal is None:
             return None
-        plan = np.asarray(plan_xy, dtype=np.float64).reshape(-1, 2)
-        segs = np.concatenate([plan[:-1], plan[1:]], axis=1)
+        graph = self.building.navgraph
+        try:
+            nodes = astar(graph, graph.nearest_node(float(pose[0]), float(pose[1])), int(goal))
+        except InputError:
+            return None
+        return np.vstack([np.asarray(pose[:2], dtype=np.float64), path_points(graph, nodes)])
+
+    def _blockage_spot(
+        self, pose: np.ndarray, way_xy: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, np.ndarray] | None:
+        """Ends (a, b) of a wall-to-wall line across the way ``way_xy`` 4-8 m ahead, the
+        way's direction there, the distance ahead and the graph edges it cuts; None when no
+        place there is a corridor (up to ``blockage_max_width_m``) whose blocking leaves the
+        graph a way from the robot to the way's end."""
+        if way_xy is None or len(way_xy) < 2 or not len(self._panels):
+            return None
+        way = np.asarray(way_xy, dtype=np.float64).reshape(-1, 2)
+        segs = np.concatenate([way[:-1], way[1:]], axis=1)
         lengths = np.hypot(segs[:, 2] - segs[:, 0], segs[:, 3] - segs[:, 1])
         cum = np.concatenate([[0.0], np.cumsum(lengths)])
         frac, dist = point_segment_projection(pose[:2], segs)
@@ -554,7 +569,7 @@ class FaultInjector:
         graph = self.building.navgraph
         edges, edge_ij = graph.edge_segments(), graph.edge_indices()
         src = graph.index_of(graph.nearest_node(float(pose[0]), float(pose[1])))
-        dst = graph.index_of(graph.nearest_node(float(plan[-1, 0]), float(plan[-1, 1])))
+        dst = graph.index_of(graph.nearest_node(float(way[-1, 0]), float(way[-1, 1])))
         for s_ahead in np.roll(ahead, -int(self.rng.integers(len(ahead)))):
             s = s0 + s_ahead
             k = int(np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(segs) - 1))

@@ -15,7 +15,7 @@ import numpy as np
 from autonomy.maps.navgraph import NavGraph
 from autonomy.maps.vectormap import VectorMap
 from autonomy.navigation.config import NavCommand
-from autonomy.stack import RobotStack
+from autonomy.stack import StackOutput
 from sim.scenario import Scenario
 from sim.simulator.actors import Furniture
 from sim.simulator.step import SimFrame
@@ -28,13 +28,13 @@ if TYPE_CHECKING:
 HEALTH_CODES = {"ok": 0.0, "blind": 1.0, "lost": 2.0, "relocalizing": 3.0}
 
 
-def health_scalars(stack: RobotStack) -> dict[str, float]:
+def health_scalars(out: StackOutput) -> dict[str, float]:
     """The health signal for the recording's timeline (autonomy.localization.health)."""
-    h = stack.health_sample
+    h = out.health_sample
     if h is None:
         return {}
     return {
-        "health/state": HEALTH_CODES.get(stack.health_state, -1.0),
+        "health/state": HEALTH_CODES.get(out.health_state, -1.0),
         "health/explained_fast": h.explained_fast,
         "health/explained_slow": h.explained_slow,
         "health/through_fast": h.through_fast,
@@ -47,8 +47,10 @@ def health_scalars(stack: RobotStack) -> dict[str, float]:
 class RunLogger:
     """Logs one mission run to a rerun recording (an .rrd file or a spawned viewer)."""
 
-    def __init__(self, rec: Recorder) -> None:
+    def __init__(self, rec: Recorder, avoidance_radius_m: float) -> None:
         self.rec = rec
+        self.avoidance_radius_m = avoidance_radius_m
+        """The avoidance's radius, the fan's extent."""
 
     @classmethod
     def open(
@@ -75,13 +77,18 @@ class RunLogger:
         rec.log_robot_shape(scn.robot.radius_m, scn.robot.height_m)
         rec.log_furniture([(np.array([f.x, f.y, f.dims[2] / 2]), np.array(f.dims) / 2, f.yaw) for f in furniture])
         rec.log_waypoints(waypoints_xy)
-        return cls(rec)
+        return cls(rec, scn.avoidance.radius_m)
+
+    def heavy(self, k: int) -> bool:
+        """Whether frame ``k`` gets the heavy items (the stack is asked for its
+        correspondences on those frames only)."""
+        return self.rec.heavy(k)
 
     def frame(
         self,
         k: int,
         frame: SimFrame,
-        stack: RobotStack,
+        out: StackOutput,
         nav: NavCommand,
         world: World,
         *,
@@ -90,7 +97,9 @@ class RunLogger:
         collisions: int,
     ) -> None:
         """Frame ``k``'s pose and ``estimate`` (None: the stack does not localize); every
-        ``rrd_every`` frames the heavy items, with the true ``error_m`` and the contacts so far."""
+        ``rrd_every`` frames the heavy items from the stack's output ``out`` on the frame
+        (made with its correspondences, :meth:`heavy`), with the true ``error_m`` and
+        the contacts so far."""
         rec = self.rec
         rec.set_time(k, frame.t)
         rec.log_pose(k, frame.pose)
@@ -98,19 +107,19 @@ class RunLogger:
             rec.log_estimate(k, estimate)
         if not rec.heavy(k):
             return
-        per = stack.perception
+        per = out.perception
         rec.log_depth(frame.depth)
         rec.log_fspf(per.planes)
-        loc = stack.localizer
-        if loc is not None:
-            rec.log_localization(loc.before_refinement, loc.after_refinement, loc.refined_weights)
-            lines, idx = stack.correspondences()
-            rec.log_scene(lines, stack.pose, per.points_2d, idx)
+        if out.refinement is not None:
+            rec.log_localization(out.refinement.before, out.refinement.after, out.refinement.weights)
+        if out.correspondences is not None:
+            lines, idx = out.correspondences
+            rec.log_scene(lines, out.estimate, per.points_2d, idx)
         rec.log_near_field(per.near_lines)
         if nav.fan is not None:
-            rec.log_avoidance(nav.fan[0], nav.fan[1], nav.theta_star_rad, nav.desired_rad, stack.cfg.avoidance.radius_m)
+            rec.log_avoidance(nav.fan[0], nav.fan[1], nav.theta_star_rad, nav.desired_rad, self.avoidance_radius_m)
         rec.log_people(world.people.positions())
-        ms = {f"timing_ms/{name}": v * 1e3 for name, v in {**frame.timings_s, **stack.timings_s}.items()}
+        ms = {f"timing_ms/{name}": v * 1e3 for name, v in {**frame.timings_s, **out.timings_s}.items()}
         rec.log_scalars(
             {
                 "speed_mps": float(np.hypot(*world.robot.velocity_body(world.data)[:2])),
@@ -118,8 +127,8 @@ class RunLogger:
                 "fspf/plane_points": float(len(per.planes.points)),
                 "fspf/points_2d": float(len(per.points_2d)),
                 "localization/error_m": error_m,
-                "localization/spread_m": stack.spread[0] if loc is not None else float("nan"),
-                **health_scalars(stack),
+                "localization/spread_m": out.spread[0] if out.localizing else float("nan"),
+                **health_scalars(out),
                 "collisions": float(collisions),
             }
         )

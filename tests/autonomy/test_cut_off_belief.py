@@ -75,10 +75,9 @@ def test_a_goal_the_belief_is_cut_off_from_is_planned_from_a_node_that_reaches_i
     is planned from the corridor's node nearest the belief, not refused."""
     stack = make_stack(IN_CORRIDOR)
     stack.pose = IN_ROOM.copy()
-    length = stack.set_goal(CORRIDOR[-1], 5.0)
-    nav = stack.navigator
-    assert nav.plan_nodes[0] == CORRIDOR[0] and nav.plan_nodes[-1] == CORRIDOR[-1]
-    assert length == pytest.approx(3.0 + 14.0)
+    plan = stack.set_goal(CORRIDOR[-1], 5.0)
+    assert plan.nodes[0] == CORRIDOR[0] and plan.nodes[-1] == CORRIDOR[-1]
+    assert plan.remaining_m == pytest.approx(3.0 + 14.0)
 
 
 def test_a_goal_the_start_has_no_path_to_stays_the_users_mistake() -> None:
@@ -97,7 +96,7 @@ def test_with_an_unknown_start_the_first_goal_stands_for_the_start() -> None:
     first goal's length is the best guess's, not an error; a later goal with no path from
     the first is the user's mistake."""
     stack = make_stack(None)
-    assert stack.set_goal(CORRIDOR[2], 0.0) > 0.0
+    assert stack.set_goal(CORRIDOR[2], 0.0).remaining_m > 0.0
     with pytest.raises(NoPathError):
         stack.set_goal(ROOM[0], 1.0)
 

@@ -232,7 +232,7 @@ def test_blockage_is_passed_by_replanning(tmp_path):
         r.camera.close()
     f = [x for x in fault_report(r) if x["kind"] == "blockage"]
     assert len(f) == 1 and not f[0].get("skipped"), f
-    assert r.stack.navigator is not None and r.stack.navigator.blocked_edges >= 1
+    assert r.out.plan is not None and r.out.plan.blocked_edges >= 1
     # It turned away and went the other way round (the loop is too long to finish in a
     # short test): it drove on for metres after the blockage appeared and ended far
     # from it, without contact.

@@ -74,11 +74,12 @@ class Rig:
         self.faults = FaultInjector(cfg, self.world, building, fault_rng(seed), self.odometry, RADIUS) if injector else None
         self.distance_m = 0.0
 
-    def tick(self, velocity=(0.0, 0.0, 0.0), plan_xy=None):
-        """One tick as the runner does it: faults, the pose, the step, the filtered frame."""
+    def tick(self, velocity=(0.0, 0.0, 0.0), goal=None):
+        """One tick as the runner does it: faults (``goal``: the mission's waypoint), the
+        pose, the step, the filtered frame."""
         t = float(self.world.data.time)
         if self.faults is not None:
-            self.faults.before_step(t, self.distance_m, plan_xy)
+            self.faults.before_step(t, self.distance_m, goal)
         pose = self.world.robot.pose(self.world.data)
         frame = self.sim.step(np.asarray(velocity, dtype=float))
         self.distance_m += float(np.hypot(*(frame.pose[:2] - pose[:2])))
@@ -464,14 +465,13 @@ def _blockage_rig(kinect: KinectConfig, blockage_s: float = 0.0):
     b = corridor_loop()
     g = b.navgraph
     start = np.array([12.0, 6.3, 0.0])
-    plan = path_points(g, astar(g, g.nearest_node(12.0, 6.3), g.nearest_node(34.0, 6.3)))
     cfg = FaultsConfig(events=(FaultEvent(kind="blockage", at_s=0.0, blockage_s=blockage_s),))
-    return Rig(cfg, b, start, kinect=kinect, seed=4), plan
+    return Rig(cfg, b, start, kinect=kinect, seed=4), g.nearest_node(34.0, 6.3)
 
 
-def test_blockage_is_placed_across_the_plan_where_another_route_remains() -> None:
-    rig, plan = _blockage_rig(TINY, blockage_s=0.5)
-    rig.tick(plan_xy=plan)
+def test_blockage_is_placed_across_the_way_to_the_waypoint_where_another_route_remains() -> None:
+    rig, goal = _blockage_rig(TINY, blockage_s=0.5)
+    rig.tick(goal=goal)
     ev = rig.faults.events[0]
     assert "skipped" not in ev, ev
     w = ev["where"]
@@ -481,7 +481,7 @@ def test_blockage_is_placed_across_the_plan_where_another_route_remains() -> Non
     walls = np.asarray(rig.building.vectormap.segments)
     assert point_segment_distance(a, walls).min() < 1e-6 and point_segment_distance(z, walls).min() < 1e-6
     assert 1.5 < w["width_m"] < 3.0 and w["panels"] == math.ceil(w["width_m"] / 0.5)
-    # The plan's way is cut, another way to its goal remains (independently: the graph without the cut edges).
+    # The way is cut, another way to the waypoint remains (independently: the graph without the cut edges).
     g = rig.building.navgraph
     cut = {tuple(sorted(e)) for e in w["cut_edges"]}
     assert cut
@@ -502,7 +502,7 @@ def test_blockage_is_placed_across_the_plan_where_another_route_remains() -> Non
     assert along[0] - 0.25 == pytest.approx(0.0, abs=1e-9) and along[-1] + 0.25 == pytest.approx(w["width_m"], abs=1e-9)
     assert np.all(np.diff(along) <= 0.5 + 1e-9)
     for _ in range(20):
-        rig.tick(plan_xy=plan)
+        rig.tick(goal=goal)
     assert ev["t_end"] == pytest.approx(0.5, abs=0.04)
     assert np.all(np.hypot(*(rig.world.model.body_pos[bodies, :2] - PARK_XY).T) > 40.0)
     rig.close()
@@ -513,9 +513,9 @@ def test_blockage_shows_in_the_depth_frame() -> None:
     """The slab across the corridor ahead, rendered: the centre column above the floor
     sees a plane at the slab's face (closed form), where it saw farther before."""
     kinect = KinectConfig(render_far_m=20.0)
-    rig, plan = _blockage_rig(kinect)
+    rig, goal = _blockage_rig(kinect)
     before = rig.camera.render_clean(rig.world.data)[:, 320].copy()
-    rig.faults.before_step(0.0, 0.0, plan)
+    rig.faults.before_step(0.0, 0.0, goal)
     after = rig.camera.render_clean(rig.world.data)[:, 320].copy()
     w = rig.faults.events[0]["where"]
     face_x = w["centre"][0] - 0.5 * rig.faults.cfg.blockage_depth_m
@@ -535,27 +535,27 @@ def test_blockage_shows_in_the_depth_frame() -> None:
 
 
 def test_a_blockage_waits_for_a_place_and_is_skipped_after_the_wait() -> None:
-    """Due without a plan, it waits; placed once there is one, with when it was due; a
+    """Due without a waypoint, it waits; placed once there is one, with when it was due; a
     second one that finds no place while the robot drives 50 m is recorded as skipped."""
-    rig, plan = _blockage_rig(TINY)
+    rig, goal = _blockage_rig(TINY)
     for _ in range(3):
-        rig.tick(plan_xy=None)
+        rig.tick(goal=None)
     assert rig.faults.events == [] and rig.faults.active == []
     while not rig.faults.events:
-        rig.tick(plan_xy=plan)
+        rig.tick(goal=goal)
     ev = rig.faults.events[0]
     # It looks again every 0.5 s.
     assert "where" in ev and ev["due_t"] == 0.0 and ev["t_start"] == pytest.approx(0.5, abs=1e-6) and rig.faults.active == ["blockage"]
     rig.close()
 
     rig, _ = _blockage_rig(TINY)
-    rig.tick(plan_xy=None)
+    rig.tick(goal=None)
     rig.distance_m = 49.0
-    rig.tick(plan_xy=None)
+    rig.tick(goal=None)
     assert rig.faults.events == []
     rig.distance_m = 51.0
     for _ in range(16):  # it looks every 0.5 s
-        rig.tick(plan_xy=None)
+        rig.tick(goal=None)
     ev = rig.faults.events[0]
     assert ev["t_end"] == ev["t_start"] and "no corridor" in ev["skipped"] and rig.faults.active == []
     assert ev["due_distance_m"] == 0.0 and ev["distance_m"] >= 51.0

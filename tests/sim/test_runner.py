@@ -79,8 +79,8 @@ def test_interrupted_run_still_writes_its_report(tmp_path: Path, monkeypatch: py
 
 def _fail_at_call(monkeypatch: pytest.MonkeyPatch, n: int, exc: Exception | None = None) -> None:
     """Make the runner's localization check raise ``exc`` (a bug's ZeroDivisionError) on
-    its ``n``-th call: mid-frame, after the frame's FSPF counts are recorded and before
-    its poses are."""
+    its ``n``-th call: mid-frame, inside the stack's step on the frame, after the frame's
+    physics and before its records."""
     import sim.experiments.loop as loop
 
     calls = {"n": 0}
@@ -449,18 +449,18 @@ def test_blind_driving_counts_the_metres_cgr_dead_reckoned_and_the_longest_stret
     from sim.experiments.accounting import note_blind
 
     seen, unseen = UpdateStats(observation=True), UpdateStats(observation=False)
-    stack = SimpleNamespace(localizer=object(), relocalizing=False, cgr_stats=None)
-    run = SimpleNamespace(stack=stack, tracked_m=0.0, blind_m=0.0, blind_stretch_m=0.0, blind_stretch_max_m=0.0)
+    out = SimpleNamespace(localizing=True, relocalizing=False, cgr_stats=None)
+    run = SimpleNamespace(out=out, tracked_m=0.0, blind_m=0.0, blind_stretch_m=0.0, blind_stretch_max_m=0.0)
     # (what CGR did, relocalizing, metres): 1 m seen, 3 m blind (a refused frame among
     # them), 1 m seen, 2 m blind, 4 m relocalizing (the search's, not CGR's), 2.5 m blind.
     frames = [(seen, False, 1.0), (unseen, False, 1.0), (None, False, 1.0), (unseen, False, 1.0), (seen, False, 1.0),
               (unseen, False, 2.0), (None, True, 4.0), (unseen, False, 2.5)]
     for stats, reloc, metres in frames:
-        stack.cgr_stats, stack.relocalizing = stats, reloc
+        out.cgr_stats, out.relocalizing = stats, reloc
         note_blind(run, metres)
     assert run.tracked_m == 9.5 and run.blind_m == 7.5
     assert run.blind_stretch_max_m == 3.0 and run.blind_stretch_m == 2.5
     # No localizer (a ground-truth follower): nothing counted.
-    stack.localizer = None
+    out.localizing = False
     note_blind(run, 5.0)
     assert run.tracked_m == 9.5

@@ -46,7 +46,7 @@ import math
 import numpy as np
 
 from autonomy.common.geometry import wrap_angle
-from autonomy.maps.vectormap import NavGraph
+from autonomy.maps.navgraph import NavGraph
 from autonomy.navigation.avoidance import AvoidanceConfig, choose_direction
 from autonomy.navigation.config import NavCommand, NavigatorConfig
 from autonomy.navigation.plan import Plan

@@ -18,8 +18,8 @@ from autonomy.common.geometry import (
     point_segment_distance,
     point_segment_projection,
 )
+from autonomy.maps.navgraph import NavGraph
 from autonomy.maps.planner import NoPathError, astar, blind_lengths, edge_key, parts, path_points
-from autonomy.maps.vectormap import NavGraph
 from autonomy.navigation.avoidance import AvoidanceConfig
 from autonomy.navigation.config import NavigatorConfig
 from autonomy.navigation.plan import Plan

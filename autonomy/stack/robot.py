@@ -43,9 +43,10 @@ from autonomy.localization.health import HealthMonitor, HealthSample
 from autonomy.localization.observation import correspond
 from autonomy.localization.relocalization import Scan
 from autonomy.localization.view_check import ViewCheck
+from autonomy.maps.navgraph import NavGraph
 from autonomy.maps.planner import NoPathError
 from autonomy.maps.raycast import SceneQuery, load_or_build
-from autonomy.maps.vectormap import NavGraph, VectorMap
+from autonomy.maps.vectormap import VectorMap
 from autonomy.navigation.avoidance import obstacle_points
 from autonomy.navigation.config import NavCommand
 from autonomy.navigation.navigator import Navigator

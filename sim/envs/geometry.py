@@ -19,8 +19,8 @@ import numba
 import numpy as np
 
 from autonomy.common.geometry import segments_cross_nb
+from autonomy.maps.navgraph import NavGraph
 from autonomy.maps.planner import adjacency, dijkstra
-from autonomy.maps.vectormap import NavGraph
 from autonomy.perception.camera import CameraIntrinsics, CameraMount, pixel_rays
 
 

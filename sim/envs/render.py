@@ -11,7 +11,8 @@ import math
 
 import numpy as np
 
-from autonomy.maps.vectormap import NavGraph, VectorMap
+from autonomy.maps.navgraph import NavGraph
+from autonomy.maps.vectormap import VectorMap
 
 BACKGROUND = (250, 250, 247)
 WALL = (40, 40, 45)

@@ -19,7 +19,7 @@ import numpy as np
 
 from autonomy.common.errors import InputError
 from autonomy.maps.graph_builder import graph_components
-from autonomy.maps.vectormap import NavGraph
+from autonomy.maps.navgraph import NavGraph
 from sim.scenario import MissionConfig
 
 #: A waypoint counts as reached when the true position is this much beyond the

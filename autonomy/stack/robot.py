@@ -38,7 +38,7 @@ import numpy as np
 
 from autonomy.common.errors import InputError
 from autonomy.common.geometry import compose_pose
-from autonomy.localization.cgr import CGRLocalizer, UpdateStats
+from autonomy.localization.cgr import CGRLocalizer
 from autonomy.localization.health import HealthMonitor, HealthSample
 from autonomy.localization.observation import correspond
 from autonomy.localization.relocalization import Scan
@@ -58,7 +58,7 @@ from autonomy.stack.config import StackConfig
 from autonomy.stack.frames import FrameGuard, moved_more_than_noise
 from autonomy.stack.lost import Accepted, LostRecovery
 from autonomy.stack.output import PlanView, Refinement, StackOutput
-from autonomy.stack.state import Perception, StackState, empty_perception
+from autonomy.stack.state import LocalizationFrame, Perception, StackState, empty_perception
 
 #: Seeds of the FSPF sampling stream stay below this (the kernel's xorshift seed range).
 FSPF_SEED_MODULUS = 2**31
@@ -116,10 +116,7 @@ class RobotStack:
         self._home: np.ndarray | None = None
         """Where the robot was started (x, y; :meth:`reset`), or the first goal when the
         start was unknown: a goal with no path from there is the user's mistake."""
-        self._view_agree = math.nan
-        self._cgr_lines: np.ndarray | None = None
-        self._cgr_stats: UpdateStats | None = None
-        self._correction: tuple[float, float] | None = None
+        self._loc = LocalizationFrame()
         self._events_out: tuple[dict, ...] = ()
         """The event log as the last output gave it (made again only when it grew)."""
 
@@ -134,15 +131,6 @@ class RobotStack:
         self.state.pose = value
 
     @property
-    def spread(self) -> tuple[float, float]:
-        """(position spread m, heading spread rad) of the belief."""
-        return self.state.spread
-
-    @spread.setter
-    def spread(self, value: tuple[float, float]) -> None:
-        self.state.spread = value
-
-    @property
     def odom(self) -> np.ndarray:
         """Dead reckoning from the odometry alone (the relocalization's scan frame)."""
         return self.state.odom
@@ -150,11 +138,6 @@ class RobotStack:
     @odom.setter
     def odom(self, value: np.ndarray) -> None:
         self.state.odom = value
-
-    @property
-    def perception(self) -> Perception | None:
-        """The last usable frame's perception (None before the first)."""
-        return self.state.perception
 
     @property
     def mount(self) -> CameraMount:
@@ -335,10 +318,7 @@ class RobotStack:
         st = self.state
         if t is not None:
             st.t = float(t)
-        self._cgr_lines = None
-        self._cgr_stats = None
-        self._correction = None
-        self._view_agree = math.nan
+        self._loc = LocalizationFrame()
         if increment is not None:
             inc = np.asarray(increment, dtype=np.float64)
             if inc.shape != (3,):
@@ -361,24 +341,24 @@ class RobotStack:
                 predicted = compose_pose(st.pose, inc)
                 self.localizer.predict(inc)
                 if st.perception is not None and st.fresh:
-                    self._cgr_stats = self.localizer.update(st.perception.points_2d, st.perception.normals_2d)
-                    self._cgr_lines = self.localizer.last_lines
+                    self._loc.stats = self.localizer.update(st.perception.points_2d, st.perception.normals_2d)
+                    self._loc.lines = self.localizer.last_lines
                 self._read_estimate()
                 # How far the update moved the belief beyond the odometry (the jump test).
-                self._correction = (float(st.pose[0] - predicted[0]), float(st.pose[1] - predicted[1]))
+                self._loc.correction = (float(st.pose[0] - predicted[0]), float(st.pose[1] - predicted[1]))
         self.guard.note_odometry(st.odom)
         if t is not None and self.view_check is not None and st.fresh and st.depth is not None:
             if self.lost.relocalizing:  # the health monitor does not listen while relocalizing
                 self.view_check.store(float(t), st.odom, st.depth)
             else:
-                self._view_agree = self.view_check.update(float(t), st.odom, st.depth)
+                self._loc.view_agree = self.view_check.update(float(t), st.odom, st.depth)
         if t is not None and self.health is not None:
             if self.lost.relocalizing:
                 accepted = self.lost.step(float(t))
                 if accepted is not None:
                     self._restart_on(accepted, float(t))
             else:
-                self.lost.watch(float(t), self._cgr_lines, self._correction, self._view_agree)
+                self.lost.watch(float(t), self._loc.lines, self._loc.correction, self._loc.view_agree)
         self.timings_s["localization"] = time.perf_counter() - t0
         return st.pose
 
@@ -406,18 +386,6 @@ class RobotStack:
         if self.lost.relocalizing:
             return "relocalizing"
         return "ok" if self.health is None else self.health.state
-
-    @property
-    def correction(self) -> tuple[float, float] | None:
-        """How far this frame's localizer update moved the belief beyond the odometry's
-        prediction (world x, y; None: no update this frame)."""
-        return self._correction
-
-    @property
-    def cgr_stats(self) -> UpdateStats | None:
-        """What CGR's update did on this frame (None: no update, the frame was refused or
-        the robot is relocalizing)."""
-        return self._cgr_stats
 
     @property
     def health_sample(self) -> HealthSample | None:
@@ -518,8 +486,8 @@ class RobotStack:
             events=self._events_out,
             frame_fault=self.guard.fault,
             frames_rejected=dict(self.guard.rejected),
-            cgr_stats=self._cgr_stats,
-            correction=self._correction,
+            cgr_stats=self._loc.stats,
+            correction=self._loc.correction,
             odometry=st.odom.copy(),
             particles=None if loc is None else loc.particles.copy(),
             refinement=None if loc is None else Refinement(loc.before_refinement, loc.after_refinement, loc.refined_weights),

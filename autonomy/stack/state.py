@@ -3,10 +3,12 @@ last perception and the event log."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from autonomy.localization.cgr import UpdateStats
 from autonomy.perception.camera import CameraMount
 from autonomy.perception.fspf import FSPFResult
 
@@ -56,3 +58,17 @@ class StackState:
     """The time of the last :meth:`RobotStack.localize` that was given one (s)."""
     events: list[dict] = field(default_factory=list)
     """What the recovery did: {"t", "event": lost | relocalized | blind | seeing | mount corrected, ...}."""
+
+
+@dataclass
+class LocalizationFrame:
+    """What one frame's localization step found: read by the lost test and the output."""
+
+    lines: np.ndarray | None = None
+    """The scene lines CGR's update associated the points with (None: no update)."""
+    stats: UpdateStats | None = None
+    """CGR's update statistics (None: no update this frame)."""
+    correction: tuple[float, float] | None = None
+    """How far the update moved the belief beyond the odometry (x, y m)."""
+    view_agree: float = math.nan
+    """The view check's agreement of this frame with the last (NaN: not checked)."""

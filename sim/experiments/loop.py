@@ -96,12 +96,15 @@ def drive(run: Run, recorder: RunLogger | None, progress: bool | None, checkpoin
                 if run.frames % 30 == 0:
                     bar.set_postfix(dist=f"{run.distance_m:.0f}m", wp=f"{mission.reached}/{len(mission.waypoints)}", coll=run.collisions, resets=run.resets)
     except KeyboardInterrupt:
+        end_on_whole_frame(run)
         return True
     except Exception as exc:
         # A bug in the loop: report what finished (run_scenario raises after). But Ctrl-C
         # (or SIGTERM) landing inside a numba kernel comes out as a SystemError caused by
         # the KeyboardInterrupt, one or several levels down: an interruption, not a bug.
-        if not _caused_by_interrupt(exc):
+        if _caused_by_interrupt(exc):
+            end_on_whole_frame(run)
+        else:
             note_crash(run, exc)
         return True
     finally:
@@ -196,6 +199,13 @@ def note_crash(run: Run, exc: Exception) -> None:
         "t": round(float(run.world.data.time), 4), "frame": run.frames, "distance_m": round(run.distance_m, 3),
     }
     run.crash_exc = exc
+    end_on_whole_frame(run)
+
+
+def end_on_whole_frame(run: Run) -> None:
+    """End every per-frame record on the last whole frame: a frame cut short (by a crash,
+    or by Ctrl-C or SIGTERM landing inside the stack's step, which records the estimate
+    before the loop records the frame's time) may have written some of its rows."""
     for col in (run.times, run.truth, run.estimates):
         col.truncate(run.frames + 1)
     for col in (run.loc_errors, run.heading_errors, run.fspf_counts, *run.timing.values()):

@@ -119,6 +119,30 @@ def test_a_run_that_stops_on_an_error_keeps_its_report(tmp_path: Path, monkeypat
     assert (tmp_path / "trajectory.png").exists()
 
 
+def test_ctrl_c_inside_the_stacks_step_ends_the_records_on_the_last_whole_frame(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Ctrl-C (or SIGTERM) landing in the stack's step after the runner's check has
+    recorded the frame's estimate, before the loop records the frame's time: the run
+    stops as interrupted and its trajectories end on the same last whole frame."""
+    import sim.experiments.loop as loop
+
+    calls = {"n": 0}
+    real = loop.check_localization
+
+    def then_interrupted(*args, **kwargs):
+        calls["n"] += 1
+        out = real(*args, **kwargs)
+        if calls["n"] == 30:
+            raise KeyboardInterrupt
+        return out
+
+    monkeypatch.setattr(loop, "check_localization", then_interrupted)
+    rep = run_scenario(_short_demo(), tmp_path, seed=1, progress=False)
+    assert rep["interrupted"] is True and rep["error"] is None and rep["metrics"]["frames"] == 29
+    assert len(np.loadtxt(tmp_path / "trajectory_estimate.tum")) == len(np.loadtxt(tmp_path / "trajectory_truth.tum")) == 30
+
+
 def test_a_sweep_trial_that_stops_on_an_error_names_its_seed(monkeypatch: pytest.MonkeyPatch) -> None:
     from sim.experiments.mission import trial
 

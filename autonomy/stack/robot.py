@@ -41,7 +41,6 @@ from autonomy.common.geometry import compose_pose
 from autonomy.localization.cgr import CGRLocalizer
 from autonomy.localization.health import HealthMonitor, HealthSample
 from autonomy.localization.observation import correspond
-from autonomy.localization.relocalization import Scan
 from autonomy.localization.view_check import ViewCheck
 from autonomy.maps.navgraph import NavGraph
 from autonomy.maps.planner import NoPathError
@@ -50,7 +49,6 @@ from autonomy.maps.vectormap import VectorMap
 from autonomy.navigation.avoidance import obstacle_points
 from autonomy.navigation.config import NavCommand
 from autonomy.navigation.navigator import Navigator
-from autonomy.perception.camera import CameraMount
 from autonomy.perception.fspf import fspf
 from autonomy.perception.mount_check import MountCheck
 from autonomy.perception.nearfield import NearField
@@ -119,70 +117,6 @@ class RobotStack:
         self._loc = LocalizationFrame()
         self._events_out: tuple[dict, ...] = ()
         """The event log as the last output gave it (made again only when it grew)."""
-
-    # -- the shared belief and frame, read and set by callers ---------------------------
-    @property
-    def pose(self) -> np.ndarray:
-        """The pose estimate (x, y, theta), map frame."""
-        return self.state.pose
-
-    @pose.setter
-    def pose(self, value: np.ndarray) -> None:
-        self.state.pose = value
-
-    @property
-    def odom(self) -> np.ndarray:
-        """Dead reckoning from the odometry alone (the relocalization's scan frame)."""
-        return self.state.odom
-
-    @odom.setter
-    def odom(self, value: np.ndarray) -> None:
-        self.state.odom = value
-
-    @property
-    def mount(self) -> CameraMount:
-        """The camera mount FSPF and the near field use (the mount check corrects it)."""
-        return self.state.mount
-
-    @property
-    def events(self) -> list[dict]:
-        """What the recovery did: {"t", "event": lost | relocalized | blind | seeing | mount corrected, ...}."""
-        return self.state.events
-
-    @property
-    def frame_fault(self) -> str:
-        """What was wrong with this frame ('' nothing): dropped or stale (not used), invalid
-        (no valid pixel; used), corrupt (NaN or infinite pixels; used without them)."""
-        return self.guard.fault
-
-    @property
-    def frames_rejected(self) -> dict[str, int]:
-        """How many frames were dropped, stale, invalid or corrupt."""
-        return self.guard.rejected
-
-    @property
-    def relocalizing(self) -> bool:
-        """True while the stack is lost and searching the map (the navigator looks round)."""
-        return self.lost.relocalizing
-
-    @property
-    def scan(self) -> Scan:
-        """The relocalization's scan (dead-reckoning frame)."""
-        return self.lost.view.scan
-
-    @property
-    def modes(self) -> list[tuple[np.ndarray, float]]:
-        """Relocalization modes as (map-from-odometry transform, score), best first."""
-        return self.lost.view.modes
-
-    @modes.setter
-    def modes(self, value: list[tuple[np.ndarray, float]]) -> None:
-        self.lost.view.modes = value
-
-    @property
-    def last_search(self):
-        """The relocalization's last map search (None before the first)."""
-        return self.lost.last_search
 
     # -- belief ------------------------------------------------------------------------
     def reset(self, pose: np.ndarray | None) -> StackOutput:

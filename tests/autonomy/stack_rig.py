@@ -83,7 +83,7 @@ def follow(stack: RobotStack, scene: SceneQuery, truth: np.ndarray, t: float, un
     from the true pose, until it has relocalized or ``until_s``; returns the truth, the
     time and the commands' (t, state, velocity)."""
     commands = []
-    while t < until_s and not any(e["event"] == "relocalized" for e in stack.events):
+    while t < until_s and not any(e["event"] == "relocalized" for e in stack.state.events):
         cmd = stack.decide(t)
         commands.append((t, cmd.state, cmd.velocity.copy()))
         inc = cmd.velocity / fps
@@ -96,7 +96,7 @@ def follow(stack: RobotStack, scene: SceneQuery, truth: np.ndarray, t: float, un
 
 def settle(stack: RobotStack, scene: SceneQuery, seconds: float, fps: float = 10.0) -> float:
     """Standing at the belief's pose (the frame repeats: standing still, not stale)."""
-    depth = render(scene, stack.pose.copy())
+    depth = render(scene, stack.state.pose.copy())
     for k in range(int(seconds * fps)):
         stack.perceive(depth)
         stack.localize(np.zeros(3), (k + 1) / fps)

@@ -54,8 +54,8 @@ def test_an_exploring_drive_is_not_set_out_through_a_wall_to_a_part_the_mode_can
     ``explore_m`` to twice that away lies in the corridor, which the room's part of the
     graph does not reach. The robot looks round again; no plan is made, no error raised."""
     stack = make_stack(None)
-    stack.odom = np.zeros(3)  # modes as map-from-odometry transforms: the poses
-    stack.modes = [(IN_ROOM.copy(), 0.1)]
+    stack.state.odom = np.zeros(3)  # modes as map-from-odometry transforms: the poses
+    stack.lost.view.modes = [(IN_ROOM.copy(), 0.1)]
     cmd = stack.decide(stack.cfg.recovery.explore_after_s + 1.0)
     assert cmd.state == "looking" and stack.lost.motion.exploring_from is None
     assert stack.lost.motion.explore_node(IN_ROOM, 0.0) is None
@@ -63,8 +63,8 @@ def test_an_exploring_drive_is_not_set_out_through_a_wall_to_a_part_the_mode_can
 
 def test_an_exploring_drive_still_sets_out_where_the_mode_reaches() -> None:
     stack = make_stack(None)
-    stack.odom = np.zeros(3)
-    stack.modes = [(IN_CORRIDOR.copy(), 0.1)]
+    stack.state.odom = np.zeros(3)
+    stack.lost.view.modes = [(IN_CORRIDOR.copy(), 0.1)]
     cmd = stack.decide(stack.cfg.recovery.explore_after_s + 1.0)
     assert cmd.state != "looking" and stack.lost.motion.exploring_from is not None
     assert stack.navigator.goal in CORRIDOR and all(n in CORRIDOR for n in stack.navigator.plan_nodes)
@@ -74,7 +74,7 @@ def test_a_goal_the_belief_is_cut_off_from_is_planned_from_a_node_that_reaches_i
     """Started in the corridor, the belief now in the room: the next goal in the corridor
     is planned from the corridor's node nearest the belief, not refused."""
     stack = make_stack(IN_CORRIDOR)
-    stack.pose = IN_ROOM.copy()
+    stack.state.pose = IN_ROOM.copy()
     plan = stack.set_goal(CORRIDOR[-1], 5.0)
     assert plan.nodes[0] == CORRIDOR[0] and plan.nodes[-1] == CORRIDOR[-1]
     assert plan.remaining_m == pytest.approx(3.0 + 14.0)
@@ -86,7 +86,7 @@ def test_a_goal_the_start_has_no_path_to_stays_the_users_mistake() -> None:
         stack.set_goal(ROOM[0], 0.0)
     assert isinstance(exc.value, InputError)
     # ... even once the belief has wandered into the room.
-    stack.pose = IN_ROOM.copy()
+    stack.state.pose = IN_ROOM.copy()
     with pytest.raises(NoPathError):
         stack.set_goal(ROOM[1], 1.0)
 

@@ -82,9 +82,9 @@ def test_without_localization_the_estimate_is_dead_reckoning() -> None:
         want = compose_pose(want, inc)
         stack.perceive(depth)
         stack.localize(inc)
-    np.testing.assert_array_equal(stack.pose, want)
+    np.testing.assert_array_equal(stack.state.pose, want)
     stack.localize(np.array([np.nan, 0.0, 0.0]))  # a broken odometry message is ignored
-    np.testing.assert_array_equal(stack.pose, want)
+    np.testing.assert_array_equal(stack.state.pose, want)
 
 
 def test_decides_towards_the_goal_and_stops_short_of_the_wall() -> None:
@@ -112,7 +112,7 @@ def test_decides_towards_the_goal_and_stops_short_of_the_wall() -> None:
 def test_relocalize_puts_the_belief_at_the_given_pose() -> None:
     stack = make_stack()
     stack.relocalize(np.array([0.5, -0.2, 0.1]))
-    np.testing.assert_array_equal(stack.pose, [0.5, -0.2, 0.1])
+    np.testing.assert_array_equal(stack.state.pose, [0.5, -0.2, 0.1])
     assert stack.localizer is not None
     assert np.abs(stack.localizer.particles[:, 0].mean() - 0.5) < 0.2
 

@@ -37,8 +37,8 @@ def test_consistent_frames_at_the_true_pose_stay_ok(building) -> None:
     depth = render(building[1], START)
     drive(stack, [depth] * 45)
     s = stack.health_sample
-    assert stack.health_state == "ok" and s.explained > 0.8 and s.through < 0.05 and stack.events == []
-    assert math.hypot(*(stack.pose[:2] - START[:2])) < 0.1
+    assert stack.health_state == "ok" and s.explained > 0.8 and s.through < 0.05 and stack.state.events == []
+    assert math.hypot(*(stack.state.pose[:2] - START[:2])) < 0.1
 
 
 def test_no_usable_frames_for_longer_than_blind_s_stops_the_robot(building) -> None:
@@ -49,18 +49,18 @@ def test_no_usable_frames_for_longer_than_blind_s_stops_the_robot(building) -> N
     t_last = 15 / FPS
     # Dropped frames, and the last frame repeated while the wheels turn (stale): none is usable.
     out = drive(stack, [None, depth] * 15, t0=t_last, increment=np.array([0.0, 0.0, 0.01]))
-    assert stack.frames_rejected["dropped"] == stack.frames_rejected["stale"] == 15
+    assert stack.guard.rejected["dropped"] == stack.guard.rejected["stale"] == 15
     blind = [(t, c) for t, c in out if c.state == "blind"]
     assert blind, [c.state for _, c in out]
     t_blind = blind[0][0]
     assert hc.blind_s < t_blind - t_last <= hc.blind_s + 1.01 / FPS
     assert all(np.array_equal(c.velocity, np.zeros(3)) for _, c in blind)
     assert all(c.state == "blind" for t, c in out if t >= t_blind)
-    assert stack.health_state == "blind" and [e["event"] for e in stack.events] == ["blind"]
+    assert stack.health_state == "blind" and [e["event"] for e in stack.state.events] == ["blind"]
     # New frames again (where the wheels have turned it): seeing, and the navigator decides again.
-    out = drive(stack, [render(building[1], stack.odom.copy())] * 3, t0=out[-1][0])
+    out = drive(stack, [render(building[1], stack.state.odom.copy())] * 3, t0=out[-1][0])
     assert stack.health_state == "ok" and out[-1][1].state != "blind"
-    assert [e["event"] for e in stack.events] == ["blind", "seeing"]
+    assert [e["event"] for e in stack.state.events] == ["blind", "seeing"]
 
 
 @pytest.mark.parametrize("view_check", [True, False])
@@ -71,11 +71,11 @@ def test_a_kidnap_is_noticed_and_the_robot_relocalizes_where_it_is(building, vie
     stack = make_stack(building, recovery=RecoveryConfig(view=ViewCheckConfig(enabled=view_check)))
     hc = stack.cfg.recovery.health
     t = settle(stack, scene, hc.min_history_s + 1.0)
-    assert stack.health_state == "ok" and stack.events == []
+    assert stack.health_state == "ok" and stack.state.events == []
     # Carried to another corridor (a spot no other place repeats).
     truth, t, commands = follow(stack, scene, np.array([22.91, 30.84, -2.2]), t, until_s=40.0)
     kidnap = hc.min_history_s + 1.0
-    lost = [e for e in stack.events if e["event"] == "lost"]
+    lost = [e for e in stack.state.events if e["event"] == "lost"]
     if view_check:
         assert len(lost) == 1 and lost[0]["why"] == "view jumped", lost
         # The first frame after the landing disagrees with the last one before it.
@@ -89,9 +89,9 @@ def test_a_kidnap_is_noticed_and_the_robot_relocalizes_where_it_is(building, vie
     looking = [(s, v) for tc, s, v in commands if lost[0]["t"] < tc < lost[0]["t"] + 5.0]
     assert looking and all(s == "looking" and v[0] == v[1] == 0.0 and v[2] > 0 for s, v in looking)
     # ... and found where it is, not where it was.
-    done = [e for e in stack.events if e["event"] == "relocalized"]
-    assert len(done) == 1 and "before the alarm" not in done[0]["reason"], (t, stack.events)
-    err = relative_pose(truth, stack.pose)
+    done = [e for e in stack.state.events if e["event"] == "relocalized"]
+    assert len(done) == 1 and "before the alarm" not in done[0]["reason"], (t, stack.state.events)
+    err = relative_pose(truth, stack.state.pose)
     assert math.hypot(err[0], err[1]) < 0.15 and abs(wrap_angle(err[2])) < math.radians(3.0), err
     assert stack.health_state == "ok"
 
@@ -105,17 +105,17 @@ def test_a_false_alarm_in_a_repeated_office_ends_where_it_began(building) -> Non
     t = settle(stack, scene, 2.0)
     # A few seconds of frames that belong elsewhere (a camera fault) raise the alarm.
     away = render(scene, np.array([30.0, 6.3, 0.0]))
-    while not stack.relocalizing and t < 10.0:
+    while not stack.lost.relocalizing and t < 10.0:
         t += 0.1
         stack.perceive(away)
         stack.localize(np.zeros(3), t)
-    assert stack.relocalizing
+    assert stack.lost.relocalizing
     # The camera is right again; the robot looks round where it is.
     truth, t, _ = follow(stack, scene, office, t, until_s=t + 20.0)
-    done = [e for e in stack.events if e["event"] == "relocalized"]
-    assert len(done) == 1 and "before the alarm" in done[0]["reason"], stack.events
-    assert stack.last_search.accepted is None  # the map search alone: ambiguous
-    err = relative_pose(truth, stack.pose)
+    done = [e for e in stack.state.events if e["event"] == "relocalized"]
+    assert len(done) == 1 and "before the alarm" in done[0]["reason"], stack.state.events
+    assert stack.lost.last_search.accepted is None  # the map search alone: ambiguous
+    err = relative_pose(truth, stack.state.pose)
     assert math.hypot(err[0], err[1]) < 0.15 and abs(wrap_angle(err[2])) < math.radians(3.0), err
 
 
@@ -131,17 +131,17 @@ def test_after_the_belief_jumped_the_belief_is_not_kept_for_explaining_the_scan(
     t += 0.1
     stack.perceive(render(scene, office))
     stack.localize(np.zeros(3), t)
-    assert stack.relocalizing and stack.events[-1]["why"] == "belief jumped"
+    assert stack.lost.relocalizing and stack.state.events[-1]["why"] == "belief jumped"
     monkeypatch.undo()
     truth, t, _ = follow(stack, scene, office, t, until_s=t + 20.0)
-    assert stack.last_search is not None  # it searched
-    done = [e for e in stack.events if e["event"] == "relocalized"]
-    assert all("before the alarm" not in e["reason"] for e in done), stack.events
+    assert stack.lost.last_search is not None  # it searched
+    done = [e for e in stack.state.events if e["event"] == "relocalized"]
+    assert all("before the alarm" not in e["reason"] for e in done), stack.state.events
     if done:
-        err = relative_pose(truth, stack.pose)
+        err = relative_pose(truth, stack.state.pose)
         assert math.hypot(err[0], err[1]) < 0.15 and abs(wrap_angle(err[2])) < math.radians(3.0), err
     else:
-        assert stack.relocalizing
+        assert stack.lost.relocalizing
 
 
 
@@ -166,11 +166,11 @@ def test_a_landing_facing_open_floor_is_noticed_by_the_walls_seen_past(building,
     t = settle(stack, scene, hc.min_history_s + 1.0)
     kidnap = t
     landing = render(scene, np.array([30.0, 12.0, -math.pi / 2]))
-    while t < kidnap + 10.0 and not stack.relocalizing:
+    while t < kidnap + 10.0 and not stack.lost.relocalizing:
         t += 0.1
         stack.perceive(landing)
         stack.localize(np.zeros(3), t)
-    lost = [e for e in stack.events if e["event"] == "lost"]
+    lost = [e for e in stack.state.events if e["event"] == "lost"]
     if tests == "view":
         assert len(lost) == 1 and lost[0]["why"] == "view jumped" and lost[0]["t"] == pytest.approx(kidnap + 0.1), lost
     elif tests == "missing walls":
@@ -189,10 +189,10 @@ def test_a_mount_corrected_upwards_past_the_near_floor_band_keeps_a_near_field(b
     watches the nearest floor the camera still sees (the run went on), and the event says
     where."""
     stack = make_stack(building)
-    up = replace(stack.mount, pitch_down_rad=math.radians(8.0))
+    up = replace(stack.state.mount, pitch_down_rad=math.radians(8.0))
     stack._correct_mount(up)
-    ev = stack.events[-1]
+    ev = stack.state.events[-1]
     assert ev["event"] == "mount corrected" and ev["near_floor_m"][0] > stack.cfg.avoidance.near_field.band_max_depth_m
-    assert stack.near_field.band_m[0] == pytest.approx(ev["near_floor_m"][0], abs=0.01) and stack.mount is up
+    assert stack.near_field.band_m[0] == pytest.approx(ev["near_floor_m"][0], abs=0.01) and stack.state.mount is up
     # It still sees something close in front: a blank frame blocks its columns.
     assert stack.near_field.blocked_columns(np.zeros(SHAPE, np.float32)).all()

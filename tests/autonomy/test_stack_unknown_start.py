@@ -41,8 +41,8 @@ def building():
 
 def test_an_unknown_start_pose_looks_round_in_place(building) -> None:
     stack = make_stack(building, pose=None)
-    assert stack.relocalizing and stack.health_state == "relocalizing"
-    assert stack.events[-1]["event"] == "lost" and "unknown" in stack.events[-1]["why"]
+    assert stack.lost.relocalizing and stack.health_state == "relocalizing"
+    assert stack.state.events[-1]["event"] == "lost" and "unknown" in stack.state.events[-1]["why"]
     for t in (0.0, 1.0, 30.0):  # no modes yet: it looks on, whatever the time
         cmd = stack.decide(t)
         assert cmd.state == "looking" and np.array_equal(cmd.velocity[:2], [0.0, 0.0])
@@ -60,7 +60,7 @@ def found(building):
         t = k / fps
         stack.perceive(render(building[1], truth))
         stack.localize(inc, t)
-        if not stack.relocalizing:
+        if not stack.lost.relocalizing:
             break
         cmd = stack.decide(t)
         states.append(cmd.state)
@@ -71,12 +71,12 @@ def found(building):
 
 def test_an_unknown_start_pose_is_found_by_looking_round(found) -> None:
     stack, truth, t, states, _ = found
-    done = [e for e in stack.events if e["event"] == "relocalized"]
-    assert len(done) == 1, (t, stack.last_search.reason if stack.last_search else None)
+    done = [e for e in stack.state.events if e["event"] == "relocalized"]
+    assert len(done) == 1, (t, stack.lost.last_search.reason if stack.lost.last_search else None)
     assert states[0] == "looking" and set(states) <= {"looking", "exploring", "turning", "driving"}
-    err = relative_pose(truth, stack.pose)
+    err = relative_pose(truth, stack.state.pose)
     assert math.hypot(err[0], err[1]) < 0.15 and abs(wrap_angle(err[2])) < math.radians(3.0), err
-    assert not stack.relocalizing and stack.health_state == "ok"
+    assert not stack.lost.relocalizing and stack.health_state == "ok"
 
 
 def test_after_a_relocalization_the_robot_turns_in_place_before_driving_on(found) -> None:
@@ -121,11 +121,11 @@ def test_a_mode_is_accepted_only_on_a_search_of_the_whole_map(building, monkeypa
     for k in range(200):
         stack.perceive(render(building[1], truth))
         stack.localize(inc, k / 10.0)
-        if not stack.relocalizing:
+        if not stack.lost.relocalizing:
             break
         inc = stack.decide(k / 10.0).velocity / 10.0
         truth = compose_pose(truth, inc)
-    assert not stack.relocalizing and calls, calls
+    assert not stack.lost.relocalizing and calls, calls
     assert calls[-1] == ("search", True), calls  # accepted on a whole-map search
     passed = [i for i, (name, ok) in enumerate(calls) if ok]
     assert len(passed) >= stack.cfg.recovery.relocalization.confirmations
@@ -148,8 +148,8 @@ def test_an_exploring_drive_keeps_the_mode_it_set_out_on(building, monkeypatch) 
     stack = make_stack(building, pose=None)
     a = np.array([0.0, 0.0, 0.0])  # modes as map-from-odometry transforms
     b = np.array([12.0, -4.0, math.pi / 2])
-    stack.modes = [(a, 0.1), (b, 0.11)]
-    stack.odom = START.copy()
+    stack.lost.view.modes = [(a, 0.1), (b, 0.11)]
+    stack.state.odom = START.copy()
     seen: list[np.ndarray] = []
     real = stack.navigator.command
 
@@ -160,11 +160,11 @@ def test_an_exploring_drive_keeps_the_mode_it_set_out_on(building, monkeypatch) 
     monkeypatch.setattr(stack.navigator, "command", spy)
     t = stack.cfg.recovery.explore_after_s + 1.0
     assert stack.decide(t).state in ("exploring", "turning", "driving", "arrived")
-    stack.modes = [(b, 0.09), (a, 0.1)]  # re-scored: the other mode is best now
-    stack.odom = compose_pose(START, np.array([0.2, 0.0, 0.05]))
+    stack.lost.view.modes = [(b, 0.09), (a, 0.1)]  # re-scored: the other mode is best now
+    stack.state.odom = compose_pose(START, np.array([0.2, 0.0, 0.05]))
     stack.decide(t + 0.1)
     np.testing.assert_allclose(seen[0], compose_pose(a, START))
-    np.testing.assert_allclose(seen[-1], compose_pose(a, stack.odom))
+    np.testing.assert_allclose(seen[-1], compose_pose(a, stack.state.odom))
 
 
 def test_an_exploring_drive_on_a_mode_the_scan_rules_out_sets_out_again_on_the_best(building, monkeypatch) -> None:
@@ -174,8 +174,8 @@ def test_an_exploring_drive_on_a_mode_the_scan_rules_out_sets_out_again_on_the_b
     stack = make_stack(building, pose=None)
     a = np.array([0.0, 0.0, 0.0])  # modes as map-from-odometry transforms
     b = compose_pose(np.array([18.0, 6.3, math.pi]), relative_pose(START, np.zeros(3)))  # the south corridor
-    stack.modes = [(a, 0.1), (b, 0.11)]
-    stack.odom = START.copy()
+    stack.lost.view.modes = [(a, 0.1), (b, 0.11)]
+    stack.state.odom = START.copy()
     seen: list[np.ndarray] = []
     real = stack.navigator.command
 
@@ -187,17 +187,17 @@ def test_an_exploring_drive_on_a_mode_the_scan_rules_out_sets_out_again_on_the_b
     t = stack.cfg.recovery.explore_after_s + 1.0
     stack.decide(t)
     margin = stack.cfg.recovery.active.abandon_margin
-    stack.modes = [(b, 0.1), (a, 0.1 + 0.5 * margin)]  # within the margin: drive on
+    stack.lost.view.modes = [(b, 0.1), (a, 0.1 + 0.5 * margin)]  # within the margin: drive on
     stack.decide(t + 0.1)
-    np.testing.assert_allclose(seen[-1], compose_pose(a, stack.odom))
-    stack.modes = [(b, 0.1), (a, 0.1 + 2.0 * margin)]  # ruled out
+    np.testing.assert_allclose(seen[-1], compose_pose(a, stack.state.odom))
+    stack.lost.view.modes = [(b, 0.1), (a, 0.1 + 2.0 * margin)]  # ruled out
     cmd = stack.decide(t + 0.2)
-    np.testing.assert_allclose(seen[-1], compose_pose(b, stack.odom))
+    np.testing.assert_allclose(seen[-1], compose_pose(b, stack.state.odom))
     assert cmd.state != "looking"
     np.testing.assert_allclose(stack.lost.motion.explore_T, b)
-    stack.modes = [(b, 0.1)]  # a is no longer kept at all; b's drive goes on
+    stack.lost.view.modes = [(b, 0.1)]  # a is no longer kept at all; b's drive goes on
     stack.decide(t + 0.3)
-    np.testing.assert_allclose(seen[-1], compose_pose(b, stack.odom))
+    np.testing.assert_allclose(seen[-1], compose_pose(b, stack.state.odom))
 
 
 def test_an_exploring_drive_goes_where_the_modes_predict_different_walls(building) -> None:
@@ -211,8 +211,8 @@ def test_an_exploring_drive_goes_where_the_modes_predict_different_walls(buildin
     for enabled in (True, False):
         rec = StackConfig().recovery
         stack = make_stack(building, pose=None, recovery=replace(rec, active=replace(rec.active, enabled=enabled)))
-        stack.odom = np.zeros(3)  # modes as map-from-odometry transforms: the poses
-        stack.modes = [(pose, 0.05), (other, 0.052)]
+        stack.state.odom = np.zeros(3)  # modes as map-from-odometry transforms: the poses
+        stack.lost.view.modes = [(pose, 0.05), (other, 0.052)]
         stacks.append(stack)
     active, plain = stacks
     assert plain.lost.motion._compared_modes(pose).shape == (0, 3)
@@ -241,7 +241,7 @@ def test_an_exploring_drive_does_not_set_out_into_walls_the_scan_has_seen(buildi
     from autonomy.stack import SEEN_KEEP_S
 
     stack = make_stack(building, pose=None)
-    stack.odom = np.zeros(3)
+    stack.state.odom = np.zeros(3)
     pose = START.copy()  # the best mode's belief
     ahead = stack.lost.motion.explore_node(pose, 0.0)
     assert ahead is not None
@@ -253,7 +253,7 @@ def test_an_exploring_drive_does_not_set_out_into_walls_the_scan_has_seen(buildi
     at = path[k] + f * (path[k + 1] - path[k])
     u = (path[k + 1] - path[k]) / seg_len[k]
     wall = at + np.outer(np.linspace(-1.0, 1.0, 41), [-u[1], u[0]])
-    stack.scan.add(np.zeros(3), wall, 0.0)
+    stack.lost.view.scan.add(np.zeros(3), wall, 0.0)
     other = stack.lost.motion.explore_node(pose, 0.0)
     assert other is not None and other != ahead
     stack.lost.motion.explored.clear()
@@ -265,7 +265,7 @@ def test_an_exploring_drive_does_not_set_out_into_walls_the_scan_has_seen(buildi
     assert polyline_clear(points_in_frame(pose, stack.navigator.plan_points(other, pose)), wall, stack.cfg.recovery.explore_check_m, r - 0.05)
     # Walled in all round: the node ahead after all.
     ring = 0.9 * np.column_stack([np.cos(np.linspace(0, 2 * np.pi, 200)), np.sin(np.linspace(0, 2 * np.pi, 200))])
-    stack.scan.add(np.zeros(3), ring, 0.0)
+    stack.lost.view.scan.add(np.zeros(3), ring, 0.0)
     assert stack.lost.motion.explore_node(pose, 0.0) == ahead
 
 
@@ -303,8 +303,8 @@ kernels = (_grid_costs, _refine, _through_counts, _straight_runs)
 warm = [len(k.signatures) for k in kernels]
 ring = np.column_stack([3.0 * np.cos(np.linspace(0, 6, 200)), 2.0 * np.sin(np.linspace(0, 6, 200))])
 stack.lost._global.search(ring, origins=np.zeros_like(ring))
-stack.scan.add(stack.odom, ring, 0.0)
-on_straight_runs(stack.scan.points, 1.5)
+stack.lost.view.scan.add(stack.state.odom, ring, 0.0)
+on_straight_runs(stack.lost.view.scan.points, 1.5)
 print(warm, [len(k.signatures) for k in kernels])
 """
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600, check=True)
@@ -334,18 +334,18 @@ def test_an_unknown_start_where_no_wall_is_in_range_drives_to_find_walls(buildin
         z = render(building[1], truth)
         stack.perceive(np.where(z > 0, z + noise.normal(0.0, 0.003, z.shape), 0.0).astype(np.float32))
         stack.localize(inc, t)
-        if not stack.relocalizing:
+        if not stack.lost.relocalizing:
             break
-        if swept_small is None and stack.scan.turned_rad >= math.radians(rc.min_sweep_deg):
-            swept_small = (len(stack.scan.points), len(stack.modes))
+        if swept_small is None and stack.lost.view.scan.turned_rad >= math.radians(rc.min_sweep_deg):
+            swept_small = (len(stack.lost.view.scan.points), len(stack.lost.view.modes))
         cmd = stack.decide(t)
-        states.append((cmd.state, len(stack.modes)))
+        states.append((cmd.state, len(stack.lost.view.modes)))
         inc = cmd.velocity / fps
         truth = compose_pose(truth, inc)
     assert swept_small is not None and swept_small[0] < rc.min_scan_points and swept_small[1] == 0, swept_small
     assert ("exploring", 0) in states, "it never drove without a mode"
-    assert not stack.relocalizing, (t, stack.last_search.reason if stack.last_search else None)
-    err = relative_pose(truth, stack.pose)
+    assert not stack.lost.relocalizing, (t, stack.lost.last_search.reason if stack.lost.last_search else None)
+    err = relative_pose(truth, stack.state.pose)
     assert math.hypot(err[0], err[1]) < 0.15 and abs(wrap_angle(err[2])) < math.radians(3.0), err
 
 
@@ -365,8 +365,8 @@ def test_a_scan_of_pillars_and_furniture_alone_sends_the_robot_to_find_walls(bui
         stack = make_stack(building, pose=None)
         rc = stack.cfg.recovery.relocalization
         stack = make_stack(building, pose=None, recovery=replace(stack.cfg.recovery, relocalization=replace(rc, min_wall_points=min_wall_points)))
-        stack.scan.add(stack.odom, clutter, 1.0)
-        stack.scan.turned_rad = 2 * math.pi
+        stack.lost.view.scan.add(stack.state.odom, clutter, 1.0)
+        stack.lost.view.scan.turned_rad = 2 * math.pi
         cmd = stack.decide(1.0)
         assert cmd.state in ((want, "turning") if want == "exploring" else (want,)), (min_wall_points, cmd.state)
         if want == "exploring":
@@ -375,7 +375,7 @@ def test_a_scan_of_pillars_and_furniture_alone_sends_the_robot_to_find_walls(bui
             assert stack.lost.motion.probe is not None
             way = np.array([0.0, 0.0, 3.0 * math.cos(stack.lost.motion.probe[1]), 3.0 * math.sin(stack.lost.motion.probe[1])])
             assert point_segment_distance(clutter, way[None, :]).min() > stack.cfg.avoidance.robot_radius_m, math.degrees(stack.lost.motion.probe[1])
-            stack.scan.add(stack.odom, points_along((-1.5, 3.0), (1.5, 3.0)) + (0.0, 0.5), 1.6)
+            stack.lost.view.scan.add(stack.state.odom, points_along((-1.5, 3.0), (1.5, 3.0)) + (0.0, 0.5), 1.6)
             stack.decide(1.6)
             assert stack.lost.motion.probe is None
 
@@ -424,7 +424,7 @@ def test_kept_near_field_points_a_modes_map_explains_give_way_to_its_walls(build
     wall of that mode's map explains (the map's pillar counts there, where it stands);
     on a mode whose map has no wall there they stay, the robot's only knowledge of it."""
     stack, truth = _look_round_by_the_pillar(building)
-    n_scan = len(stack.scan.recent_in_robot_frame(stack.odom, 12.0 - 15.0))
+    n_scan = len(stack.lost.view.scan.recent_in_robot_frame(stack.state.odom, 12.0 - 15.0))
     kept = len(stack.lost.view.seen_now(12.0)) - n_scan
     assert kept > 20
     # The true place: the pillar is mapped where the near field saw it (all but a few
@@ -447,7 +447,7 @@ def test_what_the_near_field_shows_while_looking_round_keeps_a_drive_off_it(buil
 
     stack, truth = _look_round_by_the_pillar(building)
     to_pillar = PILLAR - truth[:2]
-    scan = stack.scan.in_robot_frame(stack.odom)
+    scan = stack.lost.view.scan.in_robot_frame(stack.state.odom)
     assert not len(scan) or np.hypot(scan[:, 0], scan[:, 1]).min() > 1.0
     seen = stack.lost.view.seen_now(12.0)
     assert len(seen) > len(scan)
@@ -457,9 +457,9 @@ def test_what_the_near_field_shows_while_looking_round_keeps_a_drive_off_it(buil
     off = np.abs(wrap_angles(bearing - math.atan2(to_pillar[1], to_pillar[0])))
     assert off.max() < math.radians(40.0), math.degrees(off.max())  # the pillar spans +-30 degrees from here
     # The pillar's direction in the dead-reckoning frame the drive steers in.
-    heading = float(stack.odom[2]) + wrap_angle(math.atan2(to_pillar[1], to_pillar[0]) - float(truth[2]))
+    heading = float(stack.state.odom[2]) + wrap_angle(math.atan2(to_pillar[1], to_pillar[0]) - float(truth[2]))
     # Turned in place to face it: the same points relative to the robot facing that way.
-    o = stack.odom
+    o = stack.state.odom
     facing = np.array([o[0], o[1], heading])
 
     def turned(p: np.ndarray) -> np.ndarray:

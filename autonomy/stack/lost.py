@@ -7,7 +7,7 @@ scan, the map search and the decision (:mod:`autonomy.localization.health`,
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -43,6 +43,23 @@ class Accepted:
     """A relocalization's decision: the place the robot is at (map frame)."""
 
     pose: np.ndarray
+
+
+@dataclass
+class SearchProgress:
+    """How the searches since the robot got lost went: when the last ran, how many, whether
+    the next must cover the whole map, and the candidate place the latest ones agreed on."""
+
+    last_t: float = -math.inf
+    """When the last map search ran."""
+    searches: int = 0
+    """Map searches since the robot got lost."""
+    whole_map: bool = False
+    """The next search covers the whole map (the candidate was not confirmed)."""
+    confirmed: int = 0
+    """How many searches in a row gave ``candidate``."""
+    candidate: np.ndarray | None = field(default=None)
+    """The place the last searches gave (map frame)."""
 
 
 class LostRecovery:
@@ -81,11 +98,7 @@ class LostRecovery:
         self._global: GlobalLocalizer | None = None
         self._prior: np.ndarray | None = None
         self._prior_trusted = True
-        self._last_search_t = -math.inf
-        self._searches = 0
-        self._search_whole_map = False
-        self._confirmed = 0
-        self._candidate: np.ndarray | None = None
+        self._progress = SearchProgress()
 
     # -- the belief while lost -----------------------------------------------------------
     def belief(self, odom: np.ndarray) -> np.ndarray | None:
@@ -161,12 +174,8 @@ class LostRecovery:
         self.view.clear(t)
         self._prior = prior
         self._prior_trusted = True
-        self._last_search_t = -math.inf
-        self._searches = 0
-        self._search_whole_map = False
+        self._progress = SearchProgress()
         self.motion.start(t)
-        self._confirmed = 0
-        self._candidate = None
         if self.health is not None:
             # Its averages restart when the robot knows where it is again; a blind state
             # from before would keep the robot from turning to look.
@@ -198,9 +207,9 @@ class LostRecovery:
             scan.add(st.odom, per.points_2d, t, floor)
             view.keep_near(per.near_lines, t)
         looked = view.swept() or scan.travelled_m >= rc.min_travel_m
-        if not looked or t - self._last_search_t < rc.search_every_s or len(scan.points) < rc.min_scan_points:
+        if not looked or t - self._progress.last_t < rc.search_every_s or len(scan.points) < rc.min_scan_points:
             return None
-        self._last_search_t = t
+        self._progress.last_t = t
         gl = self.global_localizer()
         assert self.scene is not None
         query = self.scene
@@ -210,8 +219,8 @@ class LostRecovery:
         floor = scan.floor_in_robot_frame(odom)
         frame_pts = per.points_2d if (st.fresh and per is not None) else None
         prior = None if self._prior is None else compose_pose(self._prior, odom)
-        full = not view.modes or self._searches % FULL_SEARCH_EVERY == 0 or self._search_whole_map
-        self._search_whole_map = False
+        full = not view.modes or self._progress.searches % FULL_SEARCH_EVERY == 0 or self._progress.whole_map
+        self._progress.whole_map = False
         times = scan.times
         if full:
             res = gl.search(pts, frame_pts, lambda x, y: query.scene_lines(x, y)[0], prior, origins, times, floor)
@@ -220,7 +229,7 @@ class LostRecovery:
             if prior is not None:
                 poses.append(prior)
             res = gl.rescore(np.array(poses), pts, frame_pts, lambda x, y: query.scene_lines(x, y)[0], origins, times, floor)
-        self._searches += 1
+        self._progress.searches += 1
         inv = relative_pose(odom, np.zeros(3))
         view.modes = [(compose_pose(m.pose, inv), m.score) for m in res.modes]
         if view.modes and self._prior is None:
@@ -238,21 +247,22 @@ class LostRecovery:
         if acc is not None and not gl.lead_allowed(acc, prior_mode):
             acc = None
         if acc is None:
-            self._confirmed = 0
+            self._progress.confirmed = 0
             return None
         # Modes compared as map-from-odometry transforms: the robot turns between searches.
         cand = compose_pose(acc.pose, inv)
-        same = self._candidate is not None and math.hypot(*(cand[:2] - self._candidate[:2])) < rc.mode_separation_m and abs(
-            wrap_angle(float(cand[2] - self._candidate[2]))
+        prog, before = self._progress, self._progress.candidate
+        same = before is not None and math.hypot(*(cand[:2] - before[:2])) < rc.mode_separation_m and abs(
+            wrap_angle(float(cand[2] - before[2]))
         ) < math.radians(rc.mode_separation_deg)
-        self._confirmed = self._confirmed + 1 if same else 1
-        self._candidate = cand
-        if self._confirmed >= rc.confirmations:
+        prog.confirmed = prog.confirmed + 1 if same else 1
+        prog.candidate = cand
+        if prog.confirmed >= rc.confirmations:
             if full:
                 return self._accept(acc, t, res.reason, len(res.modes))
             # Re-scoring sees only the modes kept so far; the place the robot is at
             # may not be among them (a room's corner fits hundreds of places).
-            self._search_whole_map = True
+            self._progress.whole_map = True
         return None
 
     def _accept(self, mode: Mode, t: float, reason: str, n_modes: int) -> Accepted:
@@ -261,7 +271,7 @@ class LostRecovery:
         self.state.events.append(
             {
                 "t": round(t, 3), "event": "relocalized", "pose": [round(float(v), 3) for v in pose], "reason": reason,
-                "modes": n_modes, "searches": self._searches, "scan_points": len(self.view.scan.points),
+                "modes": n_modes, "searches": self._progress.searches, "scan_points": len(self.view.scan.points),
                 "looked_s": round(t - self.view.started_t, 3),
             }
         )

@@ -150,6 +150,21 @@ def correspond(lines, pose, pts, nrm, use_normals, cos_theta_max, max_dist, out_
     return kept
 
 
+def associate(lines: np.ndarray, pose: np.ndarray, points_2d: np.ndarray, normals_2d: np.ndarray, cfg: ObservationConfig) -> np.ndarray:
+    """For each observation point, the index of the scene line ``lines`` (K, 4) it is
+    associated with at ``pose`` (-1: none), as CGR's observation model associates them
+    (BV2012 Eq. 1, :func:`correspond`). For viewers: one association pass."""
+    pts = np.ascontiguousarray(points_2d, dtype=np.float64).reshape(-1, 2)
+    idx = np.full(len(pts), -1, dtype=np.int64)
+    if len(lines) and len(pts):
+        nrm = np.ascontiguousarray(normals_2d, dtype=np.float64).reshape(-1, 2)
+        correspond(
+            np.ascontiguousarray(lines, dtype=np.float64), np.asarray(pose, dtype=np.float64), pts, nrm, True,
+            math.cos(cfg.theta_max_rad), cfg.max_distance_m, idx,
+        )
+    return idx
+
+
 @numba.njit(cache=True)
 def loglik_grad(frames, idx, pose, pts, inv_2fs2, out):  # pragma: no cover - numba
     """ln p(y | x) (Eq. 1), its gradient (Eq. 2) and the Gauss-Newton curvature at ``pose``.

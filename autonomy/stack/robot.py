@@ -40,7 +40,7 @@ from autonomy.common.errors import InputError
 from autonomy.common.geometry import compose_pose
 from autonomy.localization.cgr import CGRLocalizer
 from autonomy.localization.health import HealthMonitor, HealthSample
-from autonomy.localization.observation import correspond
+from autonomy.localization.observation import associate
 from autonomy.localization.view_check import ViewCheck
 from autonomy.maps.navgraph import NavGraph
 from autonomy.maps.planner import NoPathError
@@ -482,12 +482,4 @@ class RobotStack:
             return np.zeros((0, 4)), np.zeros(0, dtype=np.int64)
         est = self.state.pose
         lines = np.ascontiguousarray(self.scene.scene_lines(float(est[0]), float(est[1]))[0])
-        p2d = np.ascontiguousarray(per.points_2d, dtype=np.float64)
-        idx = np.full(len(p2d), -1, dtype=np.int64)
-        if len(lines) and len(p2d):
-            ocfg = self.cfg.localization.observation
-            correspond(
-                lines, est, p2d, np.ascontiguousarray(per.normals_2d, dtype=np.float64), True,
-                math.cos(ocfg.theta_max_rad), ocfg.max_distance_m, idx,
-            )
-        return lines, idx
+        return lines, associate(lines, est, per.points_2d, per.normals_2d, self.cfg.localization.observation)

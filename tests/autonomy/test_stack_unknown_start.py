@@ -140,14 +140,9 @@ def test_an_unknown_start_after_a_blackout_still_looks_round(building) -> None:
     assert stack.decide(1.0).state == "looking"
 
 
-def test_an_exploring_drive_keeps_the_mode_it_set_out_on(building, monkeypatch) -> None:
-    """Undecided after explore_after_s, the robot drives on the best mode. When the
-    re-scored modes change their order mid-drive, the navigator goes on seeing the world
-    through the transform the drive began with (its plan, memory and blind-spot walls
-    were placed through it), until it looks round again."""
-    stack = make_stack(building, pose=None)
-    a = np.array([0.0, 0.0, 0.0])  # modes as map-from-odometry transforms
-    b = np.array([12.0, -4.0, math.pi / 2])
+def exploring_from(stack, a: np.ndarray, b: np.ndarray, monkeypatch) -> list[np.ndarray]:
+    """Lost at START with modes ``a`` (best) and ``b`` (map-from-odometry transforms);
+    returns the list that the poses given to the navigator are appended to."""
     stack.lost.view.modes = [(a, 0.1), (b, 0.11)]
     stack.state.odom = START.copy()
     seen: list[np.ndarray] = []
@@ -158,6 +153,18 @@ def test_an_exploring_drive_keeps_the_mode_it_set_out_on(building, monkeypatch) 
         return real(pose, *args, **kwargs)
 
     monkeypatch.setattr(stack.navigator, "command", spy)
+    return seen
+
+
+def test_an_exploring_drive_keeps_the_mode_it_set_out_on(building, monkeypatch) -> None:
+    """Undecided after explore_after_s, the robot drives on the best mode. When the
+    re-scored modes change their order mid-drive, the navigator goes on seeing the world
+    through the transform the drive began with (its plan, memory and blind-spot walls
+    were placed through it), until it looks round again."""
+    stack = make_stack(building, pose=None)
+    a = np.array([0.0, 0.0, 0.0])  # modes as map-from-odometry transforms
+    b = np.array([12.0, -4.0, math.pi / 2])
+    seen = exploring_from(stack, a, b, monkeypatch)
     t = stack.cfg.recovery.explore_after_s + 1.0
     assert stack.decide(t).state in ("exploring", "turning", "driving", "arrived")
     stack.lost.view.modes = [(b, 0.09), (a, 0.1)]  # re-scored: the other mode is best now
@@ -174,16 +181,7 @@ def test_an_exploring_drive_on_a_mode_the_scan_rules_out_sets_out_again_on_the_b
     stack = make_stack(building, pose=None)
     a = np.array([0.0, 0.0, 0.0])  # modes as map-from-odometry transforms
     b = compose_pose(np.array([18.0, 6.3, math.pi]), relative_pose(START, np.zeros(3)))  # the south corridor
-    stack.lost.view.modes = [(a, 0.1), (b, 0.11)]
-    stack.state.odom = START.copy()
-    seen: list[np.ndarray] = []
-    real = stack.navigator.command
-
-    def spy(pose, *args, **kwargs):
-        seen.append(np.array(pose))
-        return real(pose, *args, **kwargs)
-
-    monkeypatch.setattr(stack.navigator, "command", spy)
+    seen = exploring_from(stack, a, b, monkeypatch)
     t = stack.cfg.recovery.explore_after_s + 1.0
     stack.decide(t)
     margin = stack.cfg.recovery.active.abandon_margin

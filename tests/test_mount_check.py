@@ -234,6 +234,17 @@ def test_second_bump_is_corrected_again() -> None:
     assert check.tilt_error_deg < 0.5
 
 
+def test_the_correction_event_records_the_mount_in_degrees() -> None:
+    """The event-log record of a corrected mount: time, pitch and roll rounded; the tilt
+    error is the check's (NaN before any floor); a plain mount has no roll."""
+    check = MountCheck(NOMINAL)
+    ev = check.correction_event(3.14159, TiltedCameraMount(pitch_down_rad=math.radians(12.3), roll_rad=math.radians(-1.5)))
+    assert list(ev) == ["t", "event", "tilt_error_deg", "pitch_down_deg", "roll_deg"]
+    assert (ev["t"], ev["event"], ev["pitch_down_deg"], ev["roll_deg"]) == (3.142, "mount corrected", 12.3, -1.5)
+    assert math.isnan(ev["tilt_error_deg"])
+    assert check.correction_event(0.0, NOMINAL)["roll_deg"] == 0.0
+
+
 def test_config_errors_name_the_argument() -> None:
     with pytest.raises(InputError, match="mount_check.threshold_deg"):
         MountCheckConfig(threshold_deg=0.0)

@@ -328,6 +328,15 @@ class MountCheck:
             corrections=self._corrections,
         )
 
+    def correction_event(self, t: float, mount: CameraMount) -> dict:
+        """The event-log record of a corrected ``mount`` (normally the one :meth:`update`
+        just proposed) at time ``t`` (s): this check's :attr:`tilt_error_deg` and the
+        mount's pitch and roll in degrees."""
+        return {
+            "t": round(t, 3), "event": "mount corrected", "tilt_error_deg": round(float(self.tilt_error_deg), 2),
+            "pitch_down_deg": round(math.degrees(float(mount.pitch_down_rad)), 2), "roll_deg": round(math.degrees(mount_roll_rad(mount)), 2),
+        }
+
     def _stable(self) -> bool:
         """A full window whose per-frame pitch and roll agree: small median absolute
         deviation, and the older and newer halves' medians within ``stable_deg``."""

@@ -98,6 +98,7 @@ class NearField:
         self.cfg = cfg
         self.intr = intr
         self.min_range_m = float(min_range_m)
+        self.robot_radius_m = robot_radius_m
         rot, t = mount.rotation(), mount.translation()
         rows = np.arange(intr.height - 1, -1, -cfg.row_step)[::-1]
         cols = np.arange(0, intr.width, cfg.col_step)
@@ -152,6 +153,17 @@ class NearField:
             f = np.clip((np.sign(b[:, 1]) * robot_radius_m - a[:, 1]) / (b[:, 1] - a[:, 1]), 0.0, 1.0)
         a[edge] = a[edge] + f[edge, None] * (b[edge] - a[edge])
         self.lines = np.column_stack([a, b])
+
+    def for_mount(self, mount: CameraMount) -> NearField | None:
+        """This near field for a mount the stack corrected at run time. A camera tilted up
+        may no longer see the configured band of near floor: the nearest floor it sees
+        takes its place (``shift_band``; the robot is blind a little farther out). None
+        when no floor is in view at all: the caller keeps this one, which watches the
+        pixels the floor was last seen in."""
+        try:
+            return NearField(self.intr, mount, self.min_range_m, self.robot_radius_m, self.cfg, shift_band=True)
+        except InputError:
+            return None
 
     def blocked_columns(self, depth: np.ndarray) -> np.ndarray:
         """Boolean per sampled column: is the near floor hidden there?"""

@@ -49,6 +49,7 @@ from autonomy.maps.vectormap import VectorMap
 from autonomy.navigation.avoidance import obstacle_points
 from autonomy.navigation.config import NavCommand
 from autonomy.navigation.navigator import Navigator
+from autonomy.perception.camera import CameraMount
 from autonomy.perception.fspf import fspf
 from autonomy.perception.mount_check import MountCheck
 from autonomy.perception.nearfield import NearField
@@ -95,11 +96,8 @@ class RobotStack:
         self.navigator: Navigator | None = None
         self.near_field: NearField | None = None
         if cfg.navigate:
-            walls = np.asarray(vectormap.segments)
-            self.navigator = Navigator(navgraph, cfg.navigator, cfg.avoidance, walls=walls, camera=cam)
-            self.near_field = NearField(
-                cam.intrinsics, cam.mount, cam.min_range_m, cfg.avoidance.robot_radius_m, cfg.avoidance.near_field
-            )
+            self.navigator = Navigator(navgraph, cfg.navigator, cfg.avoidance, walls=np.asarray(vectormap.segments), camera=cam)
+            self.near_field = NearField(cam.intrinsics, cam.mount, cam.min_range_m, cfg.avoidance.robot_radius_m, cfg.avoidance.near_field)
         self.frame = 0
         self.state = StackState(mount=cam.mount)
         self.timings_s: dict[str, float] = {}
@@ -159,12 +157,6 @@ class RobotStack:
         if self.health is not None:
             self.health.reset(st.t)
 
-    def _read_estimate(self) -> None:
-        assert self.localizer is not None
-        est = self.localizer.estimate()
-        self.state.pose = est.pose.copy()
-        self.state.spread = (est.std_xy_m, est.std_theta_rad)
-
     # -- the three steps of a frame ----------------------------------------------------
     def perceive(self, depth: np.ndarray | None, seed: int | None = None) -> Perception:
         """FSPF (BV2012 Algorithm 1) on a depth frame (float32 m, 0 = invalid), its
@@ -186,11 +178,10 @@ class RobotStack:
         depth = self.guard.check(np.asarray(depth))
         t0 = time.perf_counter()
         planes = fspf(depth, cam.intrinsics, cfg.fspf, seed=s, mount=st.mount)
-        if self.mount_check is not None:
-            corrected = self.mount_check.update(planes)
-            if corrected is not None:
-                self._correct_mount(corrected)
-                planes = fspf(depth, cam.intrinsics, cfg.fspf, seed=s, mount=st.mount)
+        corrected = None if self.mount_check is None else self.mount_check.update(planes)
+        if corrected is not None:
+            self._correct_mount(corrected)
+            planes = fspf(depth, cam.intrinsics, cfg.fspf, seed=s, mount=st.mount)
         p2d, n2d = planes.projected(cfg.fspf.max_vertical_normal_angle_rad)
         t1 = time.perf_counter()
         if self.navigator is not None:
@@ -206,32 +197,18 @@ class RobotStack:
         st.depth = depth
         return st.perception
 
-    def _correct_mount(self, mount) -> None:
-        """Use a corrected camera mount from now on (FSPF, the near field)."""
+    def _correct_mount(self, mount: CameraMount) -> None:
+        """Use a corrected camera mount from now on (FSPF, the view check, the near field)."""
         assert self.mount_check is not None
-        st = self.state
-        st.events.append(
-            {"t": round(st.t, 3), "event": "mount corrected", "tilt_error_deg": round(float(self.mount_check.tilt_error_deg), 2),
-             "pitch_down_deg": round(math.degrees(float(mount.pitch_down_rad)), 2),
-             "roll_deg": round(math.degrees(float(getattr(mount, "roll_rad", 0.0))), 2)}
-        )
-        st.mount = mount
+        event = self.mount_check.correction_event(self.state.t, mount)
+        self.state.events.append(event)
+        self.state.mount = mount
         if self.view_check is not None:
             self.view_check.set_mount(mount.robot_from_camera())
         if self.near_field is not None:
-            cam = self.cfg.camera
-            try:
-                # A camera tilted up may no longer see the configured band of near floor:
-                # the nearest floor it sees takes its place (the robot is blind a little
-                # farther out, and the event says how far).
-                self.near_field = NearField(
-                    cam.intrinsics, mount, cam.min_range_m, self.cfg.avoidance.robot_radius_m, self.cfg.avoidance.near_field, shift_band=True
-                )
-                st.events[-1]["near_floor_m"] = [round(v, 2) for v in self.near_field.band_m]
-            except InputError:
-                # No floor in view at all: the last near field stays (it watches the
-                # pixels the floor was last seen in).
-                st.events[-1]["near_floor_m"] = None
+            near = self.near_field.for_mount(mount)
+            event["near_floor_m"] = None if near is None else [round(v, 2) for v in near.band_m]
+            self.near_field = near or self.near_field
 
     def _reject(self, why: str) -> Perception:
         self.guard.reject(why)
@@ -262,7 +239,6 @@ class RobotStack:
                 st.odom = compose_pose(st.odom, inc)
                 moved = moved_more_than_noise(inc)
             if self.guard.stale(st.odom, moved):
-                # The wheels turned but the camera gave the same pixels: a stale frame.
                 st.fresh = False
             if self.localizer is None:
                 if np.all(np.isfinite(inc)):
@@ -277,7 +253,8 @@ class RobotStack:
                 if st.perception is not None and st.fresh:
                     self._loc.stats = self.localizer.update(st.perception.points_2d, st.perception.normals_2d)
                     self._loc.lines = self.localizer.last_lines
-                self._read_estimate()
+                est = self.localizer.estimate()
+                st.pose, st.spread = est.pose.copy(), (est.std_xy_m, est.std_theta_rad)
                 # How far the update moved the belief beyond the odometry (the jump test).
                 self._loc.correction = (float(st.pose[0] - predicted[0]), float(st.pose[1] - predicted[1]))
         self.guard.note_odometry(st.odom)

@@ -223,3 +223,15 @@ def test_a_mount_tilted_up_shifts_the_band_to_the_nearest_floor_it_sees() -> Non
     # A camera looking over the floor entirely (no row meets it): still an error.
     with pytest.raises(InputError, match="no image row sees the floor"):
         NearField(INTR, CameraMount(pitch_down_rad=math.radians(-30.0)), MIN_RANGE, 0.3, shift_band=True)
+
+
+def test_for_mount_is_the_near_field_rebuilt_with_the_band_shifted() -> None:
+    """:meth:`NearField.for_mount` builds the same near field for the corrected mount with
+    ``shift_band`` (its settings and robot radius kept); None when no row sees the floor."""
+    cfg = NearFieldConfig(col_step=2)
+    nf = NearField(INTR, MOUNT, MIN_RANGE, 0.25, cfg)
+    up = CameraMount(pitch_down_rad=math.radians(8.0))
+    moved, direct = nf.for_mount(up), NearField(INTR, up, MIN_RANGE, 0.25, cfg, shift_band=True)
+    assert moved is not None and moved.cfg is cfg and moved.band_m == direct.band_m
+    assert np.array_equal(moved.rows, direct.rows) and np.array_equal(moved.lines, direct.lines)
+    assert nf.for_mount(CameraMount(pitch_down_rad=math.radians(-30.0))) is None

@@ -196,3 +196,7 @@ def test_a_mount_corrected_upwards_past_the_near_floor_band_keeps_a_near_field(b
     assert stack.near_field.band_m[0] == pytest.approx(ev["near_floor_m"][0], abs=0.01) and stack.state.mount is up
     # It still sees something close in front: a blank frame blocks its columns.
     assert stack.near_field.blocked_columns(np.zeros(SHAPE, np.float32)).all()
+    # Turned up so far that no row sees the floor: the last near field stays, the event says so.
+    kept = stack.near_field
+    stack._correct_mount(replace(up, pitch_down_rad=math.radians(-30.0)))
+    assert stack.state.events[-1]["near_floor_m"] is None and stack.near_field is kept

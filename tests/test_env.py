@@ -231,7 +231,7 @@ def test_random_steps_on_procedural_buildings_stay_in_their_spaces() -> None:
     )
     space = env.observation_space
     obs, info = env.reset(seed=11)
-    buildings = {env.unwrapped._site.seed}
+    buildings = {env.unwrapped.site.seed}
     for _ in range(300):
         assert space.contains(obs), {k: space[k].contains(v) for k, v in obs.items()}
         for v in obs.values():
@@ -241,7 +241,7 @@ def test_random_steps_on_procedural_buildings_stay_in_their_spaces() -> None:
         assert math.isfinite(r)
         if term or trunc:
             obs, info = env.reset()
-            buildings.add(env.unwrapped._site.seed)
+            buildings.add(env.unwrapped.site.seed)
     assert len(buildings) >= 4  # a new building every episode
     assert (obs["depth"] > 0).any()
     env.close()
@@ -251,18 +251,18 @@ def test_building_schedule() -> None:
     env = DepthNavEnv(building="procedural", new_building_every=2)
     seeds = []
     env.reset(seed=1)
-    seeds.append(env._site.seed)
+    seeds.append(env.site.seed)
     for _ in range(4):
         env.reset()
-        seeds.append(env._site.seed)
+        seeds.append(env.site.seed)
     assert seeds[0] == seeds[1] and seeds[1] != seeds[2] and seeds[2] == seeds[3] and seeds[3] != seeds[4]
     env.reset(seed=1)
-    assert env._site.seed == seeds[0]
+    assert env.site.seed == seeds[0]
     fixed = DepthNavEnv(building="procedural", building_seed=4)
     fixed.reset(seed=1)
-    site = fixed._site
+    site = fixed.site
     fixed.reset(seed=2)
-    assert fixed._site is site
+    assert fixed.site is site
     env.close()
     fixed.close()
 
@@ -281,7 +281,7 @@ def test_scan_and_points_see_a_wall_at_the_right_distance() -> None:
     assert len(side) > 20
     np.testing.assert_allclose(np.abs(side[:, 1]), 1.09, atol=0.05)
     # The scanner's own geometry: bins span the horizontal field of view.
-    sc = env._scanner
+    sc = env._observations.scanner
     assert isinstance(sc, KCScanner)
     assert sc.angles[0] == pytest.approx(-env.intrinsics.fov_h_rad / 2 + env.intrinsics.fov_h_rad / 160)
     env.close()
@@ -327,7 +327,7 @@ def test_buildings_from_files(tmp_path: Path) -> None:
     blueprints.save_blueprint(bp, tmp_path / "b9")
     env = DepthNavEnv(building=str(tmp_path / "b9"), n_furniture=2)
     _, info = env.reset(seed=0)
-    assert env._site.building.vectormap.n_segments == bp.vectormap.n_segments
+    assert env.site.building.vectormap.n_segments == bp.vectormap.n_segments
     env.step(env.action_space.sample())
     env.close()
     env = DepthNavEnv(building="", vectormap=str(tmp_path / "b9.vectormap.txt"), navgraph=str(tmp_path / "b9.navigation.json"))
@@ -337,7 +337,7 @@ def test_buildings_from_files(tmp_path: Path) -> None:
     # A map without zones takes random furniture in its free space.
     env = DepthNavEnv(building="", vectormap=str(tmp_path / "b9.vectormap.txt"), navgraph=str(tmp_path / "b9.navigation.json"), n_furniture=1)
     env.reset(seed=0)
-    assert abs(env._site.furniture[0].x) < 100.0
+    assert abs(env.site.furniture[0].x) < 100.0
     env.close()
 
 

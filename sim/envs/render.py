@@ -2,17 +2,25 @@
 
 No matplotlib per frame: the walls and the navigation graph are drawn once per building
 into a background image; each frame copies it and draws furniture, people, the path,
-the goal, the camera's view, the particles and the robot with a few array operations.
+the goal, the camera's view, the particles and the robot with a few array operations
+(:func:`top_view`).
 """
 
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from autonomy.maps.navgraph import NavGraph
 from autonomy.maps.vectormap import VectorMap
+
+if TYPE_CHECKING:
+    from sim.envs.config import EnvConfig
+    from sim.envs.loop import Reading
+    from sim.envs.site import Site
+    from sim.envs.task import Episode
 
 BACKGROUND = (250, 250, 247)
 WALL = (40, 40, 45)
@@ -123,6 +131,53 @@ class MapCanvas:
         out[:, 0] = xy[:, 0] * self.scale + self.ox
         out[:, 1] = self.h - 1 - (xy[:, 1] * self.scale + self.oy)
         return out
+
+
+def top_view(site: Site, cfg: EnvConfig, fov_h_rad: float, depth_max_m: float, episode: Episode, reading: Reading) -> np.ndarray:
+    """The ``rgb_array`` frame: the building with its furniture and people, the route to the
+    goal, the goal, the camera's field of view, the CGR particles and estimate, and the robot."""
+    if site.canvas is None:
+        site.canvas = MapCanvas(site.building.vectormap, site.building.navgraph, cfg.render_size)
+    cv = site.canvas
+    assert isinstance(cv, MapCanvas)
+    img = cv.background.copy()
+    s = cv.scale
+    pose = reading.pose
+    # The camera's horizontal field of view out to the maximum range.
+    cam = cfg.kinect.mount.translation()
+    c, sn = math.cos(pose[2]), math.sin(pose[2])
+    cxy = pose[:2] + np.array([c * cam[0] - sn * cam[1], sn * cam[0] + c * cam[1]])
+    half = fov_h_rad / 2
+    r = min(depth_max_m, 6.0)
+    ends = np.array([cxy + r * np.array([math.cos(pose[2] + a), math.sin(pose[2] + a)]) for a in (-half, half)])
+    draw_segments(img, cv.px(np.vstack([cxy, cxy])), cv.px(ends), FRUSTUM)
+    for f in site.furniture:
+        lx, ly, _ = f.dims
+        cf, sf = math.cos(f.yaw), math.sin(f.yaw)
+        corners = np.array([[sx * lx / 2, sy * ly / 2] for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
+        world_c = np.column_stack([f.x + cf * corners[:, 0] - sf * corners[:, 1], f.y + sf * corners[:, 0] + cf * corners[:, 1]])
+        fill_convex(img, cv.px(world_c), FURNITURE)
+    people = site.world.people.positions()
+    for i, p in enumerate(site.people):
+        u, v = cv.px(people[i, :2])[0]
+        draw_disk(img, u, v, max(2.0, p.radius_m * s), PERSON)
+    path = episode.field.path(pose[:2])
+    draw_segments(img, cv.px(path[:-1]), cv.px(path[1:]), PATH, thickness=2)
+    gu, gv = cv.px(episode.goal)[0]
+    draw_disk(img, gu, gv, max(3.0, 0.15 * s), GOAL)
+    draw_disk(img, gu, gv, max(4.0, cfg.goal_radius_m * s), GOAL, ring=True)
+    out = reading.output
+    if out is not None and out.particles is not None:
+        draw_points(img, cv.px(out.particles[:, :2]), PARTICLE)
+    e = reading.estimate
+    eu, ev = cv.px(e[:2])[0]
+    draw_disk(img, eu, ev, max(2.0, 0.1 * s), ESTIMATE)
+    ru, rv = cv.px(pose[:2])[0]
+    rr = max(3.0, cfg.robot.radius_m * s)
+    draw_disk(img, ru, rv, rr, ROBOT, ring=True)
+    head = cv.px(pose[:2] + cfg.robot.radius_m * 1.6 * np.array([c, sn]))
+    draw_segments(img, np.array([[ru, rv]]), head, ROBOT, thickness=2)
+    return img
 
 
 def turbo_lut() -> np.ndarray:

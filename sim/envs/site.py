@@ -2,7 +2,8 @@
 
 A :class:`Site` holds the MuJoCo world of one building, its camera and its ray-cast
 query. Between episodes the random furniture is moved and the people re-routed in place,
-so a building is compiled once however many episodes it serves.
+so a building is compiled once however many episodes it serves. :class:`SiteSchedule`
+says which building each episode runs in.
 """
 
 from __future__ import annotations
@@ -111,6 +112,7 @@ class Site:
     people: list[Person]
     seed: int | None = None
     canvas: object | None = None
+    """The rgb_array view's background (a sim.envs.render.MapCanvas), drawn at the first render."""
 
     @classmethod
     def build(cls, cfg: EnvConfig, kinect: KinectConfig, building: Building, seed: int | None) -> Site:
@@ -190,5 +192,63 @@ class Site:
                 self.people[i] = replace(self.people[i], start_offset_m=float(rng.uniform(0.0, 40.0)))
             self._restart_people(cfg)
 
+    def check_start_pose(self, cfg: EnvConfig, start: np.ndarray) -> None:
+        """A given start pose must be where the robot fits inside the building."""
+        fs = self.building.free_space(cfg.robot.radius_m)
+        if int(fs.region_at(start[:2])) < 0:
+            pose = ", ".join(f"{v:g}" for v in start)
+            raise InputError(
+                f"DepthNav: reset option 'start_pose' ({pose}) is outside the building's free space "
+                f"(no room there for a robot of radius {cfg.robot.radius_m:g} m inside the walls)"
+            )
+
     def close(self) -> None:
         self.camera.close()
+
+
+class SiteSchedule:
+    """Which compiled building each episode runs in: the config's fixed building, compiled
+    at the first reset, or procedural ones drawn from the env's ``np_random`` every
+    ``new_building_every`` episodes (and at every seeded reset)."""
+
+    def __init__(self, cfg: EnvConfig, kinect: KinectConfig) -> None:
+        self.config = cfg
+        self.kinect = kinect
+        """The camera at the observation's size, compiled into every site."""
+        self.fixed = load_fixed_building(cfg)
+        """The building of every episode (None: procedural buildings are drawn)."""
+        self.site: Site | None = None
+        """The current site (None before the first reset and after close)."""
+        self.episodes_on_site = 0
+
+    def site_for_episode(self, rng: np.random.Generator, seeded: bool) -> Site:
+        """The site of the next episode (``seeded``: the reset had a seed)."""
+        cfg = self.config
+        if self.fixed is not None:
+            if self.site is None:
+                self.site = Site.build(cfg, self.kinect, self.fixed, None)
+            return self.site
+        # Procedural, drawn from rng (from building_seeds when given): a seeded reset
+        # always draws a new building.
+        if self.site is None or seeded or self.episodes_on_site >= cfg.new_building_every:
+            seeds = cfg.building_seeds
+            seed = int(seeds[rng.integers(len(seeds))] if seeds else rng.integers(0, 2**31 - 1))
+            if self.site is not None and self.site.seed == seed:
+                self.episodes_on_site = 0
+                return self.site
+            b = procedural_building(cfg, seed)
+            check_building(cfg, b)
+            if self.site is not None:
+                self.site.close()
+            self.site = Site.build(cfg, self.kinect, b, seed)
+            self.episodes_on_site = 0
+        return self.site
+
+    def count_episode(self) -> None:
+        """An episode started on the current site."""
+        self.episodes_on_site += 1
+
+    def close(self) -> None:
+        if self.site is not None:
+            self.site.close()
+            self.site = None

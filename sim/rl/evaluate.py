@@ -125,7 +125,7 @@ def run_episode(env: Any, policy: Policy, spec: EpisodeSpec, on_step: OnStep | N
     action was chosen on."""
     t0 = time.perf_counter()
     obs, info = env.reset(seed=spec.reset_seed)
-    site = getattr(env.unwrapped, "_site", None)
+    site = getattr(env.unwrapped, "site", None)
     if site is not None and site.seed is not None and site.seed != spec.building_seed:
         raise ValueError(f"run_episode: the env is on building {site.seed}, the episode on {spec.building_seed}")
     policy.reset(spec.reset_seed)

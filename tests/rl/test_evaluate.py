@@ -137,7 +137,7 @@ def test_same_missions_for_every_policy() -> None:
             env = gym.make("DepthNav-v0", **episode_env_kwargs(p, s.building_seed))
             try:
                 _, info = env.reset(seed=s.reset_seed)
-                site = env.unwrapped._site
+                site = env.unwrapped.site
                 seen[s.index].append(
                     (info["pose"], info["goal"], info["goal_distance_m"], [(f.x, f.y, f.yaw) for f in site.furniture],
                      site.world.people.positions()[:, :2].copy())

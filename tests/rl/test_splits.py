@@ -98,15 +98,15 @@ def test_building_seeds_draw_from_the_set_reproducibly() -> None:
         drawn = []
         for s in range(8):
             obs, info = env.reset(seed=s)
-            drawn.append(env.unwrapped._site.seed)
+            drawn.append(env.unwrapped.site.seed)
             obs2, info2 = twin.reset(seed=s)
-            assert twin.unwrapped._site.seed == drawn[-1]
+            assert twin.unwrapped.site.seed == drawn[-1]
             np.testing.assert_array_equal(obs["depth"], obs2["depth"])
             np.testing.assert_array_equal(info["pose"], info2["pose"])
         assert set(drawn) <= set(seeds) and len(set(drawn)) >= 2
         # the same seed again (after other episodes): the same building and start
         obs, info = env.reset(seed=3)
-        assert env.unwrapped._site.seed == drawn[3]
+        assert env.unwrapped.site.seed == drawn[3]
         _, info3 = twin.reset(seed=3)
         np.testing.assert_array_equal(info["pose"], info3["pose"])
         np.testing.assert_array_equal(info["goal"], info3["goal"])
@@ -114,7 +114,7 @@ def test_building_seeds_draw_from_the_set_reproducibly() -> None:
         from sim.envs.site import procedural_building
 
         b = procedural_building(env.unwrapped.config, drawn[3])
-        np.testing.assert_array_equal(env.unwrapped._site.building.vectormap.segments, b.vectormap.segments)
+        np.testing.assert_array_equal(env.unwrapped.site.building.vectormap.segments, b.vectormap.segments)
     finally:
         env.close()
         twin.close()

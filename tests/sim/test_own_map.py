@@ -258,7 +258,7 @@ def test_the_env_resets_and_steps_on_a_map_of_walls_only(tmp_path: Path) -> None
     try:
         obs, info = env.reset(seed=0)
         assert env.observation_space.contains(obs)
-        site = env.unwrapped._site
+        site = env.unwrapped.site
         assert (tmp_path / "walls_only.vectormap.txt.auto.navigation.json").is_file()
         walls = np.asarray(site.building.vectormap.segments)
         for f in site.furniture:

@@ -55,7 +55,7 @@ def test_frames_from_the_render_process_are_the_in_process_frames_bit_for_bit() 
         from sim.simulator.render_process import ProcessGLDepth
         env = gym.make("DepthNav-v0", n_people=3, n_furniture=3)
         env.reset(seed=3)
-        site = env.unwrapped._site
+        site = env.unwrapped.site
         b = site.camera.backend
         assert isinstance(b, ProcessGLDepth), type(b)
         g = GLDepth(site.world.model, site.world.camera_id, b.intr, b.far_m)

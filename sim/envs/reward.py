@@ -1,0 +1,81 @@
+"""The reward and the episode end of ``DepthNav-v0``.
+
+:class:`PointGoalReward` scores each step from the episode's state and the new frame:
+the reward terms (summed in ``REWARD_TERMS`` order), the episode's counters, and whether
+the episode terminates or is truncated.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+from sim.envs.config import EnvConfig
+from sim.envs.loop import Reading
+from sim.envs.task import Episode
+
+REWARD_TERMS = ("progress", "success", "collision", "time")
+
+
+@dataclass(frozen=True)
+class RewardConfig:
+    """The reward terms' weights and when an episode ends (the same fields of EnvConfig)."""
+
+    progress_reward_per_m: float
+    success_reward: float
+    collision_reward: float
+    time_reward: float
+    goal_radius_m: float
+    terminate_on_success: bool
+    terminate_on_collision: bool
+    max_steps: int
+
+    @classmethod
+    def from_config(cls, cfg: EnvConfig) -> RewardConfig:
+        return cls(**{f.name: getattr(cfg, f.name) for f in fields(cls)})
+
+
+@dataclass(frozen=True)
+class StepScore:
+    """A step's reward, its terms, and whether the episode ended."""
+
+    reward: float
+    terms: dict[str, float]
+    terminated: bool
+    truncated: bool
+
+
+class PointGoalReward:
+    """Scores the steps of an episode and keeps its counters (steps, collisions, success,
+    the last geodesic distance)."""
+
+    def __init__(self, config: RewardConfig) -> None:
+        self.config = config
+
+    def begin(self, episode: Episode, reading: Reading) -> None:
+        """Note the geodesic distance at the start, the first progress term's reference."""
+        episode.phi, _ = episode.field.distance(reading.pose[:2])
+
+    def score(self, episode: Episode, reading: Reading) -> StepScore:
+        """Count the step into ``episode`` and score it on the true pose."""
+        c = self.config
+        ep = episode
+        ep.steps += 1
+        ep.collisions += reading.new_contacts
+        ep.collided = reading.new_contacts > 0
+        pose = reading.pose
+        phi, _ = ep.field.distance(pose[:2])
+        reached = math.hypot(*(pose[:2] - ep.goal)) <= c.goal_radius_m
+        first_success = reached and not ep.success
+        ep.success = ep.success or reached
+        terms = {
+            "progress": c.progress_reward_per_m * (ep.phi - phi),
+            "success": c.success_reward if first_success else 0.0,
+            "collision": c.collision_reward * reading.new_contacts,
+            "time": c.time_reward,
+        }
+        ep.phi = phi
+        reward = float(terms["progress"] + terms["success"] + terms["collision"] + terms["time"])
+        terminated = bool((c.terminate_on_success and reached) or (c.terminate_on_collision and reading.new_contacts > 0))
+        truncated = bool(ep.steps >= c.max_steps and not terminated)
+        return StepScore(reward, terms, terminated, truncated)

@@ -180,7 +180,7 @@ class TrainResult:
     """Environment steps done in all (this run and any it resumed)."""
     episodes: int
     wall_s: float
-    """Wall time of training in all (without the final evaluation)."""
+    """Wall time of training in all, as policy.json records it at the last checkpoint (without the final evaluation)."""
     session_steps: int
     """Steps of this call."""
     session_wall_s: float
@@ -440,9 +440,12 @@ def train_ppo(cfg: PPOTrainConfig, resume: bool = False, progress: bool = False,
                 raise InputError(f"PPOTrainConfig: 'policy_kwargs' {cfg.policy_kwargs!r} rejected by SB3's MultiInputPolicy ({e})") from None
         # policy.json always records this run's configuration (resume: its total_steps).
         cb: _Curve
+        # The training time of the last checkpoint: what policy.json says and a resumed run goes on from.
+        saved_wall = [wall0]
 
         def checkpoint(interrupted: bool = False) -> None:
-            save_policy(model, cfg, out, episodes=cb.episodes, wall_s=cb.wall_s, interrupted=interrupted, venv=venv,
+            saved_wall[0] = cb.wall_s
+            save_policy(model, cfg, out, episodes=cb.episodes, wall_s=saved_wall[0], interrupted=interrupted, venv=venv,
                         recent=cb.recent())
             if (out / PROGRESS_FILE).exists():
                 plot_curve(out / PROGRESS_FILE, out / CURVE_FILE)
@@ -461,7 +464,7 @@ def train_ppo(cfg: PPOTrainConfig, resume: bool = False, progress: bool = False,
         session_wall = time.perf_counter() - t0
         if interrupted or cb.last_ckpt != model.num_timesteps:
             checkpoint(interrupted)
-        steps, episodes, wall = int(model.num_timesteps), cb.episodes, cb.wall_s
+        steps, episodes, wall = int(model.num_timesteps), cb.episodes, saved_wall[0]
     finally:
         try:
             venv.close()

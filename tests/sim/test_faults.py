@@ -437,7 +437,7 @@ def test_crowd_appears_around_the_robot_and_leaves_afterwards() -> None:
     b = corridor_loop()
     crowd = FaultEvent(kind="crowd", at_s=0.0, crowd_size=10, crowd_s=3.0)
     rig = Rig(FaultsConfig(events=(crowd,)), b, (22.5, 12.0, 1.57), seed=2)
-    idx = rig.faults._crowd
+    idx = rig.faults.crowd.members
     assert len(idx) == 10
     robot = np.array([22.5, 12.0])
     node_gap = float(np.hypot(*(b.navgraph.node_xy() - robot).T).min())
@@ -454,7 +454,7 @@ def test_crowd_appears_around_the_robot_and_leaves_afterwards() -> None:
     # They walk away and are parked once out of the camera's range.
     for _ in range(30 * 40):
         rig.tick()
-        if not rig.faults._leaving:
+        if not rig.faults.crowd.leaving:
             break
     pos = rig.world.people.positions()[idx, :2]
     assert np.allclose(pos, PARK_XY, atol=2.0)
@@ -490,7 +490,7 @@ def test_blockage_is_placed_across_the_way_to_the_waypoint_where_another_route_r
     pts = path_points(g, other)
     assert np.hypot(*np.diff(pts, axis=0).T).sum() > 30.0  # round the loop, not 22 m straight on
     # The panels stand in the world (the robot collides with them), then go back to the park.
-    bodies = rig.faults._furniture_bodies[rig.faults._panels]
+    bodies = rig.faults.blockage.bodies()
     xy = rig.world.model.body_pos[bodies, :2]
     used = xy[np.hypot(*(xy - np.array(w["centre"])).T) < 1.5]
     assert len(used) == w["panels"]

@@ -14,7 +14,9 @@ import numpy as np
 
 from autonomy.common.constants import ROBOT_RADIUS_M
 from autonomy.common.errors import InputError
-from autonomy.common.geometry import point_segment_distance, rectangle_corners
+from autonomy.common.geometry import rectangle_corners
+from sim.simulator.people_walls import WallClearance
+from sim.simulator.person_route import RoutePath
 from sim.simulator.robot import COLL_PEOPLE, COLL_ROBOT, COLL_STATIC
 
 FURNITURE_PREFIX = "furniture_"
@@ -205,27 +207,6 @@ def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
     return float(np.hypot(*(p - a - t * d)))
 
 
-_FAN = tuple(math.radians(a) for a in (30, -30, 60, -60, 90, -90, 120, -120, 150, -150, 180))
-"""Directions (from straight away) a person stepping back from the robot tries last."""
-
-
-def _retreat_steps(away: np.ndarray, d: np.ndarray, right: np.ndarray, step: float) -> list[tuple[float, float]]:
-    """The steps back a person tries, in order, as (along the route, to its right).
-
-    Straight away; else along the route, a full step (with a wall beside, the along-route
-    part of a step straight away alone leaves a person pushed along ahead of the robot);
-    else only sideways, a full step (the route ends or bends right behind them); failing
-    all three, any other way, the nearest to straight away first (``_FAN``): at the end
-    of a door frame the three can all lead towards the frame.
-    """
-    ds, dside = step * float(away @ d), step * float(away @ right)
-    cands = [(ds, dside), (math.copysign(step, ds), 0.0), (0.0, math.copysign(step, dside))]
-    for a in _FAN:
-        u = (math.cos(a) * away[0] - math.sin(a) * away[1], math.sin(a) * away[0] + math.cos(a) * away[1])
-        cands.append((step * (u[0] * d[0] + u[1] * d[1]), step * (u[0] * right[0] + u[1] * right[1])))
-    return cands
-
-
 class PeopleController:
     """Moves the people's mocap bodies along their routes as simulated time passes.
 
@@ -262,6 +243,9 @@ class PeopleController:
     personal space (else such a person would tail the robot just beyond it, in the
     camera's blind zone, until it drives forward into them). A robot that drives into a person still
     collides, and that is counted.
+
+    Where a person is on their route at an arc length is :class:`RoutePath`'s; which
+    places keep off the walls, and which step back does, is :class:`WallClearance`'s.
     """
 
     notice_m = 2.5
@@ -288,29 +272,20 @@ class PeopleController:
         self.people = people
         self.robot_radius_m = float(robot_radius_m)
         self.mocap_ids = mocap_ids
-        self.walls = np.zeros((0, 4)) if walls is None else np.asarray(walls, dtype=np.float64)
-        self._pts: list[np.ndarray] = []
-        self._cum: list[np.ndarray] = []
-        for p in people:
-            pts, cum = self._route_arrays(p)
-            self._pts.append(pts)
-            self._cum.append(cum)
+        self._walls = WallClearance(walls)
+        self._routes = [RoutePath.of(p.route, p.loop) for p in people]
         self.reset()
 
-    @staticmethod
-    def _route_arrays(p: Person) -> tuple[np.ndarray, np.ndarray]:
-        """A route's points (closed for a loop) and the arc length at each."""
-        pts = np.asarray(p.route, dtype=np.float64)
-        if p.loop:
-            pts = np.vstack([pts, pts[:1]])
-        seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
-        return pts, np.concatenate([[0.0], np.cumsum(seg)])
+    @property
+    def walls(self) -> np.ndarray:
+        """The walls (N, 4) people keep off."""
+        return self._walls.walls
 
     def reroute(self, i: int, person: Person) -> None:
         """Person ``i`` walks ``person``'s route from its ``start_offset_m`` on (a parked
         person called in, or sent away); everyone else walks on as they were."""
         self.people = (*self.people[:i], person, *self.people[i + 1 :])
-        self._pts[i], self._cum[i] = self._route_arrays(person)
+        self._routes[i] = RoutePath.of(person.route, person.loop)
         self._s[i] = person.start_offset_m
         self._side[i] = self._waited[i] = self._blocked[i] = 0.0
         self._state[i] = self._place(i)
@@ -338,7 +313,7 @@ class PeopleController:
         (left where they were when no point of the route is)."""
         gap = self.robot_radius_m + self.people[i].radius_m + self.clear_of_robot_m
         s0 = self._s[i]
-        span = self._cum[i][-1] * (1.0 if self.people[i].loop else 2.0)
+        span = self._routes[i].length * (1.0 if self.people[i].loop else 2.0)
         k = 0
         while float(np.hypot(*(self._state[i][:2] - robot_xy))) < gap:
             k += 1
@@ -360,39 +335,15 @@ class PeopleController:
         return cls(people, np.array(ids, dtype=int), walls, robot_radius_m)
 
     def _route_point(self, i: int, s: float) -> tuple[np.ndarray, np.ndarray]:
-        """Position and unit walking direction at arc length s (ping-pong or loop)."""
-        p, pts, cum = self.people[i], self._pts[i], self._cum[i]
-        total = cum[-1]
-        if total <= 0:
-            return pts[0].copy(), np.array([1.0, 0.0])
-        direction = 1.0
-        if p.loop:
-            s = s % total
-        else:
-            s = s % (2 * total)
-            if s > total:
-                s, direction = 2 * total - s, -1.0
-        k = int(np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(cum) - 2))
-        seg_len = cum[k + 1] - cum[k]
-        a = (s - cum[k]) / seg_len if seg_len > 0 else 0.0
-        d = pts[k + 1] - pts[k]
-        n = float(np.hypot(d[0], d[1]))
-        return pts[k] + a * d, (direction * d / n if n > 0 else np.array([1.0, 0.0]))
-
-    def _leg(self, i: int, s: float) -> int:
-        """Which way a back-and-forth route is walked at arc length s: 0 out, 1 back
-        (always 0 on a loop)."""
-        total = self._cum[i][-1]
-        if self.people[i].loop or total <= 0:
-            return 0
-        return int(math.floor(s / total)) % 2
+        """Position and unit walking direction of person ``i``'s route at arc length s."""
+        return self._routes[i].point(s)
 
     def _turn_back(self, i: int) -> None:
         """Turn a person on a back-and-forth route round where they stand."""
-        total = self._cum[i][-1]
-        if self.people[i].loop or total <= 0:
+        s = self._routes[i].turned_back(self._s[i])
+        if s is None:
             return
-        self._s[i] = 2.0 * total - self._s[i] % (2.0 * total)
+        self._s[i] = s
         self._side[i] = -self._side[i]
 
     def _place(self, i: int) -> np.ndarray:
@@ -400,14 +351,9 @@ class PeopleController:
         right = np.array([d[1], -d[0]])
         return np.array([*(pos + self._side[i] * right), math.atan2(d[1], d[0])])
 
-    def _side_is_clear(self, i: int, pos: np.ndarray, margin_m: float = 0.05) -> bool:
-        return self._wall_distance(pos) > self.people[i].radius_m + margin_m
-
-    def _wall_distance(self, pos: np.ndarray) -> float:
-        """Distance from a body's centre to the nearest wall (inf without walls)."""
-        if not len(self.walls):
-            return math.inf
-        return float(point_segment_distance(pos, self.walls).min())
+    def _side_is_clear(self, i: int, pos: np.ndarray) -> bool:
+        """Whether person ``i``'s body at ``pos`` keeps 5 cm from every wall."""
+        return self._walls.is_clear(pos, self.people[i].radius_m)
 
     def _keep_off_walls(self, i: int) -> None:
         """Walking on stepped aside, a person keeps 5 cm off the walls: where the corridor
@@ -465,83 +411,20 @@ class PeopleController:
         return away
 
     def _step_back(self, i: int, away: np.ndarray, robot_xy: np.ndarray, dist: float, dt: float) -> bool:
-        """Take the first step of ``_retreat_steps`` that keeps 5 cm from the walls and ends
-        farther than ``dist`` from the robot; True if one did. Wedged where none keeps 5 cm
-        (a door frame beside, the robot turning into the door), they squeeze along the
-        wall, ``squeeze_m`` from it: keeping the 5 cm, such a person would stand still
-        while the robot, which cannot see them, drives into them.
-
-        The step moves the body from where it is, and the route position (s, side) by as
-        much; walking on reconciles the two. Placing the body at the new route position
-        instead, a person whose body lags it (walking to the next leg's offset after a
-        corner) could take no step at all: every one would be a jump.
-
-        A body already closer than ``squeeze_m`` to a wall (it lagged its route position
-        while the robot held it up, and stands in the end of a door's frame: people are
-        not stopped by walls) can end no step ``squeeze_m`` from it; it takes the first
-        step that goes no deeper into the wall. Else it would stand still there while the
-        robot, which cannot see it beside it, drives out of the door into it.
-
-        Failing every step of ``_retreat_steps``, a person slides along the nearest wall,
-        either way: pressed against a wall by a robot closing in at a slant, each step of
-        the 30 degree fan either goes into the wall or comes nearer the robot, and the one
-        way out, along the wall, is none of them.
-        """
+        """Step ``away`` from the robot at ``retreat_speed_mps``, by the first step that
+        keeps off the walls and ends farther than ``dist`` from it
+        (:meth:`WallClearance.step_back`); True if one did. The body moves from where it
+        is, and the route position (s, side) by as much."""
         _, d = self._route_point(i, self._s[i])
-        right = np.array([d[1], -d[0]])
         step = self.retreat_speed_mps * dt
-        here = self._state[i, :2]
-        inside = self._wall_distance(here)
-        if self._try_steps(i, _retreat_steps(away, d, right, step), d, right, inside, robot_xy, dist):
-            return True
-        along = self._wall_direction(here)
-        if along is None:
+        found = self._walls.step_back(self._state[i, :2], self.people[i].radius_m, away, d, step, robot_xy, dist, self.squeeze_m)
+        if found is None:
             return False
-        along = along if float(along @ away) >= 0.0 else -along
-        cands = [(step * float(u @ d), step * float(u @ right)) for u in (along, -along)]
-        return self._try_steps(i, cands, d, right, inside, robot_xy, dist, 1e-9)
-
-    def _wall_direction(self, pos: np.ndarray) -> np.ndarray | None:
-        """Unit direction of the wall nearest ``pos`` (None without walls)."""
-        if not len(self.walls):
-            return None
-        w = self.walls[int(np.argmin(point_segment_distance(pos, self.walls)))]
-        u = w[2:4] - w[0:2]
-        n = float(np.hypot(u[0], u[1]))
-        return u / n if n > 1e-12 else None
-
-    def _try_steps(
-        self,
-        i: int,
-        cands: list[tuple[float, float]],
-        d: np.ndarray,
-        right: np.ndarray,
-        inside: float,
-        robot_xy: np.ndarray,
-        dist: float,
-        tol: float = 0.0,
-    ) -> bool:
-        """Take the first of ``cands`` (along the route, to its right) that keeps 5 cm from
-        the walls, else ``squeeze_m``, else (a body already that close) goes no deeper
-        (``tol``: rounding allowed, for steps along a wall), and ends farther than ``dist``
-        from the robot (see :meth:`_step_back`)."""
-        here = self._state[i, :2]
-        tries = [(m, c) for m in (0.05, self.squeeze_m) for c in cands]
-        if inside <= self.people[i].radius_m + self.squeeze_m:
-            tries += [(None, c) for c in cands]
-        for margin, (cand_s, cand_side) in tries:
-            new = here + cand_s * d + cand_side * right
-            if margin is None:
-                if self._wall_distance(new) < inside - tol:
-                    continue
-            elif not self._side_is_clear(i, new, margin):
-                continue
-            if float(np.hypot(new[0] - robot_xy[0], new[1] - robot_xy[1])) > dist:
-                self._state[i, :2] = new
-                self._s[i] += cand_s
-                self._side[i] += cand_side
-                return True
-        return False
+        cand_s, cand_side, new = found
+        self._state[i, :2] = new
+        self._s[i] += cand_s
+        self._side[i] += cand_side
+        return True
 
     def advance(self, t: float, robot_xy: np.ndarray | None = None) -> np.ndarray:
         """Move everyone to time t (reacting to the robot); returns (n, 3) x, y, heading."""
@@ -629,9 +512,10 @@ class PeopleController:
         """Walk along the route; at the end of a back-and-forth route, turn round on the
         spot: stepped aside to the right going out is to the left coming back (keeping
         the right hand, it would be a diagonal walk across the corridor, into a robot there)."""
-        leg = self._leg(i, self._s[i])
+        route = self._routes[i]
+        leg = route.leg(self._s[i])
         self._s[i] += self.people[i].speed_mps * dt
-        if self._leg(i, self._s[i]) != leg:
+        if route.leg(self._s[i]) != leg:
             self._side[i] = -self._side[i]
 
     def _keeps_clear(

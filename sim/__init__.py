@@ -13,6 +13,14 @@ if not os.environ["PYOPENGL_PLATFORM"]:
     del os.environ["PYOPENGL_PLATFORM"]
 
 
+#: ``max_episode_steps`` of ``DepthNav-v0``: the benchmark task's ``max_steps``
+#: (``sim.rl.splits.BENCHMARK_TASK``), also ``EnvConfig``'s default (tests/test_env.py
+#: checks both). ``gymnasium.make`` wraps the env in a ``TimeLimit`` of this many steps
+#: unless given ``max_episode_steps``; ``sim.envs.depthnav.make`` gives it the env's own
+#: ``max_steps``.
+MAX_EPISODE_STEPS = 1000
+
+
 def _register_envs() -> None:
     """Register the gymnasium environments (``DepthNav-v0``); mujoco is imported on make."""
     try:
@@ -20,7 +28,7 @@ def _register_envs() -> None:
     except ImportError:  # pragma: no cover - gymnasium is a dependency
         return
     if "DepthNav-v0" not in registry:
-        register(id="DepthNav-v0", entry_point="sim.envs.depthnav:DepthNavEnv")
+        register(id="DepthNav-v0", entry_point="sim.envs.depthnav:DepthNavEnv", max_episode_steps=MAX_EPISODE_STEPS)
 
 
 _register_envs()

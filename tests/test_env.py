@@ -16,7 +16,7 @@ from gymnasium.utils.env_checker import check_env
 
 import sim  # noqa: F401  (registers DepthNav-v0)
 from autonomy.common.errors import InputError
-from sim.envs.depthnav import DepthNavEnv, EnvConfig
+from sim.envs.depthnav import DepthNavEnv, EnvConfig, make
 from sim.envs.geometry import GeodesicField, KCScanner
 from sim.scenario import SCENARIOS_DIR, LocalizationConfig
 from tests.helpers import GL
@@ -214,6 +214,68 @@ def test_truncates_at_the_step_limit() -> None:
     env.reset(seed=2, options={"start_pose": (3.0, 5.1, 0.0), "goal": (8.0, 5.1)})
     flags = [env.step(np.zeros(3, np.float32))[2:4] for _ in range(5)]
     assert flags == [(False, False)] * 4 + [(False, True)]
+    env.close()
+
+
+def test_registration_time_limit_is_the_benchmark_max_steps() -> None:
+    from sim.rl.splits import BENCHMARK_TASK
+
+    assert gym.spec("DepthNav-v0").max_episode_steps == sim.MAX_EPISODE_STEPS == 1000
+    assert BENCHMARK_TASK["max_steps"] == EnvConfig().max_steps == sim.MAX_EPISODE_STEPS
+
+
+def _flags(env: gym.Env, n: int) -> list[tuple[bool, bool]]:
+    """(terminated, truncated) of standing still from a fixed start, until the episode ends."""
+    env.reset(seed=2, options={"start_pose": (3.0, 5.1, 0.0), "goal": (8.0, 5.1)})
+    out = []
+    for _ in range(n):
+        out.append(tuple(bool(f) for f in env.step(np.zeros(3, np.float32))[2:4]))
+        if any(out[-1]):
+            break
+    return out
+
+
+def test_time_limit_and_max_steps_agree() -> None:
+    """gym.make's TimeLimit (the registered 1000 steps) never cuts an episode the env
+    would not: a shorter max_steps truncates as the bare env does, and make() puts the
+    wrapper at the env's own max_steps, a longer one included."""
+    kw = dict(max_steps=6, localization=LocalizationConfig(enabled=False))
+    bare = DepthNavEnv(**kw)
+    expected = _flags(bare, 20)
+    bare.close()
+    assert expected == [(False, False)] * 5 + [(False, True)]
+    made = gym.make("DepthNav-v0", **kw)
+    own = make(**kw)
+    try:
+        assert made.spec.max_episode_steps == 1000 and own.spec.max_episode_steps == 6
+        assert _flags(made, 20) == _flags(own, 20) == expected
+    finally:
+        made.close()
+        own.close()
+    # a max_episode_steps given to gymnasium still wins: the wrapper then cuts first
+    cut = make(max_steps=6, max_episode_steps=4, localization=LocalizationConfig(enabled=False))
+    try:
+        assert _flags(cut, 20) == [(False, False)] * 3 + [(False, True)]
+    finally:
+        cut.close()
+    # longer than the registration: a scenario's mission limit is kept, not cut at 1000
+    long = make(scenario=SCENARIOS_DIR / "demo.toml")
+    assert long.spec.max_episode_steps == long.unwrapped.config.max_steps == 36000
+    long.close()
+    assert make(scenario=SCENARIOS_DIR / "demo.toml", max_steps=10).spec.max_episode_steps == 10
+
+
+def test_check_env_passes_on_the_made_env() -> None:
+    """check_env on what gym.make returns (the TimeLimit and checker wrappers included),
+    not only on the bare env; its one advice about wrappers aside."""
+    env = gym.make("DepthNav-v0")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(env)
+    msgs = [str(w.message) for w in caught if "gymnasium" in str(w.filename) or "env_checker" in str(w.message)]
+    assert any("different from the unwrapped version" in m for m in msgs)  # the wrappers are there
+    msgs = [m for m in msgs if "different from the unwrapped version" not in m]
+    assert not msgs, msgs
     env.close()
 
 

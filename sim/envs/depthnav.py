@@ -104,7 +104,12 @@ class DepthNavEnv(gym.Env):
     ## Episode end
 
     Terminated on success (``terminate_on_success``) or on a collision
-    (``terminate_on_collision``); truncated after ``max_steps`` steps.
+    (``terminate_on_collision``); truncated after ``max_steps`` steps. ``gymnasium.make``
+    also wraps the env in a ``TimeLimit`` of the registration's ``max_episode_steps``, 1000
+    (the benchmark task's ``max_steps``, and the default): with a ``max_steps`` above it,
+    pass ``max_episode_steps`` too, or make the env with :func:`make`, which sets it to
+    ``max_steps``. Where both limits fall on the same step, an arrival on that step is
+    terminated and (by the wrapper) truncated.
 
     ## Info
 
@@ -147,14 +152,7 @@ class DepthNavEnv(gym.Env):
         render_mode: str | None = None,
         **overrides: Any,
     ) -> None:
-        if config is not None and scenario is not None:
-            raise InputError("DepthNav: give 'config' or 'scenario', not both")
-        if config is not None and not isinstance(config, EnvConfig):
-            raise InputError(f"DepthNav: argument 'config' expected an EnvConfig, got {type(config).__name__}")
-        if scenario is not None:
-            cfg = EnvConfig.from_scenario(scenario, **overrides)
-        else:
-            cfg = (config or EnvConfig()).replace(**overrides) if overrides else (config or EnvConfig())
+        cfg = env_config(config, scenario=scenario, **overrides)
         if render_mode is not None and render_mode not in RENDER_MODES:
             raise InputError(f"DepthNav: argument 'render_mode' expected None or one of {', '.join(RENDER_MODES)}, got {render_mode!r}")
         self.config = cfg
@@ -189,6 +187,11 @@ class DepthNavEnv(gym.Env):
     def goal(self) -> np.ndarray | None:
         """The current episode's goal (world x, y; None before the first reset)."""
         return None if self._episode is None else self._episode.goal
+
+    @property
+    def goal_node(self) -> int | None:
+        """The navigation-graph node of the current episode's goal (None before the first reset)."""
+        return None if self._episode is None else self._episode.goal_node
 
     # -- gymnasium API ----------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -275,6 +278,32 @@ class DepthNavEnv(gym.Env):
         self._sites.close()
         self._loop = self._episode = self._reading = None
         super().close()
+
+
+def env_config(config: EnvConfig | None = None, *, scenario: str | Path | None = None, **overrides: Any) -> EnvConfig:
+    """The :class:`EnvConfig` that ``DepthNavEnv(config, scenario=..., **overrides)`` runs with."""
+    if config is not None and scenario is not None:
+        raise InputError("DepthNav: give 'config' or 'scenario', not both")
+    if config is not None and not isinstance(config, EnvConfig):
+        raise InputError(f"DepthNav: argument 'config' expected an EnvConfig, got {type(config).__name__}")
+    if scenario is not None:
+        return EnvConfig.from_scenario(scenario, **overrides)
+    return (config or EnvConfig()).replace(**overrides) if overrides else (config or EnvConfig())
+
+
+def make(**kwargs: Any) -> gym.Env:
+    """``gymnasium.make("DepthNav-v0", **kwargs)`` with gymnasium's ``TimeLimit`` at the
+    env's own ``max_steps`` (a ``max_episode_steps`` in ``kwargs`` still wins).
+
+    The registration's ``max_episode_steps`` is the benchmark task's 1000 steps, and
+    ``gymnasium.make`` applies it whatever ``max_steps`` the env is given: a longer episode
+    (``max_steps=2000``, or a scenario's mission limit) would be cut at 1000 steps. The env
+    truncates at its own ``max_steps``, so here the wrapper and the env agree (``import
+    sim``, which this module's import runs first, registered the id)."""
+    if "max_episode_steps" not in kwargs:
+        own = {k: v for k, v in kwargs.items() if k not in ("render_mode", "disable_env_checker")}
+        kwargs = {**kwargs, "max_episode_steps": env_config(**own).max_steps}
+    return gym.make(ENV_ID, **kwargs)
 
 
 def _option_array(opts: dict[str, Any], key: str, n: int) -> np.ndarray | None:

@@ -168,12 +168,11 @@ def export_minari(demos: Demonstrations, dataset_id: str, description: str | Non
     except (ValueError, TypeError):  # TypeError: no -vN version
         raise InputError(f"Minari dataset {dataset_id!r}: expected an id (namespace/)name-vN, "
                          "e.g. depthnav/classical-train-v0 (a namespace has at least two characters)") from None
-    import gymnasium as gym
-
-    import sim  # noqa: F401  (registers DepthNav-v0)
+    from sim.envs.depthnav import make
 
     kw = {k: tuple(v) if isinstance(v, list) else v for k, v in demos.meta.get("env_kwargs", {}).items()}
-    env = gym.make("DepthNav-v0", **kw, building_seeds=tuple(demos.meta.get("split_building_seeds", ())))
+    # The TimeLimit (in the spec Minari stores) at the recording's own max_steps.
+    env = make(**kw, building_seeds=tuple(demos.meta.get("split_building_seeds", ())))
     buffers = [
         EpisodeBuffer(
             id=e,

@@ -339,14 +339,14 @@ def run_episodes(
 ) -> Iterator[EpisodeResult]:
     """Run the episodes of ``specs`` and yield their results as they finish: grouped by
     building (in order of first appearance), one env per building made with
-    :func:`episode_env_kwargs` and closed after its episodes (also on an exception, a
-    KeyboardInterrupt included), counted on a tqdm bar (stderr) with the success rate so
-    far. ``episode(env, spec)`` runs one episode (default :func:`run_episode` with
-    ``policy``)."""
-    import gymnasium as gym
+    :func:`episode_env_kwargs` (through :func:`sim.envs.depthnav.make`: gymnasium's
+    ``TimeLimit`` at the env's own ``max_steps``) and closed after its episodes (also on an
+    exception, a KeyboardInterrupt included), counted on a tqdm bar (stderr) with the
+    success rate so far. ``episode(env, spec)`` runs one episode (default
+    :func:`run_episode` with ``policy``)."""
     from tqdm import tqdm
 
-    import sim  # noqa: F401  (registers DepthNav-v0)
+    from sim.envs.depthnav import make
 
     if episode is None:
 
@@ -359,7 +359,7 @@ def run_episodes(
     n = successes = 0
     with tqdm(total=len(specs), desc=desc, unit="ep", disable=not progress, file=sys.stderr, leave=False) as bar:
         for b, group in groups.items():
-            env = gym.make("DepthNav-v0", **episode_env_kwargs(policy, b, env_kwargs))
+            env = make(**episode_env_kwargs(policy, b, env_kwargs))
             try:
                 for s in group:
                     r = episode(env, s)

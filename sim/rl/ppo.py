@@ -195,12 +195,11 @@ class TrainResult:
 
 
 def make_env(env_kwargs: Mapping[str, Any]):
-    """One monitored DepthNav env (module level, so spawned workers import it by name)."""
-    import gymnasium as gym
+    """One monitored DepthNav env (module level, so spawned workers import it by name), with
+    gymnasium's ``TimeLimit`` at its own ``max_steps`` (:func:`sim.envs.depthnav.make`)."""
+    from sim.envs.depthnav import make
 
-    import sim  # noqa: F401  (registers DepthNav-v0)
-
-    return Monitor(gym.make("DepthNav-v0", **env_kwargs))
+    return Monitor(make(**env_kwargs))
 
 
 def make_vec_env(cfg: PPOTrainConfig) -> VecEnv:

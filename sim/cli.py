@@ -11,6 +11,7 @@ import math
 import signal
 import sys
 import threading
+import warnings
 from pathlib import Path
 
 from autonomy.common.errors import InputError
@@ -319,6 +320,7 @@ def cmd_scenarios(args: argparse.Namespace) -> int:
 
 def cmd_eval(args: argparse.Namespace) -> int:
     from autonomy.common.files import output_path
+    from sim.rl.benchmark_episodes import UnfrozenEpisodesWarning, benchmark_specs
     from sim.rl.evaluate import compare, comparison_table
     from sim.rl.policy_specs import make_policy
     from sim.rl.splits import get_split
@@ -331,12 +333,24 @@ def cmd_eval(args: argparse.Namespace) -> int:
     policies = [make_policy(spec) for spec in args.policy]  # every spec checked before any episode
     if args.out:
         output_path(args.out, "--out")
+    # Val and test run the frozen benchmark episodes; any beyond the file get one note.
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", UnfrozenEpisodesWarning)
+        benchmark_specs(split, args.episodes, args.seed)
+    for w in caught:
+        if issubclass(w.category, UnfrozenEpisodesWarning):
+            print(f"depthnav: note: {w.message}", file=sys.stderr)
     try:
-        reports = compare(policies, split, args.episodes, args.seed, progress=not args.no_progress, out=args.out)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UnfrozenEpisodesWarning)
+            reports = compare(policies, split, args.episodes, args.seed, progress=not args.no_progress, out=args.out)
     except KeyboardInterrupt:
         print("depthnav: eval interrupted" + (f"; the finished episodes are in {args.out}" if args.out else ""), file=sys.stderr)
         return 130
     print(comparison_table(reports))
+    if reports[0].frozen_episodes:
+        print(f"{reports[0].frozen_episodes} of the {args.episodes} episodes frozen in {reports[0].episodes_file}; "
+              "every reset matched it")
     if args.out:
         print(f"wrote {args.out}")
     return 0
@@ -585,7 +599,9 @@ def _add_eval_command(sub) -> None:
                    help="random, random:SEED, classical, ppo:PATH or bc:PATH; several: the same episodes each, and a table")
     c.add_argument("--split", default="val", help="train, val (default) or test")
     c.add_argument("--episodes", type=int, default=50, help="number of episodes (default 50)")
-    c.add_argument("--seed", type=int, default=0, help="episode seed: which starts and goals (default 0)")
+    c.add_argument("--seed", type=int, default=0,
+                   help="episode seed: which starts and goals (default 0; val and test episodes of seed 0 are the "
+                        "frozen benchmark's, sim/rl/episodes/DepthNav-v0.json)")
     c.add_argument("--out", help="write the reports (every episode) to this JSON file")
     c.add_argument("--no-progress", action="store_true", help="no progress bar")
     c.set_defaults(func=cmd_eval)

@@ -7,8 +7,10 @@ geodesic distance the env reports at reset (``info["goal_distance_m"]``) and ``p
 length of the true trajectory (the sum of the steps of ``info["pose"]``). Soft-SPL
 (Habitat): ``max(0, 1 - d_T / l_i) * l_i / max(p_i, l_i)`` with ``d_T`` the final
 geodesic distance to the goal. Every policy runs the same :class:`EpisodeSpec` list
-(:func:`sim.rl.splits.episode_specs`), so it meets the same buildings, furniture, people,
-starts and goals. docs/rl.md describes the numbers and the JSON report.
+(:func:`sim.rl.benchmark_episodes.benchmark_specs`: on val and test the frozen benchmark
+episodes of ``sim/rl/episodes/DepthNav-v0.json``, each reset checked against the file;
+otherwise :func:`sim.rl.splits.episode_specs`), so it meets the same buildings,
+furniture, people, starts and goals. docs/rl.md describes the numbers and the JSON report.
 """
 
 from __future__ import annotations
@@ -28,9 +30,10 @@ import numpy as np
 
 from autonomy.common.files import output_path
 from sim.experiments.report_file import json_safe, write_json
+from sim.rl.benchmark_episodes import FrozenEpisode, benchmark_specs, frozen_count
 from sim.rl.policies import Policy
 from sim.rl.policy_specs import make_policy
-from sim.rl.splits import BENCHMARK_TASK, TASK_KEYS, EpisodeSpec, Split, episode_specs, get_split
+from sim.rl.splits import BENCHMARK_TASK, TASK_KEYS, EpisodeSpec, Split, get_split
 
 #: 95 % two-sided normal quantile, for the confidence half-widths of the summary.
 Z95 = 1.959963984540054
@@ -122,12 +125,16 @@ def run_episode(env: Any, policy: Policy, spec: EpisodeSpec, on_step: OnStep | N
     """Run one episode of ``spec`` on ``env`` (a DepthNav env on ``spec.building_seed``)
     until it terminates or truncates. ``on_step(obs, action, reward, next_obs, terminated,
     truncated, info)`` is called after every step, ``obs`` being the observation the
-    action was chosen on."""
+    action was chosen on. A :class:`FrozenEpisode` is checked after the reset: an env that
+    did not produce the frozen episode raises a :class:`FrozenEpisodeError` before any
+    step."""
     t0 = time.perf_counter()
     obs, info = env.reset(seed=spec.reset_seed)
     site = getattr(env.unwrapped, "site", None)
     if site is not None and site.seed is not None and site.seed != spec.building_seed:
         raise ValueError(f"run_episode: the env is on building {site.seed}, the episode on {spec.building_seed}")
+    if isinstance(spec, FrozenEpisode):
+        spec.check(env, info)
     policy.reset(spec.reset_seed)
     start = np.asarray(info["pose"], dtype=np.float64).copy()
     goal = np.asarray(info["goal"], dtype=np.float64).copy()
@@ -202,6 +209,10 @@ class EvalReport:
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     """The env arguments besides the building (the benchmark task, the policy's, overrides)."""
     interrupted: bool = False
+    frozen_episodes: int = 0
+    """How many of the episodes came from the frozen file (and were checked against it)."""
+    episodes_file: str | None = None
+    """The frozen file they came from (None when none did)."""
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready (non-finite numbers as null)."""
@@ -212,6 +223,8 @@ class EvalReport:
                 "seed": self.seed,
                 "episodes": self.episodes,
                 "interrupted": self.interrupted,
+                "frozen_episodes": self.frozen_episodes,
+                "episodes_file": self.episodes_file,
                 "env_kwargs": self.env_kwargs,
                 "summary": self.summary,
                 "results": [dataclasses.asdict(r) for r in self.results],
@@ -286,15 +299,20 @@ def evaluate(
     env_kwargs: Mapping[str, Any] | None = None,
     progress: bool = True,
     out: str | Path | None = None,
+    episodes_file: str | Path | None = None,
 ) -> EvalReport:
     """Run ``policy`` (a :class:`Policy` or a spec for :func:`make_policy`) on the
-    ``episodes`` episodes of :func:`episode_specs` (split, seed), one building's env at a
-    time, and summarise. ``out``: write the report's JSON there (atomically), also when
-    interrupted (``"interrupted": true``, then the KeyboardInterrupt goes on)."""
+    ``episodes`` episodes of :func:`benchmark_specs` (split, seed; on val and test the
+    frozen ones of ``episodes_file``, default ``sim/rl/episodes/DepthNav-v0.json``), one
+    building's env at a time, and summarise. ``out``: write the report's JSON there
+    (atomically), also when interrupted (``"interrupted": true``, then the
+    KeyboardInterrupt goes on)."""
+    sp = get_split(split)
+    specs = benchmark_specs(sp, episodes, seed, episodes_file)
     if out is not None:
         output_path(out)
     sink = None if out is None else (lambda report: write_json(out, report.to_dict()))
-    return _evaluate(policy, split, episodes, seed, env_kwargs, progress, sink)
+    return _evaluate(policy, sp, specs, seed, env_kwargs, progress, sink)
 
 
 def compare(
@@ -305,12 +323,13 @@ def compare(
     env_kwargs: Mapping[str, Any] | None = None,
     progress: bool = True,
     out: str | Path | None = None,
+    episodes_file: str | Path | None = None,
 ) -> list[EvalReport]:
     """:func:`evaluate` each policy on the same episodes, in turn. ``out``: one JSON file
     ``{"split", "seed", "episodes", "reports": [...], "table"}`` rewritten after every
     policy (and on an interrupt, with the unfinished report marked)."""
     sp = get_split(split)
-    episode_specs(sp, episodes, seed)  # bad arguments fail before any policy is made
+    specs = benchmark_specs(sp, episodes, seed, episodes_file)  # bad arguments fail before any policy is made
     if out is not None:
         output_path(out)
     made = [make_policy(p) if isinstance(p, str) else p for p in policies]
@@ -324,7 +343,7 @@ def compare(
         write_json(out, doc)
 
     for p in made:
-        done.append(_evaluate(p, sp, episodes, seed, env_kwargs, progress, write))
+        done.append(_evaluate(p, sp, specs, seed, env_kwargs, progress, write))
     return done
 
 
@@ -374,22 +393,23 @@ def run_episodes(
 
 def _evaluate(
     policy: Policy | str,
-    split: str | Split,
-    episodes: int,
+    sp: Split,
+    specs: Sequence[EpisodeSpec],
     seed: int,
     env_kwargs: Mapping[str, Any] | None,
     progress: bool,
     sink: Callable[[EvalReport], None] | None,
 ) -> EvalReport:
-    sp = get_split(split)
-    specs = episode_specs(sp, episodes, seed)
     pol = make_policy(policy) if isinstance(policy, str) else policy
     shown = {k: v for k, v in episode_env_kwargs(pol, specs[0].building_seed, env_kwargs).items() if k != "building_seeds"}
+    frozen = [s for s in specs if isinstance(s, FrozenEpisode)]
+    source = frozen[0].source if frozen else None
     results: list[EpisodeResult] = []
 
     def report(interrupted: bool) -> EvalReport:
         rs = sorted(results, key=lambda r: r.index)
-        return EvalReport(pol.name, sp.name, int(seed), int(episodes), rs, summarize(rs, time.perf_counter() - t0), shown, interrupted)
+        return EvalReport(pol.name, sp.name, int(seed), len(specs), rs, summarize(rs, time.perf_counter() - t0), shown, interrupted,
+                          frozen_count(specs), source)
 
     t0 = time.perf_counter()
     try:

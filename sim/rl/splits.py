@@ -5,7 +5,9 @@ A split is a fixed set of procedural building seeds (the generator's 30 x 24 m f
 building, so a policy trained on ``train`` is evaluated on floors it has never seen.
 :func:`episode_specs` fixes which building and which reset seed each evaluation episode
 uses: the same specs give every policy the same buildings, furniture, people, starts and
-goals. docs/rl.md explains the choices.
+goals. The val and test episodes the evaluation runs are also frozen in a data file
+(:mod:`sim.rl.benchmark_episodes`), so a change here or in the env cannot change the
+benchmark unnoticed. docs/rl.md explains the choices.
 """
 
 from __future__ import annotations

@@ -150,6 +150,8 @@ def test_tilted_mount_is_estimated_and_corrected(d_pitch_deg: float, d_roll_deg:
     assert abs(new.height_m - NOMINAL.height_m) < 0.02
     assert (new.forward_m, new.lateral_m) == (NOMINAL.forward_m, NOMINAL.lateral_m)
     assert check.tilt_error_deg < 0.05  # the believed mount now matches the estimate
+    # The event records the error that made the correction, not the one left after it.
+    assert check.correction_event(1.0, new)["tilt_error_deg"] == pytest.approx(math.hypot(d_pitch_deg, d_roll_deg), abs=0.4)
     # The floor is level again through the corrected mount (and was not through the nominal one).
     depth = next(frames(p_true, r_true, 1, seed0=500, scenes=(Scene(wall_m=4.5),)))
     before, after = floor_points(NOMINAL, depth), floor_points(new, depth)
@@ -236,7 +238,7 @@ def test_second_bump_is_corrected_again() -> None:
 
 def test_the_correction_event_records_the_mount_in_degrees() -> None:
     """The event-log record of a corrected mount: time, pitch and roll rounded; the tilt
-    error is the check's (NaN before any floor); a plain mount has no roll."""
+    error that made the correction (NaN before any); a plain mount has no roll."""
     check = MountCheck(NOMINAL)
     ev = check.correction_event(3.14159, TiltedCameraMount(pitch_down_rad=math.radians(12.3), roll_rad=math.radians(-1.5)))
     assert list(ev) == ["t", "event", "tilt_error_deg", "pitch_down_deg", "roll_deg"]

@@ -293,6 +293,8 @@ class MountCheck:
         self._frames_total = 0
         self._corrections = 0
         self._est: tuple[np.ndarray, float] | None = None  # the window's floor (up, height)
+        self.corrected_from_deg = math.nan
+        """The tilt error (degrees) that made the last correction (NaN before any)."""
 
     @property
     def mount(self) -> CameraMount:
@@ -330,10 +332,11 @@ class MountCheck:
 
     def correction_event(self, t: float, mount: CameraMount) -> dict:
         """The event-log record of a corrected ``mount`` (normally the one :meth:`update`
-        just proposed) at time ``t`` (s): this check's :attr:`tilt_error_deg` and the
+        just proposed) at time ``t`` (s): the tilt error that made the correction
+        (:attr:`corrected_from_deg`; after it the check's own error is about 0) and the
         mount's pitch and roll in degrees."""
         return {
-            "t": round(t, 3), "event": "mount corrected", "tilt_error_deg": round(float(self.tilt_error_deg), 2),
+            "t": round(t, 3), "event": "mount corrected", "tilt_error_deg": round(float(self.corrected_from_deg), 2),
             "pitch_down_deg": round(math.degrees(float(mount.pitch_down_rad)), 2), "roll_deg": round(math.degrees(mount_roll_rad(mount)), 2),
         }
 
@@ -375,6 +378,7 @@ class MountCheck:
             return None
         new = self.estimated_mount()
         assert new is not None
+        self.corrected_from_deg = self.tilt_error_deg
         self._mount = new
         self._up_b = new.rotation()[2]
         self._frames_used = 0

@@ -171,6 +171,9 @@ def main(argv: list[str] | None = None) -> int:
             raise InputError(f"{src}: no frozen episodes to check")
         if not args.check and held > n:
             raise InputError(f"{src}: holds {held} episodes a split; --episodes {n} would drop some")
+        if not args.check and not path.parent.is_dir():
+            # Checked before the episodes are made, so a mistyped --out costs nothing.
+            raise InputError(f"--out {src}: expected a file in an existing directory, {shown_path(path.parent)} is none")
         doc = freeze_document(n, progress=not args.no_progress)
         diff = None if old is None else differences(old, doc, src)
         if diff is not None:
@@ -186,6 +189,9 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     except (InputError, json.JSONDecodeError) as e:
         print(f"freeze_episodes: error: {e}", file=sys.stderr)
+        return 2
+    except OSError as e:
+        print(f"freeze_episodes: error: {src}: {e.strerror or e}", file=sys.stderr)
         return 2
 
 

@@ -254,3 +254,16 @@ def test_freeze_writes_checks_and_refuses_a_changed_benchmark(tmp_path: Path, ca
     # fewer episodes than the file holds would drop frozen ones
     assert freeze_main(["--episodes", "1", "--out", str(out), "--no-progress"]) == 2
     assert "would drop some" in err_line(capsys)
+
+
+def test_freeze_into_a_missing_directory_is_one_line_before_any_work(tmp_path: Path, capsys, monkeypatch) -> None:
+    import sim.rl.freeze_episodes as fe
+
+    def no_work(*a, **k):
+        raise AssertionError("episodes made for an --out that cannot be written")
+
+    monkeypatch.setattr(fe, "freeze_document", no_work)
+    out = tmp_path / "missing" / "x.json"
+    assert freeze_main(["--episodes", "1", "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("freeze_episodes: error: --out ") and "existing directory" in err[0]

@@ -22,13 +22,17 @@ MAX_EPISODE_STEPS = 1000
 
 
 def _register_envs() -> None:
-    """Register the gymnasium environments (``DepthNav-v0``); mujoco is imported on make."""
+    """Register the gymnasium environments (:mod:`sim.envs.tasks`); mujoco is imported on make."""
     try:
         from gymnasium.envs.registration import register, registry
     except ImportError:  # pragma: no cover - gymnasium is a dependency
         return
-    if "DepthNav-v0" not in registry:
-        register(id="DepthNav-v0", entry_point="sim.envs.depthnav:DepthNavEnv", max_episode_steps=MAX_EPISODE_STEPS)
+    from sim.envs.tasks import TASKS, max_episode_steps
+
+    for task, fixed in TASKS.items():
+        if task not in registry:
+            steps = MAX_EPISODE_STEPS if task == "DepthNav-v0" else max_episode_steps(task)
+            register(id=task, entry_point="sim.envs.depthnav:DepthNavEnv", max_episode_steps=steps, kwargs=dict(fixed))
 
 
 _register_envs()

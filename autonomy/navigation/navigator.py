@@ -89,6 +89,8 @@ class Navigator:
         self.plan = Plan(cfg, avoid.robot_radius_m)
         """The plan followed (none until :meth:`set_goal`)."""
         self.replans = 0
+        self.known = np.zeros((0, 2))
+        """The obstacles of the last decision, robot frame (:meth:`known_points`)."""
         """Plans made again to the same goal (recoveries, re-plans round a block, pose jumps)."""
         self._t = 0.0
         """Time of the last frame (``command``)."""
@@ -156,6 +158,14 @@ class Navigator:
         (:meth:`Trail.retrace`): what a back-off drives."""
         return self.trail.retrace(pose, self._t)
 
+    def known_points(self, pose: np.ndarray, radius_m: float) -> np.ndarray:
+        """What the navigator knows to be round the robot within ``radius_m``, robot frame
+        of ``pose``: the obstacles of its last decision (the obstacle memory with this
+        frame's obstacles, and the near field) and the map's walls through the pose."""
+        k = self.known
+        k = k[k[:, 0] * k[:, 0] + k[:, 1] * k[:, 1] < radius_m * radius_m]
+        return np.vstack([k, self.surroundings.map_points(pose, radius_m, with_seen=False)])
+
     def walls_explain(self, pose: np.ndarray, lines: np.ndarray, with_seen: bool = True) -> np.ndarray:
         """Per near-field sight line: whether a wall passes within ``near_wall_tol_m`` of
         it at the pose (:meth:`Surroundings.walls_explain`)."""
@@ -178,6 +188,7 @@ class Navigator:
         goal set, re-plan from it (at ``t``, default the last frame's time). Blocked
         edges stay marked (they expire, and are forgotten when they leave no path)."""
         self.surroundings.forget()
+        self.known = np.zeros((0, 2))
         self.trail.clear()
         self.steering.forget()
         self.recovery.forget()
@@ -215,6 +226,7 @@ class Navigator:
         near = line_points(lines, self.avoid.near_field.point_step_m)
         if len(near):
             obstacles = np.vstack([obstacles, near])
+        self.known = obstacles
         xy = np.asarray(pose[:2], dtype=np.float64)
         carrot = xy + cfg.lookahead_m * np.array([math.cos(heading), math.sin(heading)])
         desired = wrap_angle(heading - float(pose[2]))
@@ -254,6 +266,7 @@ class Navigator:
         near = self.surroundings.near_points(pose, near_lines)
         if len(near):
             obstacles = np.vstack([obstacles, near])
+        self.known = obstacles
         out = self._decide(pose, obstacles, t, located)
         out.near_points = len(near)
         return out

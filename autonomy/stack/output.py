@@ -120,6 +120,11 @@ class StackOutput:
     correspondences: tuple[np.ndarray, np.ndarray] | None
     """Asked for (:meth:`RobotStack.step`), the scene lines visible from the estimate and
     each observation point's line index (-1: none); else None."""
+    known: np.ndarray | None = None
+    """Asked for (:meth:`RobotStack.step`'s ``known_m``), what the navigator knows round
+    the robot within that radius, robot frame of the estimate: the obstacles of its
+    decision (obstacle memory, this frame's, near field) and the map's walls
+    (:meth:`Navigator.known_points`); else None."""
 
     @property
     def velocity(self) -> np.ndarray:

@@ -184,12 +184,10 @@ class RobotStack:
             planes = fspf(depth, cam.intrinsics, cfg.fspf, seed=s, mount=st.mount)
         p2d, n2d = planes.projected(cfg.fspf.max_vertical_normal_angle_rad)
         t1 = time.perf_counter()
-        if self.navigator is not None:
+        obstacles, near = np.zeros((0, 2)), np.zeros((0, 4))
+        if self.navigator is not None and self.near_field is not None:
             obstacles = obstacle_points(planes.points, cfg.avoidance, also=planes.outliers)
-            assert self.near_field is not None
             near = self.near_field.sight_lines(depth)
-        else:
-            obstacles, near = np.zeros((0, 2)), np.zeros((0, 4))
         t2 = time.perf_counter()
         self.timings_s = {"fspf": t1 - t0, "obstacles": t2 - t1}
         st.perception = Perception(planes, p2d, n2d, obstacles, near)
@@ -315,8 +313,7 @@ class RobotStack:
         for a while), the robot stands still; relocalizing, it turns in place to look
         (and, undecided after ``recovery.explore_after_s``, drives on the best mode), and
         goes on turning for ``recovery.settle_s`` after a mode is accepted."""
-        if self.navigator is None:
-            raise InputError("robot stack: built with navigate = false, it has no navigator")
+        nav = self._nav()
         per = self.state.perception
         obstacles = np.zeros((0, 2)) if per is None else per.obstacles
         near = None if per is None else per.near_lines
@@ -326,10 +323,10 @@ class RobotStack:
         elif self.lost.relocalizing and pose is None:
             cmd = self.lost.motion.command(t, obstacles, near)
         elif pose is None and t < self.lost.settle_until:
-            cmd = self.navigator.look_around(t)
+            cmd = nav.look_around(t)
             cmd.state = "settling"
         else:
-            cmd = self.navigator.command(self.state.pose if pose is None else pose, obstacles, t, near)
+            cmd = nav.command(self.state.pose if pose is None else pose, obstacles, t, near)
         self.timings_s["navigation"] = time.perf_counter() - t0
         return cmd
 
@@ -344,6 +341,7 @@ class RobotStack:
         localize: bool = True,
         operator: Callable[[StackOutput], np.ndarray | None] | None = None,
         correspondences: bool = False,
+        known_m: float = 0.0,
     ) -> StackOutput:
         """One frame: perceive ``depth`` (``seed`` as :meth:`perceive`'s), localize on the
         odometry ``increment`` at time ``t``, and (when navigating) decide at ``t`` on the
@@ -361,7 +359,8 @@ class RobotStack:
 
         ``correspondences``: also associate the observation points with the scene lines
         for a viewer that draws them this frame (:meth:`correspondences`: one association
-        pass, which no other reader needs); else the output has none."""
+        pass, which no other reader needs); else the output has none. ``known_m`` > 0:
+        also what the navigator knows within that radius (:attr:`StackOutput.known`)."""
         self.perceive(depth, seed)
         if localize:
             self.localize(increment, t)
@@ -370,14 +369,14 @@ class RobotStack:
             if reset_to is not None:
                 self.relocalize(reset_to)
         cmd = self.decide(t, pose) if self.navigator is not None else None
-        return self._output(cmd, pose, correspondences)
+        return self._output(cmd, pose, correspondences, known_m)
 
     def redecide(self, t: float, pose: np.ndarray | None = None) -> StackOutput:
         """Decide again on the last frame (after :meth:`set_goal` at the end of a leg): the
         last :meth:`step`'s output with the new command and plan."""
         return self._output(self.decide(t, pose), pose)
 
-    def _output(self, cmd: NavCommand | None, pose: np.ndarray | None, correspondences: bool = False) -> StackOutput:
+    def _output(self, cmd: NavCommand | None, pose: np.ndarray | None, correspondences: bool = False, known_m: float = 0.0) -> StackOutput:
         """The stack now as a :class:`StackOutput` (``pose``: the pose decided on, None:
         the estimate)."""
         st, loc = self.state, self.localizer
@@ -404,6 +403,7 @@ class RobotStack:
             refinement=None if loc is None else Refinement(loc.before_refinement, loc.after_refinement, loc.refined_weights),
             last_search=self.lost.last_search,
             correspondences=self.correspondences() if correspondences else None,
+            known=self.navigator.known_points(st.pose, known_m) if known_m > 0 and self.navigator is not None else None,
         )
 
     def _plan_view(self, pose: np.ndarray, length_m: float | None = None) -> PlanView | None:
@@ -413,9 +413,8 @@ class RobotStack:
         if nav is None:
             return None
         at = None if length_m is not None else np.array(pose[:2], dtype=np.float64)
-        return PlanView(
-            nav.plan, at, math.nan if length_m is None else float(length_m), nav.replans, nav.recoveries, nav.blocked_edges
-        )
+        length = math.nan if length_m is None else float(length_m)
+        return PlanView(nav.plan, at, length, nav.replans, nav.recoveries, nav.blocked_edges)
 
     # -- goals ---------------------------------------------------------------------------
     def set_goal(self, node_id: int, t: float, pose: np.ndarray | None = None) -> PlanView:
@@ -430,9 +429,7 @@ class RobotStack:
         (a wrong belief in a part of the graph cut off from the goal) is the robot's:
         the plan starts at the nearest node that reaches the goal, and the localization
         recovers the belief (:meth:`Navigator.set_goal`)."""
-        nav = self.navigator
-        if nav is None:
-            raise InputError("robot stack: built with navigate = false, it has no navigator")
+        nav = self._nav()
         if self._home is None:
             home = nav.graph.node_xy()[nav.graph.index_of(int(node_id))]
             self._home = np.asarray(home, dtype=np.float64).copy()
@@ -450,6 +447,11 @@ class RobotStack:
         return plan
 
     # -- for viewers ---------------------------------------------------------------------
+    def _nav(self) -> Navigator:
+        if self.navigator is None:
+            raise InputError("robot stack: built with navigate = false, it has no navigator")
+        return self.navigator
+
     def correspondences(self) -> tuple[np.ndarray, np.ndarray]:
         """The scene lines visible from the estimate and, for each observation point, the
         index of the line it is associated with there (-1: none), as CGR's observation

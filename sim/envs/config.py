@@ -88,6 +88,11 @@ class EnvConfig:
     """Success when the true position is this close to the goal."""
     max_steps: int = 1000
     """Truncate an episode after this many steps (1000 frames = 33 s at 30 Hz)."""
+    frames_per_step: int = 1
+    """Camera frames per env step: the policy decides at ``kinect.rate_hz`` / this (6: at
+    5 Hz), the command held between decisions; the physics and the people keep the
+    camera's rate, and the robot senses once per step, on the last frame (one render,
+    Kinect noise, FSPF and CGR update, on the odometry of all the step's frames)."""
     rrd: str = ""
     """Write a rerun recording of every step to this .rrd file (made lazily in the process
     that steps the env; in a vector env give each env its own file)."""
@@ -103,7 +108,14 @@ class EnvConfig:
     success_reward: float = 10.0
     """Reward on reaching the goal (once per episode)."""
     collision_reward: float = -10.0
-    """Reward per new collision."""
+    """Reward per new collision (a contact episode starting)."""
+    collision_debounce_s: float = 0.0
+    """A contact starting within this many seconds of the last penalised one is counted
+    in ``collisions`` but not penalised again (a robot pinned on a wall touches and lets
+    go over and over); 0: every one is."""
+    collision_penalties: int = 0
+    """At most this many collisions penalised per episode (0: no limit), so one bad
+    episode's return stays bounded."""
     time_reward: float = -0.01
     """Reward every step."""
     # -- observations ---------------------------------------------------------------
@@ -121,7 +133,10 @@ class EnvConfig:
     goal_format: str = "cartesian"
     """'cartesian': the goal's (x, y) in the robot frame, metres; 'polar': (distance in
     metres, bearing in radians counter-clockwise from the robot's heading), Habitat's
-    PointGoal convention."""
+    PointGoal convention; 'unit': (distance / ``goal_scale_m`` capped at 1, cosine and
+    sine of the bearing), every term in [-1, 1]."""
+    goal_scale_m: float = 10.0
+    """The distance that 'unit' goals scale to 1."""
     goal_from_truth: bool = False
     """Observe the goal relative to the true pose instead of the pose estimate."""
     observe_points: int = 0
@@ -130,6 +145,29 @@ class EnvConfig:
     """> 0: add ``scan``, a KC-style laser scan with this many bins over the camera's
     horizontal field of view. More bins than depth columns leave empty bins (the paper's
     0.35 degrees is 165 bins, which needs depth_shape (480, 640))."""
+    observe_depth: bool = True
+    """Add ``depth`` (the decision-level tasks leave it out: their ``ranges`` hold what
+    the robot knows round it, which a small policy learns from faster)."""
+    observe_ranges: int = 0
+    """> 0: add ``ranges``, the nearest obstacle in this many bearing bins all round the
+    robot as the robot stack knows them: the map's walls through the pose estimate, the
+    obstacle memory (what the camera saw, kept where it no longer looks) and the near
+    field (closer than the camera's minimum range), each range divided by
+    ``ranges_max_m`` (1: nothing within it)."""
+    ranges_max_m: float = 4.0
+    """The reach of ``ranges`` (the Kinect's 4 m)."""
+    observe_plan: int = 0
+    """> 0: add ``plan``, this many points of the robot stack's plan on the navigation
+    graph ahead of the pose estimate, ``plan_spacing_m`` apart along it, in the robot
+    frame, divided by ``ranges_max_m`` (the route a global planner gives a learned local
+    planner)."""
+    plan_spacing_m: float = 1.0
+    """Metres along the plan between the ``plan`` points."""
+    observe_velocity: bool = False
+    """Add ``velocity``: the base's body-frame velocity now (vx, vy, omega as fractions of
+    the limits the action scales to; the acceleration limits make it lag the action)."""
+    history: int = 1
+    """Decisions of ``ranges`` stacked (the newest first), the policy's short memory."""
     observe_pose_estimate: bool = False
     """Add ``pose_estimate`` (CGR mean and spread); needs localization.enabled."""
     scan_min_height_m: float = 0.1
@@ -202,7 +240,21 @@ class EnvConfig:
         need(h >= 8 and w >= 8, "depth_shape", "(rows, columns), each >= 8")
         need(self.depth_layout in ("hwc", "chw", "hw"), "depth_layout", "'hwc', 'chw' or 'hw'")
         need(self.depth_dtype in ("float32", "uint8"), "depth_dtype", "'float32' or 'uint8'")
-        need(self.goal_format in ("cartesian", "polar"), "goal_format", "'cartesian' or 'polar'")
+        need(self.goal_format in ("cartesian", "polar", "unit"), "goal_format", "'cartesian', 'polar' or 'unit'")
+        need(self.goal_scale_m > 0, "goal_scale_m", "a positive number")
+        need(self.frames_per_step >= 1, "frames_per_step", "an integer >= 1")
+        need(self.collision_debounce_s >= 0, "collision_debounce_s", "a number >= 0")
+        need(self.collision_penalties >= 0, "collision_penalties", "an integer >= 0 (0: no limit)")
+        need(self.observe_ranges >= 0, "observe_ranges", "an integer >= 0 (0: no 'ranges' key)")
+        need(self.ranges_max_m > 0, "ranges_max_m", "a positive number")
+        need(self.observe_plan >= 0, "observe_plan", "an integer >= 0 (0: no 'plan' key)")
+        need(self.plan_spacing_m > 0, "plan_spacing_m", "a positive number")
+        need(self.history >= 1, "history", "an integer >= 1")
+        need(
+            not (self.observe_ranges or self.observe_plan) or self.localization.enabled,
+            "observe_ranges" if self.observe_ranges else "observe_plan",
+            "0 when localization.enabled is False (the robot stack places them through its estimate)",
+        )
         intr = self.kinect.intrinsics
         need(
             h * intr.width == w * intr.height,
@@ -224,7 +276,7 @@ class EnvConfig:
 
     def stack_config(self, kinect: KinectConfig, fspf: FSPFConfig) -> StackConfig:
         """The robot stack's configuration for the camera at the observation's size."""
-        navigate = self.stack_policy
+        navigate = self.stack_policy or self.observe_ranges > 0 or self.observe_plan > 0
         return StackConfig(kinect.depth_camera(), fspf, self.localization, self.avoidance, self.navigator, navigate=navigate)
 
     def replace(self, **changes: Any) -> EnvConfig:

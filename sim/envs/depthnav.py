@@ -31,6 +31,7 @@ from sim.envs.render import depth_to_rgb, top_view
 from sim.envs.reward import REWARD_TERMS, PointGoalReward, RewardConfig
 from sim.envs.site import Site, SiteSchedule
 from sim.envs.task import Episode, begin_episode
+from sim.envs.tasks import TASKS
 from sim.simulator.step import EpisodeSeeds
 
 ENV_ID = "DepthNav-v0"
@@ -43,12 +44,18 @@ class DepthNavEnv(gym.Env):
 
     The robot (an omnidirectional base, :mod:`sim.simulator.robot`) starts at a random node of a
     building's navigation graph and must reach a goal node drawn at a geodesic distance in
-    ``[min_goal_distance_m, max_goal_distance_m]``. One env step is one camera frame
-    (``1 / kinect.rate_hz`` s, 30 Hz by default): the action sets the velocity command,
-    people walk, physics advances, a noisy depth frame is rendered at the observation size,
-    odometry integrates, and (if enabled) FSPF and CGR localization run on the frame. The
-    goal is observed in the robot frame of the pose *estimate* (CGR, or dead reckoning when
-    localization is off), or of the true pose with ``goal_from_truth=True``.
+    ``[min_goal_distance_m, max_goal_distance_m]``. One env step is ``frames_per_step``
+    camera frames (one by default: ``1 / kinect.rate_hz`` s, 30 Hz): the action sets the
+    velocity command, held over the step; people walk and physics advances every frame;
+    on the step's last frame a noisy depth frame is rendered at the observation size, and
+    (if enabled) FSPF and CGR localization run on it with the odometry of all the step's
+    frames. The goal is observed in the robot frame of the pose *estimate* (CGR, or dead
+    reckoning when localization is off), or of the true pose with ``goal_from_truth=True``.
+
+    The registered tasks (:mod:`sim.envs.tasks`): ``DepthNav-v0``, a decision every frame
+    with the depth image; ``DepthNavPointGoal-v0`` and ``DepthNavLocal-v0``, a decision
+    every six frames (5 Hz) with ``ranges``, ``velocity``, a 'unit' goal and (Local) the
+    ``plan``.
 
     Buildings come from the shipped assets (``building="small_floor"``, the default, or
     ``"corridor_loop"``), from blueprint or vector-map files, from a scenario file
@@ -71,13 +78,13 @@ class DepthNavEnv(gym.Env):
 
     ## Observation space
 
-    A ``Dict`` of float32 boxes. Always present:
+    A ``Dict`` of float32 boxes. Always present (``depth`` unless ``observe_depth=False``):
 
     | Key | Shape | Range | Meaning |
     | --- | --- | --- | --- |
-    | ``depth`` | (120, 160, 1): ``depth_shape`` with a channel axis (``depth_layout``: 'hwc', 'chw' (1, 120, 160) or 'hw') | [0, max range (4 m)] float32, or [0, 255] uint8 (``depth_dtype``) | Kinect-model planar depth in metres (noise at this size), 0 = invalid |
-    | ``goal`` | (2,) | [-1000, 1000] m; polar: [0, 1000] m, [-pi, pi] | goal (x forward, y left) in the robot frame of the pose estimate (or of the true pose); ``goal_format='polar'``: (distance, bearing) |
-    | ``odometry`` | (3,) | [-1, 1] m, [-pi, pi] rad | last noisy odometry increment (dx, dy, dtheta) in the previous robot frame; 0 after reset |
+    | ``depth`` | (120, 160, 1): ``depth_shape`` with a channel axis (``depth_layout``: 'hwc', 'chw' (1, 120, 160) or 'hw') | [0, max range (4 m)] float32, or [0, 255] uint8 (``depth_dtype``) | Kinect-model planar depth in metres (noise at this size), 0 = invalid: nothing in range, or closer than the camera's 0.8 m |
+    | ``goal`` | (2,); unit: (3,) | [-1000, 1000] m; polar: [0, 1000] m, [-pi, pi]; unit: [0, 1], [-1, 1], [-1, 1] | goal (x forward, y left) in the robot frame of the pose estimate (or of the true pose); ``goal_format='polar'``: (distance, bearing); ``'unit'``: (distance / ``goal_scale_m`` capped at 1, cos, sin of the bearing) |
+    | ``odometry`` | (3,) | [-1, 1] m, [-pi, pi] rad | the step's noisy odometry increment (dx, dy, dtheta) in the previous robot frame; 0 after reset |
 
     Optional, chosen by constructor arguments:
 
@@ -86,6 +93,9 @@ class DepthNavEnv(gym.Env):
     | ``points`` | ``observe_points=N`` | (N, 8) | FSPF points in the robot frame, one per row: x, y, z (m), normal nx, ny, nz (0 for outliers), ``plane`` (1 plane-filtered point, 0 outlier), ``valid`` (1 real point, 0 padding); plane points first, then outliers; a random subset when there are more than N |
     | ``scan`` | ``observe_scan=B`` | (B,) | KC-style laser scan: nearest return per azimuth bin over the camera's horizontal field of view (bin 0 rightmost), from the camera's floor position, points between ``scan_min_height_m`` and ``scan_max_height_m``; 0 = no return |
     | ``pose_estimate`` | ``observe_pose_estimate=True`` | (5,) | CGR estimate in the world frame: x, y (m, clipped to +-1e4), theta, position spread ``std_xy_m``, heading spread ``std_theta_rad`` |
+    | ``ranges`` | ``observe_ranges=B`` | (``history``, B) | the nearest obstacle per bearing bin all round the robot (bin 0 from straight behind, counter-clockwise; the heading starts bin B/2), as the robot stack knows it: the map's walls through the pose estimate, the obstacle memory (what the camera saw, kept where it no longer looks) and the near field (closer than the camera's 0.8 m); range / ``ranges_max_m`` in [0, 1], 1 = nothing within it; row 0 this step, row k the step k before (the first repeated after a reset) |
+    | ``plan`` | ``observe_plan=K`` | (K, 2) | the robot stack's plan on the navigation graph: K points ``plan_spacing_m`` apart ahead of the estimate's place on it (the last repeated past its end), robot frame of the estimate, / ``ranges_max_m``, clipped to +-10 |
+    | ``velocity`` | ``observe_velocity=True`` | (3,) | the base's body-frame velocity (vx, vy, omega) / the action's scale, clipped to +-2 (the acceleration limits make it lag the action) |
 
     ## Rewards
 
@@ -98,7 +108,9 @@ class DepthNavEnv(gym.Env):
     - ``success``: ``success_reward`` once, when the true position comes within
       ``goal_radius_m`` of the goal;
     - ``collision``: ``collision_reward`` per new contact episode (the robot starting to touch
-      a wall, furniture or a person, counted as :meth:`sim.simulator.world.World.step_frame` does);
+      a wall, furniture or a person, counted as :meth:`sim.simulator.world.World.step_frame` does),
+      none again within ``collision_debounce_s`` of the last penalised one and at most
+      ``collision_penalties`` an episode (0: no limit; ``collisions`` counts them all);
     - ``time``: ``time_reward`` every step.
 
     ## Episode end
@@ -157,12 +169,14 @@ class DepthNavEnv(gym.Env):
             raise InputError(f"DepthNav: argument 'render_mode' expected None or one of {', '.join(RENDER_MODES)}, got {render_mode!r}")
         self.config = cfg
         self.render_mode = render_mode
-        self.metadata = {**type(self).metadata, "render_fps": int(round(cfg.kinect.rate_hz))}
+        self.metadata = {**type(self).metadata, "render_fps": max(1, int(round(cfg.kinect.rate_hz / cfg.frames_per_step)))}
 
         self._loop_config = LoopConfig.from_config(cfg)
         self.intrinsics = self._loop_config.kinect.intrinsics
         """The camera's intrinsics at the observation's size."""
         self.frame_dt = 1.0 / cfg.kinect.rate_hz
+        self.step_dt = cfg.frames_per_step * self.frame_dt
+        """Simulated seconds per step (``frames_per_step`` camera frames)."""
         self.depth_max_m = self._loop_config.depth_max_m
         self._observations = Observations.from_config(cfg, self.intrinsics, self.depth_max_m)
         self._reward = PointGoalReward(RewardConfig.from_config(cfg))
@@ -170,13 +184,15 @@ class DepthNavEnv(gym.Env):
         self._action_scale = np.array([cfg.robot.max_speed_mps, cfg.robot.max_speed_mps, cfg.robot.max_angular_rad_s])
         self.action_space = spaces.Box(-1.0, 1.0, (3,), np.float32)
         self.observation_space = self._observations.space()
-        self._recording = EnvRecording(cfg, self.intrinsics, self.frame_dt) if cfg.rrd else None
+        self._recording = EnvRecording(cfg, self.intrinsics, self.step_dt) if cfg.rrd else None
 
         # Made in reset (nothing unpicklable is created here).
         self._episode: Episode | None = None
         self._loop: EpisodeLoop | None = None
         self._reading: Reading | None = None
         """The last frame (None before the first reset and after close)."""
+        self._obs: dict[str, np.ndarray] | None = None
+        """The last observation (its ``ranges`` history goes on into the next)."""
 
     @property
     def site(self) -> Site | None:
@@ -215,6 +231,7 @@ class DepthNavEnv(gym.Env):
         self._reward.begin(ep, self._reading)
         if self._recording is not None:
             self._recording.log(site, ep, self._reading, new_episode=True)
+        self._obs = None
         return self._get_obs(), self._get_info(None)
 
     def step(self, action):
@@ -233,8 +250,12 @@ class DepthNavEnv(gym.Env):
         return self._get_obs(), score.reward, score.terminated, score.truncated, self._get_info(score.terms)
 
     def _get_obs(self) -> dict[str, np.ndarray]:
-        assert self._episode is not None and self._reading is not None
-        return self._observations.observe(self._reading, self._episode.goal, self.np_random)
+        assert self._episode is not None and self._reading is not None and self._loop is not None
+        obs = self._observations
+        out = self._reading.output
+        known = None if out is None else out.known
+        self._obs = obs.observe(self._reading, self._episode.goal, self.np_random, known, self._obs)
+        return {k: v.copy() for k, v in self._obs.items()} if obs.n_ranges else self._obs
 
     def _get_info(self, reward_terms: dict[str, float] | None) -> dict[str, Any]:
         """The info of a reset (``reward_terms`` None) or of a step."""
@@ -276,7 +297,7 @@ class DepthNavEnv(gym.Env):
         if self._recording is not None:
             self._recording.close()
         self._sites.close()
-        self._loop = self._episode = self._reading = None
+        self._loop = self._episode = self._reading = self._obs = None
         super().close()
 
 
@@ -291,19 +312,22 @@ def env_config(config: EnvConfig | None = None, *, scenario: str | Path | None =
     return (config or EnvConfig()).replace(**overrides) if overrides else (config or EnvConfig())
 
 
-def make(**kwargs: Any) -> gym.Env:
-    """``gymnasium.make("DepthNav-v0", **kwargs)`` with gymnasium's ``TimeLimit`` at the
-    env's own ``max_steps`` (a ``max_episode_steps`` in ``kwargs`` still wins).
+def make(task: str = ENV_ID, **kwargs: Any) -> gym.Env:
+    """``gymnasium.make(task, **kwargs)`` (a registered id, :mod:`sim.envs.tasks`) with
+    gymnasium's ``TimeLimit`` at the env's own ``max_steps`` (a ``max_episode_steps`` in
+    ``kwargs`` still wins).
 
     The registration's ``max_episode_steps`` is the benchmark task's 1000 steps, and
     ``gymnasium.make`` applies it whatever ``max_steps`` the env is given: a longer episode
     (``max_steps=2000``, or a scenario's mission limit) would be cut at 1000 steps. The env
     truncates at its own ``max_steps``, so here the wrapper and the env agree (``import
     sim``, which this module's import runs first, registered the id)."""
+    if task not in TASKS:
+        raise InputError(f"DepthNav: task {task!r} unknown (expected one of: {', '.join(TASKS)})")
     if "max_episode_steps" not in kwargs:
         own = {k: v for k, v in kwargs.items() if k not in ("render_mode", "disable_env_checker")}
-        kwargs = {**kwargs, "max_episode_steps": env_config(**own).max_steps}
-    return gym.make(ENV_ID, **kwargs)
+        kwargs = {**kwargs, "max_episode_steps": env_config(**{**TASKS[task], **own}).max_steps}
+    return gym.make(task, **kwargs)
 
 
 def _option_array(opts: dict[str, Any], key: str, n: int) -> np.ndarray | None:

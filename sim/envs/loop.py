@@ -15,6 +15,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from autonomy.common.geometry import compose_pose
 from autonomy.stack import RobotStack, StackConfig, StackOutput
 from sim.envs.config import EnvConfig
 from sim.envs.site import Site
@@ -58,6 +59,12 @@ class LoopConfig:
     """Whether the stack runs at all: for localization, FSPF points or its navigator."""
     stack_policy: bool
     """Whether the stack's navigator drives to the goal (its command goes in the info)."""
+    navigate: bool
+    """Whether the stack plans to the goal (for ``stack_policy``, ``ranges`` or ``plan``)."""
+    frames_per_step: int
+    """Camera frames per step; the robot senses on the last."""
+    known_m: float
+    """Radius of what the stack knows round the robot, read every frame for ``ranges`` (0: not read)."""
     reset_error_m: float
     """A belief this far from the truth is re-initialised there."""
 
@@ -72,8 +79,11 @@ class LoopConfig:
             stack=cfg.stack_config(kinect, fspf),
             odometry=cfg.odometry,
             depth_max_m=float(max_range) if math.isfinite(max_range) else FAR_PLANE_M,
-            run_stack=cfg.localization.enabled or cfg.observe_points > 0 or cfg.stack_policy,
+            run_stack=cfg.localization.enabled or cfg.observe_points > 0 or cfg.stack_policy or cfg.observe_ranges > 0 or cfg.observe_plan > 0,
             stack_policy=cfg.stack_policy,
+            navigate=cfg.stack_policy or cfg.observe_ranges > 0 or cfg.observe_plan > 0,
+            frames_per_step=cfg.frames_per_step,
+            known_m=cfg.ranges_max_m if cfg.observe_ranges > 0 else 0.0,
             reset_error_m=cfg.localization.reset_error_m,
         )
 
@@ -85,7 +95,7 @@ class Reading:
     depth: np.ndarray
     """Planar depth in metres, 0 = invalid (a new array every frame; observations copy it)."""
     increment: np.ndarray
-    """Noisy odometry increment since the previous frame (zeros on the first)."""
+    """Noisy odometry increment since the previous step (zeros on the first frame)."""
     pose: np.ndarray
     """True pose (x, y, theta)."""
     estimate: np.ndarray
@@ -94,6 +104,11 @@ class Reading:
     """The estimate's position and heading spread (zeros for dead reckoning)."""
     new_contacts: int
     """Contact episodes that started during the step."""
+    contact_frames: tuple[int, ...]
+    """The step's frames (1 = its first) on which each of them started."""
+    velocity: np.ndarray
+    """The base's body-frame velocity after the step (vx, vy, omega; the acceleration
+    limits make it lag the command), as its wheel encoders measure it."""
     output: StackOutput | None
     """The stack's output on this frame (None without a stack)."""
     command: np.ndarray | None
@@ -115,16 +130,27 @@ class EpisodeLoop:
             b = site.building
             self._stack = RobotStack(b.vectormap, b.navgraph, config.stack, rng=seeds.localization, fspf_seed=seeds.fspf_seed, scene=site.query)
             self._stack.reset(start)
-            if config.stack_policy:
+            if config.navigate:
                 self._stack.set_goal(episode.goal_node, float(site.world.data.time), start)
 
     def first(self) -> Reading:
         """The frame at the start pose, seen before the robot moves."""
-        return self._read(self._capture(None))
+        return self._read(self._capture(None), np.zeros(3), ())
 
     def step(self, velocity: np.ndarray) -> Reading:
-        """Command the base (body frame vx, vy, omega in m/s and rad/s) for one frame."""
-        return self._read(self._capture(velocity))
+        """Command the base (body frame vx, vy, omega in m/s and rad/s) for
+        ``frames_per_step`` frames; the robot senses on the last one, with the odometry of
+        them all composed."""
+        increment = np.zeros(3)
+        onsets: list[int] = []
+        for k in range(1, self.config.frames_per_step):
+            frame = self.sim.step(velocity, capture=False)
+            increment = compose_pose(increment, frame.increment)
+            onsets += [k] * frame.new_contacts
+        frame = self._capture(velocity)
+        onsets += [self.config.frames_per_step] * frame.new_contacts
+        increment = compose_pose(increment, frame.increment)
+        return self._read(frame, increment, tuple(onsets))
 
     def _capture(self, velocity: np.ndarray | None) -> SimFrame:
         kin = self.config.kinect
@@ -136,21 +162,28 @@ class EpisodeLoop:
             )
         return self.sim.first() if velocity is None else self.sim.step(velocity)
 
-    def _read(self, frame: SimFrame) -> Reading:
-        """The robot stack on the new frame: FSPF, localization (or dead reckoning), and
-        with ``stack_policy`` the navigator's command."""
+    def _read(self, frame: SimFrame, increment: np.ndarray, onsets: tuple[int, ...]) -> Reading:
+        """The robot stack on the new frame: FSPF, localization (or dead reckoning) on the
+        step's odometry ``increment``, and when it navigates the navigator's decision
+        (its command is used with ``stack_policy`` only)."""
         depth = frame.depth
         assert depth is not None  # the env injects no faults: every step captures a frame
         if not math.isfinite(self.config.kinect.noise.max_range_m):
             depth = np.where(depth <= self.config.depth_max_m, depth, np.float32(0.0))
-        increment = np.zeros(3) if frame.increment is None else frame.increment
+        w = self.site.world
+        velocity = w.robot.velocity_body(w.data)
         stack = self._stack
         if stack is None:
             estimate = self.sim.odometry.pose.copy()
-            return Reading(depth, increment, frame.pose, estimate, (0.0, 0.0), frame.new_contacts, None, None)
-        out = stack.step(depth, frame.increment, frame.t, operator=lambda sensed: self._reset_far_belief(sensed, frame.pose))
+            return Reading(depth, increment, frame.pose, estimate, (0.0, 0.0), len(onsets), onsets, velocity, None, None)
+        odo = None if frame.increment is None else increment
+        out = stack.step(
+            depth, odo, frame.t, operator=lambda sensed: self._reset_far_belief(sensed, frame.pose), known_m=self.config.known_m
+        )
         command = out.velocity.copy() if self.config.stack_policy else None
-        return Reading(depth, increment, frame.pose, out.estimate, out.spread, frame.new_contacts, out, command)
+        return Reading(depth, increment, frame.pose, out.estimate, out.spread, len(onsets), onsets, velocity, out, command)
+
+
 
     def _reset_far_belief(self, sensed: StackOutput, truth: np.ndarray) -> np.ndarray | None:
         """The episode's localization reset, between the stack's localizing and deciding:

@@ -24,15 +24,21 @@ class RewardConfig:
     progress_reward_per_m: float
     success_reward: float
     collision_reward: float
+    collision_debounce_s: float
+    collision_penalties: int
     time_reward: float
     goal_radius_m: float
     terminate_on_success: bool
     terminate_on_collision: bool
     max_steps: int
+    frames_per_step: int
+    frame_s: float
+    """Seconds per camera frame."""
 
     @classmethod
     def from_config(cls, cfg: EnvConfig) -> RewardConfig:
-        return cls(**{f.name: getattr(cfg, f.name) for f in fields(cls)})
+        names = [f.name for f in fields(cls) if f.name != "frame_s"]
+        return cls(**{n: getattr(cfg, n) for n in names}, frame_s=1.0 / cfg.kinect.rate_hz)
 
 
 @dataclass(frozen=True)
@@ -60,8 +66,19 @@ class PointGoalReward:
         """Count the step into ``episode`` and score it on the true pose."""
         c = self.config
         ep = episode
+        t0 = ep.steps * c.frames_per_step * c.frame_s
         ep.steps += 1
         ep.collisions += reading.new_contacts
+        penalised = 0
+        for k in reading.contact_frames:
+            t = t0 + k * c.frame_s
+            if c.collision_penalties and ep.penalised >= c.collision_penalties:
+                break
+            if t - ep.penalised_t < c.collision_debounce_s:
+                continue
+            penalised += 1
+            ep.penalised += 1
+            ep.penalised_t = t
         ep.collided = reading.new_contacts > 0
         pose = reading.pose
         phi, _ = ep.field.distance(pose[:2])
@@ -71,7 +88,7 @@ class PointGoalReward:
         terms = {
             "progress": c.progress_reward_per_m * (ep.phi - phi),
             "success": c.success_reward if first_success else 0.0,
-            "collision": c.collision_reward * reading.new_contacts,
+            "collision": c.collision_reward * penalised,
             "time": c.time_reward,
         }
         ep.phi = phi

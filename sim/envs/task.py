@@ -39,6 +39,10 @@ class Episode:
     collided: bool = False
     phi: float = 0.0
     """Geodesic distance to the goal at the last step."""
+    penalised: int = 0
+    """Collisions penalised so far (``collision_penalties``)."""
+    penalised_t: float = -math.inf
+    """When the last penalised collision started (s from the episode's start)."""
 
 
 def begin_episode(

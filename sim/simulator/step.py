@@ -90,9 +90,11 @@ class SimStep:
         pose = self.world.robot.pose(self.world.data)
         return SimFrame(float(self.world.data.time), depth, None, pose, 0, {"physics": 0.0, "render": r, "noise": n})
 
-    def step(self, velocity: np.ndarray) -> SimFrame:
+    def step(self, velocity: np.ndarray, capture: bool = True) -> SimFrame:
         """Command the base (body frame vx, vy, omega), move the people, advance the
-        physics one frame, capture the next Kinect frame and read the odometry."""
+        physics one frame, capture the next Kinect frame and read the odometry.
+        ``capture`` False: no frame is rendered (``depth`` None), for a robot that senses
+        at a lower rate than the camera's (the noise seeds count captured frames only)."""
         w = self.world
         t0 = time.perf_counter()
         t = float(w.data.time)
@@ -101,7 +103,7 @@ class SimStep:
         w.people.update(w.data, t + self.frame_dt, pose[:2])
         contacts = w.step_frame(self.n_substeps)
         physics = time.perf_counter() - t0
-        depth, r, n = self._capture()
+        depth, r, n = self._capture() if capture else (None, 0.0, 0.0)
         new_pose = w.robot.pose(w.data)
         inc = self.odometry.update(new_pose)
         return SimFrame(float(w.data.time), depth, inc, new_pose, contacts, {"physics": physics, "render": r, "noise": n})

@@ -330,6 +330,10 @@ def cmd_eval(args: argparse.Namespace) -> int:
         raise InputError(f"--episodes: expected an integer >= 1, got {args.episodes}")
     if args.seed < 0:
         raise InputError(f"--seed: expected an integer >= 0, got {args.seed}")
+    if args.task is not None:
+        from sim.rl.splits import benchmark_task
+
+        benchmark_task(args.task)
     policies = [make_policy(spec) for spec in args.policy]  # every spec checked before any episode
     if args.out:
         output_path(args.out, "--out")
@@ -343,7 +347,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UnfrozenEpisodesWarning)
-            reports = compare(policies, split, args.episodes, args.seed, progress=not args.no_progress, out=args.out)
+            reports = compare(policies, split, args.episodes, args.seed, progress=not args.no_progress, out=args.out, task=args.task)
     except KeyboardInterrupt:
         print("depthnav: eval interrupted" + (f"; the finished episodes are in {args.out}" if args.out else ""), file=sys.stderr)
         return 130
@@ -418,6 +422,10 @@ def cmd_demos_bc(args: argparse.Namespace) -> int:
 
 def cmd_train_ppo(args: argparse.Namespace) -> int:
     from autonomy.common.files import output_path
+    from sim.envs.tasks import TASKS
+
+    if args.task is not None and args.task not in TASKS:
+        raise InputError(f"--task {args.task}: expected one of {', '.join(TASKS)}")
 
     ints = (("--steps", "total_steps", 1), ("--n-envs", "n_envs", 1), ("--seed", "seed", 0),
             ("--eval-episodes", "eval_episodes", 0), ("--checkpoint-every", "checkpoint_every", 1),
@@ -446,11 +454,14 @@ def cmd_train_ppo(args: argparse.Namespace) -> int:
         if kept:
             raise InputError(f"{', '.join(kept)}: a resumed run keeps its checkpoint's hyper-parameters; drop them with --resume")
         cfg = resume_config(args.out, **given)
+        if args.task is not None and args.task != cfg.task:
+            raise InputError(f"--task {args.task}: the run in {args.out} trains {cfg.task}; drop --task with --resume")
     else:
         if args.log_std_init is not None:
-            given["policy_kwargs"] = {"log_std_init": float(args.log_std_init)}
+            given["policy_kwargs"] = {**ppo.RECIPES.get(args.task or "DepthNav-v0", {}).get("policy_kwargs", {}),
+                                      "log_std_init": float(args.log_std_init)}
         output_path(args.out, "--out", directory=True)
-        cfg = PPOTrainConfig(out=args.out, **given)
+        cfg = PPOTrainConfig.for_task(args.task or "DepthNav-v0", out=args.out, **given)
         if args.end_on_collision:
             cfg = config_with(cfg, terminate_on_collision=True)
     train_ppo = ppo.train_ppo
@@ -602,6 +613,8 @@ def _add_eval_command(sub) -> None:
     c.add_argument("--seed", type=int, default=0,
                    help="episode seed: which starts and goals (default 0; val and test episodes of seed 0 are the "
                         "frozen benchmark's, sim/rl/episodes/DepthNav-v0.json)")
+    c.add_argument("--task", help="the registered task (DepthNav-v0, DepthNavPointGoal-v0, DepthNavLocal-v0); "
+                                  "default: the one each policy was trained on (DepthNav-v0 for random and classical)")
     c.add_argument("--out", help="write the reports (every episode) to this JSON file")
     c.add_argument("--no-progress", action="store_true", help="no progress bar")
     c.set_defaults(func=cmd_eval)
@@ -642,6 +655,8 @@ def _add_train_command(sub) -> None:
                         "progress.csv, curve.png and eval.json")
     c.add_argument("--steps", type=int, required=True, dest="total_steps", metavar="N", help="environment steps in all (with --resume: the new total)")
     c.add_argument("--out", required=True, help="output directory (a saved policy: evaluate with --policy ppo:DIR)")
+    c.add_argument("--task", help="the registered task to train on, with its reference recipe (DepthNav-v0, the default; "
+                                  "DepthNavPointGoal-v0; DepthNavLocal-v0)")
     c.add_argument("--n-envs", type=int, help="environments stepped together (default 2)")
     c.add_argument("--vec", choices=["subproc", "dummy"], help="subproc: one spawned process per env (default); dummy: in this process")
     c.add_argument("--seed", type=int, help="seed of the policy and the envs (default 0)")

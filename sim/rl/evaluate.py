@@ -33,7 +33,7 @@ from sim.experiments.report_file import json_safe, write_json
 from sim.rl.benchmark_episodes import FrozenEpisode, benchmark_specs, frozen_count
 from sim.rl.policies import Policy
 from sim.rl.policy_specs import make_policy
-from sim.rl.splits import BENCHMARK_TASK, TASK_KEYS, EpisodeSpec, Split, get_split
+from sim.rl.splits import TASK_KEYS, EpisodeSpec, Split, benchmark_task, get_split
 
 #: 95 % two-sided normal quantile, for the confidence half-widths of the summary.
 Z95 = 1.959963984540054
@@ -213,12 +213,15 @@ class EvalReport:
     """How many of the episodes came from the frozen file (and were checked against it)."""
     episodes_file: str | None = None
     """The frozen file they came from (None when none did)."""
+    task: str = "DepthNav-v0"
+    """The registered task the episodes ran on (:mod:`sim.envs.tasks`)."""
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready (non-finite numbers as null)."""
         return json_safe(
             {
                 "policy": self.policy,
+                "task": self.task,
                 "split": self.split,
                 "seed": self.seed,
                 "episodes": self.episodes,
@@ -276,19 +279,29 @@ def comparison_table(reports: Sequence[EvalReport]) -> str:
 
 
 # -- the evaluation ------------------------------------------------------------------------
-def episode_env_kwargs(policy: Policy, building_seed: int, env_kwargs: Mapping[str, Any] | None = None) -> dict[str, Any]:
-    """The env arguments of an evaluation episode on one building: the policy's own
-    (observations, expert) without task keys, the benchmark task on ``building_seed``,
-    then ``env_kwargs`` (overrides, e.g. a shorter max_steps for tests)."""
+def policy_task(policy: Policy, task: str | None = None) -> str:
+    """The registered task a policy is evaluated on: ``task`` when given, else the one it
+    was trained on (its ``task`` attribute), else ``DepthNav-v0``."""
+    return task or getattr(policy, "task", None) or "DepthNav-v0"
+
+
+def episode_env_kwargs(
+    policy: Policy, building_seed: int, env_kwargs: Mapping[str, Any] | None = None, task: str = "DepthNav-v0"
+) -> dict[str, Any]:
+    """The env arguments of an evaluation episode of ``task`` on one building: the
+    policy's own (observations, expert) without task keys, the benchmark task
+    (:func:`sim.rl.splits.benchmark_task`) on ``building_seed``, then ``env_kwargs``
+    (overrides, e.g. a shorter max_steps for tests)."""
     own = dict(policy.env_kwargs())
+    bench = benchmark_task(task)
     for k in sorted(TASK_KEYS & own.keys()):
         v = own.pop(k)
-        if k in BENCHMARK_TASK and json_safe(v) != json_safe(BENCHMARK_TASK[k]):
+        if k in bench and json_safe(v) != json_safe(bench[k]):
             warnings.warn(
-                f"policy {policy.name}: env argument {k}={v!r} ignored; the benchmark task sets {BENCHMARK_TASK[k]!r}",
+                f"policy {policy.name}: env argument {k}={v!r} ignored; the benchmark task sets {bench[k]!r}",
                 stacklevel=3,
             )
-    return {**own, "building": "procedural", "building_seeds": (int(building_seed),), **BENCHMARK_TASK, **(env_kwargs or {})}
+    return {**own, "building": "procedural", "building_seeds": (int(building_seed),), **bench, **(env_kwargs or {})}
 
 
 def evaluate(
@@ -300,19 +313,24 @@ def evaluate(
     progress: bool = True,
     out: str | Path | None = None,
     episodes_file: str | Path | None = None,
+    task: str | None = None,
 ) -> EvalReport:
     """Run ``policy`` (a :class:`Policy` or a spec for :func:`make_policy`) on the
     ``episodes`` episodes of :func:`benchmark_specs` (split, seed; on val and test the
     frozen ones of ``episodes_file``, default ``sim/rl/episodes/DepthNav-v0.json``), one
-    building's env at a time, and summarise. ``out``: write the report's JSON there
-    (atomically), also when interrupted (``"interrupted": true``, then the
-    KeyboardInterrupt goes on)."""
+    building's env at a time, and summarise. ``task``: the registered task
+    (:func:`policy_task`: default the one the policy was trained on); every task runs the
+    same frozen episodes (buildings, starts, goals, people, furniture), each with its
+    own step limit. ``out``: write the report's JSON there (atomically), also when
+    interrupted (``"interrupted": true``, then the KeyboardInterrupt goes on)."""
     sp = get_split(split)
+    if task is not None:
+        benchmark_task(task)  # an unknown task fails before any work
     specs = benchmark_specs(sp, episodes, seed, episodes_file)
     if out is not None:
         output_path(out)
     sink = None if out is None else (lambda report: write_json(out, report.to_dict()))
-    return _evaluate(policy, sp, specs, seed, env_kwargs, progress, sink)
+    return _evaluate(policy, sp, specs, seed, env_kwargs, progress, sink, task)
 
 
 def compare(
@@ -324,6 +342,7 @@ def compare(
     progress: bool = True,
     out: str | Path | None = None,
     episodes_file: str | Path | None = None,
+    task: str | None = None,
 ) -> list[EvalReport]:
     """:func:`evaluate` each policy on the same episodes, in turn. ``out``: one JSON file
     ``{"split", "seed", "episodes", "reports": [...], "table"}`` rewritten after every
@@ -343,7 +362,7 @@ def compare(
         write_json(out, doc)
 
     for p in made:
-        done.append(_evaluate(p, sp, specs, seed, env_kwargs, progress, write))
+        done.append(_evaluate(p, sp, specs, seed, env_kwargs, progress, write, task))
     return done
 
 
@@ -355,6 +374,7 @@ def run_episodes(
     episode: Callable[[Any, EpisodeSpec], EpisodeResult] | None = None,
     progress: bool = False,
     desc: str = "episodes",
+    task: str = "DepthNav-v0",
 ) -> Iterator[EpisodeResult]:
     """Run the episodes of ``specs`` and yield their results as they finish: grouped by
     building (in order of first appearance), one env per building made with
@@ -378,7 +398,7 @@ def run_episodes(
     n = successes = 0
     with tqdm(total=len(specs), desc=desc, unit="ep", disable=not progress, file=sys.stderr, leave=False) as bar:
         for b, group in groups.items():
-            env = make(**episode_env_kwargs(policy, b, env_kwargs))
+            env = make(task, **episode_env_kwargs(policy, b, env_kwargs, task))
             try:
                 for s in group:
                     r = episode(env, s)
@@ -399,9 +419,11 @@ def _evaluate(
     env_kwargs: Mapping[str, Any] | None,
     progress: bool,
     sink: Callable[[EvalReport], None] | None,
+    task: str | None = None,
 ) -> EvalReport:
     pol = make_policy(policy) if isinstance(policy, str) else policy
-    shown = {k: v for k, v in episode_env_kwargs(pol, specs[0].building_seed, env_kwargs).items() if k != "building_seeds"}
+    task = policy_task(pol, task)
+    shown = {k: v for k, v in episode_env_kwargs(pol, specs[0].building_seed, env_kwargs, task).items() if k != "building_seeds"}
     frozen = [s for s in specs if isinstance(s, FrozenEpisode)]
     source = frozen[0].source if frozen else None
     results: list[EpisodeResult] = []
@@ -409,11 +431,11 @@ def _evaluate(
     def report(interrupted: bool) -> EvalReport:
         rs = sorted(results, key=lambda r: r.index)
         return EvalReport(pol.name, sp.name, int(seed), len(specs), rs, summarize(rs, time.perf_counter() - t0), shown, interrupted,
-                          frozen_count(specs), source)
+                          frozen_count(specs), source, task)
 
     t0 = time.perf_counter()
     try:
-        for r in run_episodes(pol, specs, env_kwargs, progress=progress, desc=f"{pol.name} on {sp.name}"):
+        for r in run_episodes(pol, specs, env_kwargs, progress=progress, desc=f"{pol.name} on {sp.name}", task=task):
             results.append(r)
     except KeyboardInterrupt:
         if sink is not None:

@@ -75,8 +75,22 @@ HYPERPARAMETERS = (
 )
 
 
-def _train_env_kwargs() -> dict[str, Any]:
-    return split_env_kwargs("train", **LEARNER_OBS)
+def train_env_kwargs(task: str = "DepthNav-v0") -> dict[str, Any]:
+    """The training env of ``task``: the benchmark task on the train split, with the
+    learner observations on ``DepthNav-v0`` (the decision-level tasks' own are fixed by
+    their registration)."""
+    if task == "DepthNav-v0":
+        return split_env_kwargs("train", **LEARNER_OBS)
+    return split_env_kwargs("train", task)
+
+
+#: The reference recipe's settings per decision-level task (the rest are the defaults):
+#: a two-layer 256-unit MLP on the vector observations, 512-decision rollouts per env,
+#: ten epochs, and a small entropy bonus so the 5 Hz commands keep exploring.
+RECIPES: Mapping[str, Mapping[str, Any]] = {
+    task: {"n_steps": 512, "batch_size": 256, "n_epochs": 10, "ent_coef": 0.005, "policy_kwargs": {"net_arch": [256, 256]}}
+    for task in ("DepthNavPointGoal-v0", "DepthNavLocal-v0")
+}
 
 
 @dataclass(frozen=True)
@@ -85,6 +99,8 @@ class PPOTrainConfig:
 
     out: str = "runs/ppo"
     """Output directory (model.zip, policy.json, progress.csv, curve.png, eval.json)."""
+    task: str = "DepthNav-v0"
+    """The registered task trained on (:mod:`sim.envs.tasks`); :meth:`for_task` gives its recipe."""
     total_steps: int = 500_000
     """Environment steps in all (a resumed run continues up to this)."""
     n_envs: int = 2
@@ -122,9 +138,9 @@ class PPOTrainConfig:
     """Save model.zip, policy.json and curve.png every this many steps."""
     eval_episodes: int = 50
     """Episodes of the final evaluation on the val split (0: none)."""
-    env_kwargs: dict[str, Any] = field(default_factory=_train_env_kwargs)
-    """``gym.make("DepthNav-v0", **env_kwargs)``: the benchmark task on the train split
-    with the learner observations (``split_env_kwargs("train", **LEARNER_OBS)``)."""
+    env_kwargs: dict[str, Any] | None = None
+    """``sim.envs.depthnav.make(task, **env_kwargs)``; None: :func:`train_env_kwargs`, the
+    benchmark task on the train split (on ``DepthNav-v0`` with the learner observations)."""
     policy_kwargs: dict[str, Any] = field(default_factory=dict)
     """SB3's policy_kwargs (e.g. ``net_arch``); default SB3's MultiInputPolicy."""
     eval_env_kwargs: dict[str, Any] = field(default_factory=dict)
@@ -157,6 +173,11 @@ class PPOTrainConfig:
         for name in ("ent_coef", "vf_coef", "max_grad_norm"):
             need(is_num(getattr(self, name)) and getattr(self, name) >= 0, name, "a number >= 0")
         need(isinstance(self.out, str | os.PathLike) and str(self.out) != "", "out", "an output directory")
+        from sim.envs.tasks import TASKS
+
+        need(isinstance(self.task, str) and self.task in TASKS, "task", f"one of {', '.join(TASKS)}")
+        if self.env_kwargs is None:
+            object.__setattr__(self, "env_kwargs", train_env_kwargs(self.task))
         need(isinstance(self.env_kwargs, Mapping), "env_kwargs", "a mapping of EnvConfig fields")
         need(isinstance(self.policy_kwargs, Mapping), "policy_kwargs", "a mapping")
         need(isinstance(self.eval_env_kwargs, Mapping), "eval_env_kwargs", "a mapping of EnvConfig fields")
@@ -164,6 +185,11 @@ class PPOTrainConfig:
         object.__setattr__(self, "env_kwargs", dict(self.env_kwargs))
         object.__setattr__(self, "policy_kwargs", dict(self.policy_kwargs))
         object.__setattr__(self, "eval_env_kwargs", dict(self.eval_env_kwargs))
+
+    @classmethod
+    def for_task(cls, task: str = "DepthNav-v0", **changes: Any) -> PPOTrainConfig:
+        """The reference recipe of ``task`` (:data:`RECIPES`), then ``changes``."""
+        return cls(task=task, **{**RECIPES.get(task, {}), **changes})
 
     @property
     def rollout_steps(self) -> int:
@@ -194,12 +220,12 @@ class TrainResult:
         return self.session_steps / self.session_wall_s if self.session_wall_s > 0 else 0.0
 
 
-def make_env(env_kwargs: Mapping[str, Any]):
-    """One monitored DepthNav env (module level, so spawned workers import it by name), with
-    gymnasium's ``TimeLimit`` at its own ``max_steps`` (:func:`sim.envs.depthnav.make`)."""
+def make_env(env_kwargs: Mapping[str, Any], task: str = "DepthNav-v0"):
+    """One monitored env of ``task`` (module level, so spawned workers import it by name),
+    with gymnasium's ``TimeLimit`` at its own ``max_steps`` (:func:`sim.envs.depthnav.make`)."""
     from sim.envs.depthnav import make
 
-    return Monitor(make(**env_kwargs))
+    return Monitor(make(task, **env_kwargs))
 
 
 def make_vec_env(cfg: PPOTrainConfig) -> VecEnv:
@@ -207,7 +233,7 @@ def make_vec_env(cfg: PPOTrainConfig) -> VecEnv:
     forked child of a process that has rendered cannot render)."""
     from functools import partial
 
-    fns = [partial(make_env, cfg.env_kwargs) for _ in range(cfg.n_envs)]
+    fns = [partial(make_env, cfg.env_kwargs, cfg.task) for _ in range(cfg.n_envs)]
     if cfg.vec == "subproc":
         return SubprocVecEnv(fns, start_method="spawn")
     return DummyVecEnv(fns)
@@ -367,6 +393,7 @@ def save_policy(model: PPO, cfg: PPOTrainConfig, out: Path, *, episodes: int, wa
         "format": FORMAT,
         "version": FORMAT_VERSION,
         "algorithm": "PPO",
+        "task": cfg.task,
         "policy": "MultiInputPolicy",
         "observation": to_json(observation_kwargs(cfg.env_kwargs)),
         "env_kwargs": to_json(cfg.env_kwargs),
@@ -389,8 +416,9 @@ def train_ppo(cfg: PPOTrainConfig, resume: bool = False, progress: bool = False,
     Ctrl-C saves a checkpoint and returns with ``interrupted=True``.
     """
     from sim.envs.config import EnvConfig
+    from sim.envs.tasks import TASKS
 
-    EnvConfig().replace(**cfg.env_kwargs)  # a bad env argument fails here, before any worker starts
+    EnvConfig().replace(**{**TASKS[cfg.task], **cfg.env_kwargs})  # a bad env argument fails here, before any worker starts
     out = Path(cfg.out)
     steps0, episodes0, wall0 = 0, 0, 0.0
     recent: dict[str, list] = {}
@@ -447,7 +475,7 @@ def train_ppo(cfg: PPOTrainConfig, resume: bool = False, progress: bool = False,
             save_policy(model, cfg, out, episodes=cb.episodes, wall_s=saved_wall[0], interrupted=interrupted, venv=venv,
                         recent=cb.recent())
             if (out / PROGRESS_FILE).exists():
-                plot_curve(out / PROGRESS_FILE, out / CURVE_FILE)
+                plot_curve(out / PROGRESS_FILE, out / CURVE_FILE, f"PPO on {cfg.task}")
             if log is not None:
                 log(cb.summary_line() + (" (interrupted)" if interrupted else "") + f"; saved {out / MODEL_FILE}")
 

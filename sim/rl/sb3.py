@@ -40,6 +40,14 @@ OBSERVATION_FIELDS = (
     "observe_pose_estimate",
     "scan_min_height_m",
     "scan_max_height_m",
+    "observe_depth",
+    "observe_ranges",
+    "ranges_max_m",
+    "observe_plan",
+    "plan_spacing_m",
+    "observe_velocity",
+    "history",
+    "goal_scale_m",
 )
 ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"PPO": PPO}
 
@@ -82,6 +90,8 @@ class SB3Policy:
         self.meta = dict(meta)
         self.path = path
         self.name = f"{str(meta.get('algorithm', 'sb3')).lower()}:{path}"
+        self.task = str(meta.get("task", "DepthNav-v0"))
+        """The registered task it was trained on (:mod:`sim.envs.tasks`), evaluated on by default."""
 
     @classmethod
     def load(cls, path: str | Path, torch_threads: int | None = 1) -> SB3Policy:

@@ -39,6 +39,17 @@ BENCHMARK_TASK: Mapping[str, Any] = MappingProxyType(
     )
 )
 
+def benchmark_task(task: str = "DepthNav-v0") -> dict[str, Any]:
+    """:data:`BENCHMARK_TASK` for a registered task (:mod:`sim.envs.tasks`): the same
+    buildings, goals, people and furniture, with the task's own step limit (a
+    decision-level task's ``max_steps`` counts decisions)."""
+    from sim.envs.tasks import TASKS
+
+    if task not in TASKS:
+        raise InputError(f"task {task!r} unknown (expected one of: {', '.join(TASKS)})")
+    return {**BENCHMARK_TASK, "max_steps": int(TASKS[task].get("max_steps", BENCHMARK_TASK["max_steps"]))}
+
+
 #: Observation settings for learned policies: a 60 x 80 uint8 depth image with a channel
 #: axis (SB3's CnnPolicy normalises it), the goal as (distance, bearing) (Habitat's
 #: PointGoal) and a 40-bin scan.
@@ -111,9 +122,9 @@ def reset_seed(split: Split, seed: int, k: int) -> int:
     return int(state >> np.uint64(1))
 
 
-def split_env_kwargs(split: str | Split, **extra: Any) -> dict[str, Any]:
-    """Keyword arguments of ``gym.make("DepthNav-v0", **kw)`` for episodes over the split's
-    buildings (one drawn per episode from its seeds) on the benchmark task; ``extra``
-    (e.g. :data:`LEARNER_OBS`, ``new_building_every``) last."""
+def split_env_kwargs(split: str | Split, task: str = "DepthNav-v0", **extra: Any) -> dict[str, Any]:
+    """Keyword arguments of ``gym.make(task, **kw)`` for episodes over the split's
+    buildings (one drawn per episode from its seeds) on the benchmark task
+    (:func:`benchmark_task`); ``extra`` (e.g. :data:`LEARNER_OBS`, ``new_building_every``) last."""
     sp = get_split(split)
-    return {"building": "procedural", "building_seeds": sp.building_seeds, **BENCHMARK_TASK, **extra}
+    return {"building": "procedural", "building_seeds": sp.building_seeds, **benchmark_task(task), **extra}

@@ -214,7 +214,7 @@ def test_a_tampered_file_stops_the_evaluation(tmp_path: Path) -> None:
 def test_eval_cli_on_a_tampered_file(tmp_path: Path, capsys, monkeypatch) -> None:
     _tampered(tmp_path, _move_start)
     monkeypatch.setattr("sim.rl.benchmark_episodes.EPISODES_DIR", tmp_path)
-    monkeypatch.setattr("sim.rl.evaluate.BENCHMARK_TASK", {**BENCHMARK_TASK, "max_steps": 3})
+    monkeypatch.setattr("sim.rl.splits.BENCHMARK_TASK", {**BENCHMARK_TASK, "max_steps": 3})
     assert main(["eval", "--policy", "random", "--episodes", "2", "--no-progress"]) == 2
     line = err_line(capsys)
     assert line.startswith(f"depthnav: error: {tmp_path / 'DepthNav-v0.json'}: val episode 1: the env's start (x, y, yaw)")
@@ -222,7 +222,7 @@ def test_eval_cli_on_a_tampered_file(tmp_path: Path, capsys, monkeypatch) -> Non
 
 @needs_gl
 def test_eval_cli_notes_unfrozen_episodes(capsys, monkeypatch) -> None:
-    monkeypatch.setattr("sim.rl.evaluate.BENCHMARK_TASK", {**BENCHMARK_TASK, "max_steps": 3})
+    monkeypatch.setattr("sim.rl.splits.BENCHMARK_TASK", {**BENCHMARK_TASK, "max_steps": 3})
     assert main(["eval", "--policy", "random", "--episodes", "1", "--seed", "5", "--no-progress"]) == 0
     out = capsys.readouterr()
     assert "depthnav: note: val episode 0 of seed 5: not frozen" in out.err and "frozen in" not in out.out

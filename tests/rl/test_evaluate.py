@@ -262,7 +262,7 @@ def test_output_errors_come_before_any_episode(tmp_path: Path) -> None:
 
 @needs_gl
 def test_eval_cli_table(tmp_path: Path, capsys, monkeypatch) -> None:
-    monkeypatch.setattr("sim.rl.evaluate.BENCHMARK_TASK", {**BENCHMARK_TASK, "max_steps": 30})
+    monkeypatch.setattr("sim.rl.splits.BENCHMARK_TASK", {**BENCHMARK_TASK, "max_steps": 30})
     out = tmp_path / "b.json"
     assert main(["eval", "--policy", "random", "classical", "--episodes", "1", "--out", str(out), "--no-progress"]) == 0
     text = capsys.readouterr().out

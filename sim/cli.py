@@ -331,9 +331,10 @@ def cmd_eval(args: argparse.Namespace) -> int:
     if args.seed < 0:
         raise InputError(f"--seed: expected an integer >= 0, got {args.seed}")
     if args.task is not None:
-        from sim.rl.splits import benchmark_task
+        from sim.envs.tasks import TASKS
 
-        benchmark_task(args.task)
+        if args.task not in TASKS:
+            raise InputError(f"--task {args.task}: expected one of {', '.join(TASKS)}")
     policies = [make_policy(spec) for spec in args.policy]  # every spec checked before any episode
     if args.out:
         output_path(args.out, "--out")

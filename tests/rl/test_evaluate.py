@@ -244,6 +244,7 @@ def test_interrupted_evaluation_writes_what_finished(tmp_path: Path) -> None:
         (["--policy", "random", "--episodes", "0"], "--episodes"),
         (["--policy", "random", "--seed", "-1"], "--seed"),
         (["--split", "val"], "--policy"),
+        (["--policy", "random", "--task", "DepthNav-v9"], "--task DepthNav-v9"),
     ],
 )
 def test_eval_cli_errors(capsys, argv, pattern) -> None:
@@ -268,3 +269,18 @@ def test_eval_cli_table(tmp_path: Path, capsys, monkeypatch) -> None:
     text = capsys.readouterr().out
     assert "| policy" in text and "| random" in text and "| classical" in text and f"wrote {out}" in text
     assert len(json.loads(out.read_text())["reports"]) == 2
+
+
+@needs_gl
+def test_a_decision_level_task_is_evaluated_on_the_same_frozen_episodes() -> None:
+    """The same val episode on DepthNav-v0 and DepthNavLocal-v0: the same start and goal
+    (checked against the frozen file), the task's own observations and step limit."""
+    from sim.rl.splits import benchmark_task
+
+    assert benchmark_task("DepthNavLocal-v0")["max_steps"] == 200 and benchmark_task()["max_steps"] == 1000
+    v0 = evaluate("random", "val", episodes=1, env_kwargs={"max_steps": 4}, progress=False)
+    local = evaluate("random", "val", episodes=1, env_kwargs={"max_steps": 4}, progress=False, task="DepthNavLocal-v0")
+    assert v0.task == "DepthNav-v0" and local.task == "DepthNavLocal-v0" and local.to_dict()["task"] == "DepthNavLocal-v0"
+    assert local.frozen_episodes == v0.frozen_episodes == 1
+    assert local.results[0].geodesic_m == v0.results[0].geodesic_m
+    assert local.env_kwargs["max_steps"] == 4

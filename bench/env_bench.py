@@ -11,6 +11,13 @@
   env steps over the wall time of the whole run (resets included), and ``speedup`` that
   rate over ``env_vec1``'s.
 
+- ``dec_point_vec1``, ``dec_point_vec2``, ``dec_local_vec1``, ``dec_local_vec2``: the same
+  for the decision-level tasks ``DepthNavPointGoal-v0`` and ``DepthNavLocal-v0`` (a
+  decision every six 30 Hz frames, one render, FSPF and CGR update per decision, the
+  ranges and plan observations), in this process and behind 2 spawned workers:
+  ``env_steps_per_s`` is decisions per second. Target with 2 workers: 500 decisions/s
+  (2 ms a decision).
+
 Run alone: ``.venv/bin/python bench/env_bench.py [--quick]``.
 """
 
@@ -48,6 +55,17 @@ def bench_env(results: dict[str, Result], quick: bool) -> None:
         base = base or row["env_steps_per_s"]
         row["speedup"] = round(row["env_steps_per_s"] / base, 3)
         results[f"env_vec{n}"] = row
+    from sim.envs.tasks import LOCALNAV, POINTNAV
+
+    for short, task in (("point", POINTNAV), ("local", LOCALNAV)):
+        one = _bench_vec(1, 150 if quick else 1000, task)
+        two = _bench_vec(2, 150 if quick else 1000, task, target=2.0)
+        two["speedup"] = round(two["env_steps_per_s"] / one["env_steps_per_s"], 3)
+        results[f"dec_{short}_vec1"], results[f"dec_{short}_vec2"] = one, two
+        print(
+            f"  {task}: {one['env_steps_per_s']:.0f} decisions/s in one process, {two['env_steps_per_s']:.0f} with 2 workers",
+            file=sys.stderr,
+        )
     print(
         "  vectorized: " + ", ".join(f"{n} env(s) {results[f'env_vec{n}']['env_steps_per_s']:.0f} steps/s "
                                      f"(x{results[f'env_vec{n}']['speedup']:.2f})" for n in VEC_SIZES)
@@ -88,17 +106,21 @@ def _bench_env_step(n: int) -> Result:
     return _entry(steps, target=round(1000.0 / 150.0, 2))
 
 
-def _bench_vec(n_envs: int, env_steps: int) -> Result:
-    """About ``env_steps`` env steps through a vector env of ``n_envs`` default envs."""
+def _bench_vec(n_envs: int, env_steps: int, task: str = "", target: float | None = None) -> Result:
+    """About ``env_steps`` env steps through a vector env of ``n_envs`` envs: default
+    DepthNavEnvs, or the registered ``task`` made with :func:`sim.envs.depthnav.make`."""
+    import functools
+
     import gymnasium as gym
 
-    from sim.envs.depthnav import DepthNavEnv
+    from sim.envs.depthnav import DepthNavEnv, make
 
+    factory = functools.partial(make, task) if task else DepthNavEnv
     if n_envs == 1:
-        venv = gym.vector.SyncVectorEnv([DepthNavEnv])
+        venv = gym.vector.SyncVectorEnv([factory])
     else:
         # Spawned workers: a forked child cannot render once this process has used EGL.
-        venv = gym.vector.AsyncVectorEnv([DepthNavEnv] * n_envs, context="spawn")
+        venv = gym.vector.AsyncVectorEnv([factory] * n_envs, context="spawn")
     venv.action_space.seed(0)
     venv.reset(seed=0)
     for _ in range(30):  # warm-up in every env: GL context, numba kernels
@@ -113,7 +135,7 @@ def _bench_vec(n_envs: int, env_steps: int) -> Result:
         vsteps.append((time.perf_counter() - t) * 1e3 / n_envs)
     wall = time.perf_counter() - t_all
     venv.close()
-    row = _entry(vsteps)
+    row = _entry(vsteps, target=target)
     row["num_envs"] = n_envs
     row["env_steps_per_s"] = round(n_envs * m / wall, 1)
     return row

@@ -1,0 +1,32 @@
+"""The committed reference policy (policies/DepthNavLocal-v0-ppo): it loads, says which
+task it was trained on, and the evaluation reproduces its published episodes."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from tests.helpers import GL
+
+pytest.importorskip("stable_baselines3")
+pytestmark = pytest.mark.skipif(not GL, reason="no OpenGL (EGL/OSMesa) context on this machine")
+
+POLICY = Path(__file__).resolve().parents[2] / "policies" / "DepthNavLocal-v0-ppo"
+
+
+def test_the_committed_policy_reproduces_its_first_val_episodes() -> None:
+    from sim.rl.evaluate import evaluate
+    from sim.rl.sb3 import SB3Policy
+
+    policy = SB3Policy.load(POLICY)
+    assert policy.task == "DepthNavLocal-v0"
+    published = json.loads((POLICY / "eval.json").read_text())["reports"][0]
+    assert published["task"] == "DepthNavLocal-v0" and published["split"] == "val" and published["episodes"] == 50
+    got = evaluate(policy, "val", episodes=3, seed=0, progress=False)
+    assert got.task == "DepthNavLocal-v0"
+    for mine, theirs in zip(got.results, published["results"][:3], strict=True):
+        for key in ("success", "collisions", "steps"):
+            assert getattr(mine, key) == theirs[key], key
+        assert mine.path_length_m == pytest.approx(theirs["path_length_m"], abs=1e-6)

@@ -239,9 +239,16 @@ def cmd_warmup(args: argparse.Namespace) -> int:
     return 0
 
 
+def _seed_arg(seed: int | None) -> None:
+    """A seed given on the command line: an integer >= 0 (numpy's generators take no other)."""
+    if seed is not None and seed < 0:
+        raise InputError(f"--seed: expected an integer >= 0, got {seed}")
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     from sim.experiments.kinds import RunCrashed, load_experiment
 
+    _seed_arg(args.seed)
     exp, scn = load_experiment(args.scenario, args.set or [])
     out = Path(args.out) if args.out else Path("runs") / scn.name
     try:
@@ -263,6 +270,7 @@ def cmd_reloc_sample(args: argparse.Namespace) -> int:
     from sim.experiments.reloc_sample import parse_region, sample
     from sim.experiments.report_file import write_json
 
+    _seed_arg(args.seed)
     region = parse_region(args.region) if args.region else None
     out = output_path(args.out, "--out") if args.out else None  # checked before the long sampling
 
@@ -287,6 +295,7 @@ def cmd_reloc_sample(args: argparse.Namespace) -> int:
 def cmd_sweep(args: argparse.Namespace) -> int:
     from sim.experiments.sweep import SweepError, run_sweep
 
+    _seed_arg(args.seed)
     try:
         report = run_sweep(
             args.scenario, args.set or [], args.out, trials=args.trials, engine=args.engine,
@@ -492,8 +501,21 @@ def cmd_demos_export(args: argparse.Namespace) -> int:
     return 0
 
 
+def _version() -> str:
+    """The installed package's version (the checkout's pyproject.toml when not installed)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("depthnav")
+    except PackageNotFoundError:
+        import tomllib
+
+        return tomllib.loads((Path(__file__).resolve().parent.parent / "pyproject.toml").read_text())["project"]["version"]
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="depthnav", description="Depth-camera indoor robot autonomy in simulation.")
+    p.add_argument("--version", action="version", version=f"depthnav {_version()}")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
     _add_map_commands(sub)
     _add_snapshot_command(sub)

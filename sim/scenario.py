@@ -236,6 +236,8 @@ class Scenario:
     """Directory that relative paths resolve against (set by the loader)."""
 
     def __post_init__(self) -> None:
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
+            raise InputError(f"seed: expected an integer >= 0, got {self.seed!r}")
         # The stack avoids with the body the simulator drives: one radius, robot.radius_m.
         object.__setattr__(self, "avoidance", avoidance_for_body(self.avoidance, self.robot, "scenario"))
         if not self.localization.start_known and not (self.localization.enabled and self.recovery.enabled):

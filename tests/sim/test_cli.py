@@ -82,6 +82,10 @@ def test_snapshot_writes_depth(tmp_path: Path) -> None:
         (["map", "convert", str(SMALL), "out.svg"], "svg"),
         (["map"], "required"),
         (["frobnicate"], "invalid choice"),
+        (["run", "scenarios/demo.toml", "--seed", "-1"], "--seed: expected an integer >= 0, got -1"),
+        (["run", "scenarios/demo.toml", "--set", "seed=-1"], "seed: expected an integer >= 0, got -1"),
+        (["sweep", "scenarios/demo.toml", "--seed", "-1", "--out", "never"], "--seed: expected an integer >= 0"),
+        (["reloc-sample", "--map", "small_floor", "--seed", "-5"], "--seed: expected an integer >= 0, got -5"),
     ],
 )
 def test_user_errors_exit_2_with_one_line(capsys, argv, pattern) -> None:
@@ -154,3 +158,21 @@ def test_without_pytorch_the_rl_commands_name_the_extra(tmp_path: Path, argv) ->
     lines = r.stderr.strip().splitlines()
     assert r.returncode == 2, r.stderr
     assert len(lines) == 1 and "needs torch" in lines[0] and "'.[rl]'" in lines[0], r.stderr
+
+
+def test_version(capsys) -> None:
+    from sim.cli import _version
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0
+    assert capsys.readouterr().out.strip() == f"depthnav {_version()}"
+    assert _version().count(".") >= 1
+
+
+def test_a_negative_seed_in_a_scenario_file_is_one_line(tmp_path: Path, capsys) -> None:
+    f = tmp_path / "neg.toml"
+    f.write_text('name = "neg"\nseed = -1\n')
+    assert main(["run", str(f)]) == 2
+    line = err_line(capsys)
+    assert str(f) in line and "seed: expected an integer >= 0, got -1" in line

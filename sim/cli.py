@@ -24,7 +24,9 @@ class _Parser(argparse.ArgumentParser):
     """argparse with one-line errors (exit 2), as the CLI contract asks."""
 
     def error(self, message: str) -> None:  # type: ignore[override]
-        raise InputError(f"{self.prog}: {message}")
+        # main() prints "depthnav: error: ": name the subcommand only ("run: ...").
+        sub = self.prog.removeprefix("depthnav").strip()
+        raise InputError(f"{sub}: {message}" if sub else message)
 
 
 def _map_arg(text: str) -> Path:
@@ -698,6 +700,10 @@ def _add_train_command(sub) -> None:
     c.set_defaults(func=cmd_train_ppo)
 
 
+_SIGNALLED = [0]
+"""The signal that last stopped a command (0: none), for its exit code."""
+
+
 def interrupt_on_signals() -> dict:
     """SIGINT and SIGTERM stop a command the way Ctrl-C does (it keeps what finished).
     A shell that starts a job in the background without job control sets SIGINT to be
@@ -705,6 +711,7 @@ def interrupt_on_signals() -> dict:
     Returns the handlers replaced (restored when the command ends)."""
 
     def stop(signum, _frame):
+        _SIGNALLED[0] = signum
         raise KeyboardInterrupt(signal.Signals(signum).name)
 
     if threading.current_thread() is not threading.main_thread():
@@ -714,9 +721,12 @@ def interrupt_on_signals() -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     before = interrupt_on_signals()
+    _SIGNALLED[0] = 0
     try:
         args = build_parser().parse_args(argv)
-        return int(args.func(args))
+        rc = int(args.func(args))
+        # An interrupted command returns 130 (128 + SIGINT); stopped by SIGTERM, 143.
+        return 128 + _SIGNALLED[0] if rc == 130 and _SIGNALLED[0] else rc
     except InputError as exc:
         print(f"depthnav: error: {exc}", file=sys.stderr)
         return 2

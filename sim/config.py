@@ -126,6 +126,8 @@ def read_toml(path: Any) -> dict:
     from pathlib import Path
 
     path, src = Path(path), str(path)
+    if path.is_dir():
+        raise InputError(f"{src}: a directory; expected a scenario file (*.toml)")
     if not path.is_file():
         raise InputError(f"{src}: scenario file not found")
     try:

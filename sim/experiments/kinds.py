@@ -100,9 +100,24 @@ def experiment(kind: str, source: str = "") -> Experiment:
     return module.EXPERIMENTS[kind]
 
 
+def shipped_scenario(path: Path) -> Path:
+    """``path``, or for a bare name that is not a file here, the project's scenario of
+    that name (with or without ``.toml``) when there is one."""
+    from sim.scenario import SCENARIOS_DIR
+
+    if path.exists() or len(path.parts) != 1:
+        return path
+    for cand in (SCENARIOS_DIR / path.name, SCENARIOS_DIR / f"{path.name}.toml"):
+        if cand.is_file():
+            return cand
+    return path
+
+
 def load_experiment(path: str | Path, overrides: list[str] | None = None) -> tuple[Experiment, Any]:
-    """Read a scenario file of any kind: (its Experiment, its parsed config)."""
-    path = Path(path)
+    """Read a scenario file of any kind: (its Experiment, its parsed config). A bare name
+    that is not a file here (``demo.toml`` or ``demo``) is looked up among the project's
+    scenarios, the ones ``depthnav scenarios`` lists."""
+    path = shipped_scenario(Path(path))
     src = str(path)
     data = read_toml(path)
     kind = data.pop("kind", "mission")

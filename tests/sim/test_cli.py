@@ -82,6 +82,8 @@ def test_snapshot_writes_depth(tmp_path: Path) -> None:
         (["map", "convert", str(SMALL), "out.svg"], "svg"),
         (["map"], "required"),
         (["frobnicate"], "invalid choice"),
+        (["run"], "run: the following arguments are required: scenario"),
+        (["run", "scenarios"], "scenarios: a directory; expected a scenario file (*.toml)"),
         (["run", "scenarios/demo.toml", "--seed", "-1"], "--seed: expected an integer >= 0, got -1"),
         (["run", "scenarios/demo.toml", "--set", "seed=-1"], "seed: expected an integer >= 0, got -1"),
         (["sweep", "scenarios/demo.toml", "--seed", "-1", "--out", "never"], "--seed: expected an integer >= 0"),
@@ -176,3 +178,21 @@ def test_a_negative_seed_in_a_scenario_file_is_one_line(tmp_path: Path, capsys) 
     assert main(["run", str(f)]) == 2
     line = err_line(capsys)
     assert str(f) in line and "seed: expected an integer >= 0, got -1" in line
+
+
+def test_argparse_errors_name_the_subcommand_once(capsys) -> None:
+    assert main(["run"]) == 2
+    line = err_line(capsys)
+    assert line.startswith("depthnav: error: run: ") and "depthnav run" not in line
+
+
+def test_a_shipped_scenario_is_found_by_name_from_anywhere(tmp_path: Path, monkeypatch) -> None:
+    from sim.experiments.kinds import shipped_scenario
+    from sim.scenario import SCENARIOS_DIR
+
+    monkeypatch.chdir(tmp_path)
+    assert shipped_scenario(Path("demo.toml")) == SCENARIOS_DIR / "demo.toml"
+    assert shipped_scenario(Path("demo")) == SCENARIOS_DIR / "demo.toml"
+    assert shipped_scenario(Path("nowhere.toml")) == Path("nowhere.toml")  # still "not found" later
+    (tmp_path / "demo.toml").write_text('name = "mine"\n')
+    assert shipped_scenario(Path("demo.toml")) == Path("demo.toml")  # a file here wins

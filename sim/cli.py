@@ -49,7 +49,10 @@ def _graph_config(args: argparse.Namespace):
     if not (math.isfinite(args.robot_radius) and args.robot_radius > 0):
         raise InputError(f"--robot-radius: expected a positive number of metres, got {args.robot_radius!r}")
     open_map = True if args.open else False if args.closed else None
-    return GraphBuildConfig(free_space=FreeSpaceConfig(robot_radius_m=args.robot_radius, open_map=open_map))
+    base = FreeSpaceConfig()
+    # The grid's margin round the map must hold the robot's footprint and two cells.
+    pad = max(base.padding_m, args.robot_radius + 2 * base.cell_m)
+    return GraphBuildConfig(free_space=FreeSpaceConfig(robot_radius_m=args.robot_radius, padding_m=pad, open_map=open_map))
 
 
 def _free_space_lines(fs, how: str) -> list[str]:
@@ -168,9 +171,10 @@ def cmd_map_render(args: argparse.Namespace) -> int:
     from autonomy.maps.vectormap import load_vectormap
     from sim.viz.maps import render_map
 
-    vm = load_vectormap(args.file)
+    src = _map_arg(args.file)
+    vm = load_vectormap(src)
     graph = load_navgraph(args.graph) if args.graph else None
-    out = render_map(vm, args.out, graph, title=Path(args.file).name)
+    out = render_map(vm, args.out, graph, title=src.name)
     print(f"wrote {out}")
     return 0
 
@@ -583,7 +587,7 @@ def _add_map_commands(sub) -> None:
     c.add_argument("--scale", type=float, default=1.0, help="multiply coordinates (0.001: a map in millimetres)")
     c.set_defaults(func=cmd_map_convert)
     c = msub.add_parser("render", help="draw a map (and its navigation graph) to PNG")
-    c.add_argument("file")
+    c.add_argument("file", help="a vector map file or a building name in sim/assets")
     c.add_argument("--graph", help="a *.navigation.json to draw on top")
     c.add_argument("--out", required=True, help="output PNG")
     c.set_defaults(func=cmd_map_render)

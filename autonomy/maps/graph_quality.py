@@ -183,6 +183,8 @@ def graph_quality(
         n_regions=fs.n_regions,
         regions_without_nodes=int(sum(1 for reg in range(fs.n_regions) if not np.any(node_region == reg))),
         stretch_median=float(np.median(r)),
-        stretch_p90=float(np.percentile(r, 90)),
+        # Pairs the graph cannot join count as infinite stretch: then the percentile picks
+        # an element rather than interpolating between two (inf - inf would be NaN).
+        stretch_p90=float(np.percentile(r, 90, method="linear" if np.isfinite(r).all() else "higher")),
         n_pairs=len(ratios),
     )

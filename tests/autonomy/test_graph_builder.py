@@ -6,6 +6,7 @@ and the cache."""
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -286,3 +287,21 @@ def test_a_read_only_map_folder_is_left_untouched(tmp_path, monkeypatch):
         assert cached_navgraph(vm, path).built is False  # read back from there
     finally:
         maps.chmod(0o755)
+
+
+def test_quality_of_a_graph_that_leaves_pairs_unjoined_is_inf_not_nan():
+    """A two-node graph in one room of small_floor reaches few of the sampled points: the
+    unjoined pairs count as infinite stretch, and the 90th percentile says so (no NaN,
+    no numpy warning)."""
+    import warnings
+
+    from autonomy.maps.navgraph import NavEdge, NavGraph, NavNode
+
+    bp = blueprints.load_blueprint(blueprints.ASSETS_DIR / "small_floor")
+    gb = build_navgraph(bp.vectormap)
+    tiny = NavGraph(nodes=(NavNode(0, 2.0, 5.1), NavNode(1, 3.9, 5.1)), edges=(NavEdge(0, 1),))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        q = graph_quality(tiny, bp.vectormap, gb.free_space, np.random.default_rng(5))
+    assert not math.isnan(q.stretch_p90) and not math.isnan(q.stretch_median)
+    assert q.stretch_p90 == math.inf

@@ -196,3 +196,14 @@ def test_a_shipped_scenario_is_found_by_name_from_anywhere(tmp_path: Path, monke
     assert shipped_scenario(Path("nowhere.toml")) == Path("nowhere.toml")  # still "not found" later
     (tmp_path / "demo.toml").write_text('name = "mine"\n')
     assert shipped_scenario(Path("demo.toml")) == Path("demo.toml")  # a file here wins
+
+
+def test_map_graph_with_a_robot_too_big_names_the_radius_not_an_internal_key(tmp_path: Path, capsys) -> None:
+    assert main(["map", "graph", "small_floor", "--robot-radius", "5", "--out", str(tmp_path / "g.json")]) == 2
+    line = err_line(capsys)
+    assert "radius 5.00 m" in line and "padding_m" not in line
+
+
+def test_map_render_takes_a_building_name(tmp_path: Path) -> None:
+    assert main(["map", "render", "small_floor", "--out", str(tmp_path / "m.png")]) == 0
+    assert (tmp_path / "m.png").stat().st_size > 1000

@@ -262,11 +262,38 @@ def cmd_run(args: argparse.Namespace) -> int:
     except RunCrashed as exc:
         print(f"depthnav: {scn.name}: {exc}", file=sys.stderr)
         return 1
-    m = report["metrics"]
-    summary = ", ".join(f"{k}={v}" for k, v in m.items())
-    print(f"{scn.name}: {summary}")
-    print(f"wrote {out / 'report.json'}" + (" (interrupted)" if report["interrupted"] else ""))
+    print(run_summary(scn.name, report["metrics"]))
+    print(f"wrote {out / 'report.json'}" + (" (every metric)" if _is_mission(report["metrics"]) else "")
+          + (" (interrupted)" if report["interrupted"] else ""))
     return 130 if report["interrupted"] else 0
+
+
+_MISSION_KEYS = ("distance_m", "duration_s", "collisions", "waypoints_reached", "loc_error_p95_m", "resets", "lost_alarms")
+
+
+def _is_mission(m: dict) -> bool:
+    return all(k in m for k in _MISSION_KEYS)
+
+
+def run_summary(name: str, m: dict) -> str:
+    """A mission run's outcome in three short lines (report.json has every metric);
+    other kinds' metrics as key=value."""
+    if not _is_mission(m):
+        return f"{name}: " + ", ".join(f"{k}={v}" for k, v in m.items())
+
+    def cm(key: str) -> str:
+        v = m.get(key)
+        return "-" if v is None else f"{100 * v:.1f}"
+
+    rtf = m.get("realtime_factor")
+    return "\n".join([
+        f"{name}: {m['distance_m']:.0f} m in {m['duration_s']:.0f} s" + (f" ({rtf:.1f}x real time)" if rtf else "")
+        + f"; waypoints {m['waypoints_reached']} reached, {m.get('waypoints_failed', 0)} failed; contacts {m['collisions']}",
+        f"  localization: error mean / p95 / max {cm('loc_error_mean_m')} / {cm('loc_error_p95_m')} / {cm('loc_error_max_m')} cm; "
+        f"resets {m['resets']}, truth resets {m.get('truth_resets_needed', 0)}",
+        f"  recovery: lost alarms {m['lost_alarms']} (false {m.get('lost_false_alarms', 0)}), relocalizations "
+        f"{m.get('relocalizations', 0)}, recovered by the robot {m.get('recovered_by_robot', 0)}",
+    ])
 
 
 def cmd_reloc_sample(args: argparse.Namespace) -> int:
@@ -363,7 +390,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UnfrozenEpisodesWarning)
-            reports = compare(policies, split, args.episodes, args.seed, progress=not args.no_progress, out=args.out, task=args.task)
+            reports = compare(policies, split, args.episodes, args.seed, progress=not args.no_progress and sys.stderr.isatty(), out=args.out, task=args.task)
     except KeyboardInterrupt:
         print("depthnav: eval interrupted" + (f"; the finished episodes are in {args.out}" if args.out else ""), file=sys.stderr)
         return 130
@@ -393,7 +420,7 @@ def cmd_demos_record(args: argparse.Namespace) -> int:
     output_path(args.out, "--out")
     env_kwargs = None if args.max_steps is None else {"max_steps": args.max_steps}
     try:
-        d = record_demonstrations(args.split, args.episodes, args.seed, args.out, env_kwargs, progress=not args.no_progress)
+        d = record_demonstrations(args.split, args.episodes, args.seed, args.out, env_kwargs, progress=not args.no_progress and sys.stderr.isatty())
     except KeyboardInterrupt:
         print(f"depthnav: demos record interrupted; the finished episodes (if any) are in {args.out}", file=sys.stderr)
         return 130
@@ -432,7 +459,7 @@ def cmd_demos_bc(args: argparse.Namespace) -> int:
     if args.eval_episodes:
         from sim.rl.evaluate import evaluate
 
-        print(evaluate(policy, "val", args.eval_episodes, 0, progress=not args.no_progress).table())
+        print(evaluate(policy, "val", args.eval_episodes, 0, progress=not args.no_progress and sys.stderr.isatty()).table())
     return 0
 
 

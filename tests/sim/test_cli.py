@@ -207,3 +207,18 @@ def test_map_graph_with_a_robot_too_big_names_the_radius_not_an_internal_key(tmp
 def test_map_render_takes_a_building_name(tmp_path: Path) -> None:
     assert main(["map", "render", "small_floor", "--out", str(tmp_path / "m.png")]) == 0
     assert (tmp_path / "m.png").stat().st_size > 1000
+
+
+def test_a_mission_run_summary_is_three_short_lines() -> None:
+    from sim.cli import run_summary
+
+    m = {
+        "distance_m": 302.4, "duration_s": 412.0, "realtime_factor": 5.6, "collisions": 0, "waypoints_reached": 8,
+        "waypoints_failed": 0, "loc_error_mean_m": 0.021, "loc_error_p95_m": 0.047, "loc_error_max_m": 0.13, "resets": 0,
+        "truth_resets_needed": 0, "lost_alarms": 1, "lost_false_alarms": 1, "relocalizations": 1, "recovered_by_robot": 0,
+    }
+    lines = run_summary("demo", m).splitlines()
+    assert len(lines) == 3 and all(len(line) <= 100 for line in lines)
+    assert lines[0] == "demo: 302 m in 412 s (5.6x real time); waypoints 8 reached, 0 failed; contacts 0"
+    assert "2.1 / 4.7 / 13.0 cm" in lines[1] and "lost alarms 1 (false 1)" in lines[2]
+    assert run_summary("cmp", {"fspf_failures": 0.05}) == "cmp: fspf_failures=0.05"

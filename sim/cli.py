@@ -55,6 +55,18 @@ def _graph_config(args: argparse.Namespace):
     return GraphBuildConfig(free_space=FreeSpaceConfig(robot_radius_m=args.robot_radius, padding_m=pad, open_map=open_map))
 
 
+def _on_map(path: Path, vm, work):
+    """``work()``, with an error about the map named by its path as given (the map's own
+    name is the file's stem, which may not say which file)."""
+    try:
+        return work()
+    except InputError as exc:
+        msg, stem = str(exc), f"{vm.name}: "
+        if vm.name and msg.startswith(stem):
+            raise InputError(f"{path}: {msg[len(stem):]}") from None
+        raise
+
+
 def _free_space_lines(fs, how: str) -> list[str]:
     """What ``map check`` says about the grid and an open map."""
     lines = []
@@ -84,7 +96,7 @@ def cmd_map_check(args: argparse.Namespace) -> int:
     lengths = vm.lengths
     print(f"  segment length: min {lengths.min():.3f} m, median {float(np.median(lengths)):.3f} m, max {lengths.max():.3f} m")
     cfg = _graph_config(args)
-    gb = build_navgraph(vm, cfg)
+    gb = _on_map(path, vm, lambda: build_navgraph(vm, cfg))
     fs = gb.free_space
     areas = ", ".join(f"{a:.1f}" for a in fs.region_area_m2[1:6]) + (", ..." if fs.n_regions > 6 else "")
     print(f"  free space for a robot of radius {cfg.free_space.robot_radius_m:.2f} m: {fs.region_area_m2.sum():.1f} m2 "
@@ -127,7 +139,7 @@ def cmd_map_graph(args: argparse.Namespace) -> int:
             raise InputError(f"{out}: exists (a hand-made graph?); give --out PATH or --force to overwrite it")
     vm = load_vectormap(src)
     t0 = time.perf_counter()
-    gb = build_navgraph(vm, cfg)
+    gb = _on_map(src, vm, lambda: build_navgraph(vm, cfg))
     dt = time.perf_counter() - t0
     out.write_text(with_key(format_navgraph_json(gb.graph), graph_key(vm, cfg)), encoding="utf-8")
     print(f"wrote {out}: {gb.summary()} in {dt:.2f} s")
@@ -193,12 +205,14 @@ def _parse_pose(text: str) -> tuple[float, float, float]:
 def cmd_snapshot(args: argparse.Namespace) -> int:
     import numpy as np
 
+    from autonomy.common.files import output_path
     from autonomy.maps.vectormap import load_vectormap
     from sim.simulator.kinect import KinectCamera, KinectConfig
     from sim.simulator.world import build_world
 
     pose = _parse_pose(args.pose)
     vm = load_vectormap(_map_arg(args.map))
+    out = output_path(args.out, "--out", directory=True)
     x0, y0, x1, y1 = vm.extent()
     if not (x0 - 1 <= pose[0] <= x1 + 1 and y0 - 1 <= pose[1] <= y1 + 1):
         raise InputError(f"--pose {args.pose}: outside the map's extent x [{x0:.1f}, {x1:.1f}], y [{y0:.1f}, {y1:.1f}]")
@@ -208,8 +222,6 @@ def cmd_snapshot(args: argparse.Namespace) -> int:
     world = build_world(vm, intrinsics=cfg.intrinsics, mount=cfg.mount, start_pose=pose)
     cam = KinectCamera(world.model, world.camera_id, cfg)
     depth = cam.render_clean(world.data).copy() if args.no_noise else cam.capture(world.data, args.seed)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     np.save(out / "depth.npy", depth.astype(np.float32))
     _save_depth_png(depth, out / "depth.png")
     valid = depth > 0

@@ -65,6 +65,8 @@ def output_path(path: str | os.PathLike[str], name: str = "out", directory: bool
     d = p if directory else p.parent
     if not directory and p.is_dir():
         raise InputError(f"{name} {p}: is a directory (expected a file name)")
+    if directory and p.exists() and not p.is_dir():
+        raise InputError(f"{name} {p}: is a file (expected a directory)")
     try:
         d.mkdir(parents=True, exist_ok=True)
     except OSError as e:

@@ -222,3 +222,17 @@ def test_a_mission_run_summary_is_three_short_lines() -> None:
     assert lines[0] == "demo: 302 m in 412 s (5.6x real time); waypoints 8 reached, 0 failed; contacts 0"
     assert "2.1 / 4.7 / 13.0 cm" in lines[1] and "lost alarms 1 (false 1)" in lines[2]
     assert run_summary("cmp", {"fspf_failures": 0.05}) == "cmp: fspf_failures=0.05"
+
+
+def test_snapshot_out_an_existing_file_is_one_line_before_rendering(tmp_path: Path, capsys) -> None:
+    f = tmp_path / "fake.npz"
+    f.write_text("")
+    assert main(["snapshot", "small_floor", "--pose", "3,5.1,0", "--out", str(f)]) == 2
+    assert f"--out {f}: is a file (expected a directory)" in err_line(capsys)
+
+
+def test_a_map_error_names_the_file_given(tmp_path: Path, capsys) -> None:
+    f = tmp_path / "one.vectormap.txt"
+    f.write_text("0,0,1,0\n")
+    assert main(["map", "check", str(f)]) == 2
+    assert err_line(capsys).startswith(f"depthnav: error: {f}: ")

@@ -28,6 +28,7 @@ called in this process before any trial is dispatched.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import importlib
 import json
@@ -44,7 +45,7 @@ from autonomy.common.files import atomic_write_text
 from sim.config import to_dict
 from sim.experiments.kinds import KINDS, Experiment, load_experiment
 from sim.experiments.report_file import config_json, write_json
-from sim.experiments.sweep_engines import run_local, run_ray
+from sim.experiments.sweep_engines import ray_session, run_local, run_ray
 
 ENGINES = ("local", "ray")
 SWEEP_VERSION = 1
@@ -232,6 +233,14 @@ def _run_pending(
     ``trials.jsonl`` and to ``done``; the failures (id, message), wall time and whether
     Ctrl-C stopped the run."""
     kind_module = KINDS.get(sw.exp.kind, "")
+    with ray_session(sw.address, sw.workers) if pending and sw.engine == "ray" else contextlib.nullcontext():
+        return _run_prepared(sw, pending, done, progress, kind_module)
+
+
+def _run_prepared(
+    sw: _Sweep, pending: list[dict], done: dict[str, dict], progress: bool, kind_module: str
+) -> tuple[list[tuple[str, str]], float, bool]:
+    """:func:`_run_pending` once the engine is up: the kind's preparation, then the trials."""
     if pending:
         _prepare(kind_module, sw.cfg, progress)
     bar = _progress_bar(sw, len(done)) if progress and pending else None

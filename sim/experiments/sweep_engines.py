@@ -8,6 +8,7 @@ lose the others.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import socket
@@ -124,6 +125,22 @@ def _init_ray(ray, address: str | None, workers: int) -> None:
             os.environ.pop("PYTHONPATH", None)
         else:
             os.environ["PYTHONPATH"] = old
+
+
+@contextlib.contextmanager
+def ray_session(address: str | None, workers: int):
+    """Ray connected (to the cluster at ``address``, or a local Ray of ``workers`` CPUs)
+    for the block, and shut down after it if this started it: a sweep connects before
+    any long preparation, so a cluster that is not there is a one-line error at once."""
+    ray = _import_ray()
+    started = not ray.is_initialized()
+    if started:
+        _init_ray(ray, address, workers)
+    try:
+        yield
+    finally:
+        if started:
+            ray.shutdown()
 
 
 def run_ray(source, kind, module, specs, workers, address, on_done, on_error) -> None:

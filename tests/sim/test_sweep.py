@@ -222,3 +222,17 @@ def test_mission_kind_is_sweepable(tmp_path: Path) -> None:
     for k in ("frames", "distance_m", "collisions", "waypoints_reached"):
         assert again[k] == one["metrics"][k], k
     assert any(p == "/world/robot" for p, _ in rrd_chunks(rrd))
+
+
+def test_no_cluster_at_the_address_fails_before_the_kinds_preparation(tmp_path: Path, monkeypatch) -> None:
+    """A sweep connects to Ray before any long preparation (a kind's recorded drive), so
+    a cluster that is not there is a one-line error at once."""
+    pytest.importorskip("ray")
+
+    def prepare(*_a, **_k):
+        raise AssertionError("prepared before connecting")
+
+    monkeypatch.setattr("sim.experiments.sweep._prepare", prepare)
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+    with pytest.raises(InputError, match="--address auto: cannot connect to a Ray cluster"):
+        run_sweep(scenario(tmp_path), [], tmp_path / "o", trials=2, engine="ray", workers=1, address="auto", progress=False)

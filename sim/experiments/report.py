@@ -108,6 +108,19 @@ def failures_title(failures: list[dict]) -> str:
     return f"{n.get(RESETS_LABEL, 0)} resets" + (f" (and {', '.join(others)})" if others else "")
 
 
+def waypoint_markers(run: Run, graph, truth: np.ndarray) -> dict[str, np.ndarray]:
+    """The trajectory figure's start and end (of the truth) and the waypoints by outcome:
+    reached, missed (a timeout or the wrong place) and not visited (the run ended first)."""
+    reached = [e["waypoint"] for e in run.mission.events if e.get("status") == "reached"]
+    missed = [e["waypoint"] for e in run.mission.events if e.get("status") not in (None, "reached")]
+    later = list(run.mission.waypoints[run.mission.current :])
+    out = {"start": truth[:1, :2], "end": truth[-1:, :2]}
+    for name, nodes in (("waypoints reached", reached), ("waypoints missed", missed), ("waypoints not visited", later)):
+        if nodes:
+            out[name] = path_points(graph, nodes)
+    return out
+
+
 def write_outputs(run: Run, out: Path, metrics: dict, rrd: str | Path | None) -> dict[str, str]:
     """Trajectories (TUM), the trajectory figure, the incidents; the files written."""
     scn, graph, vm = run.scn, run.building.navgraph, run.building.vectormap
@@ -125,7 +138,8 @@ def write_outputs(run: Run, out: Path, metrics: dict, rrd: str | Path | None) ->
             out / "trajectory.png",
             graph,
             trajectories={"ground truth": truth[:, :2], **({"CGR estimate": np.array(run.estimates)[:, :2]} if run.localizing else {})},
-            markers={"waypoints": path_points(graph, run.mission.waypoints), **failure_markers(run.failures)},
+            markers={**waypoint_markers(run, graph, truth), **failure_markers(run.failures)},
+            marker_styles={"start": "o", "end": "s", "waypoints reached": "^", "waypoints missed": "v", "waypoints not visited": "D"},
             title=f"{scn.name} (seed {run.seed}): {run.distance_m:.0f} m, {failures_title(run.failures)}, {run.collisions} contacts in {metrics['collision_incidents']} incidents",
         )
         files["trajectory_figure"] = "trajectory.png"

@@ -48,12 +48,15 @@ def render_map(
     markers: dict[str, np.ndarray] | None = None,
     title: str | None = None,
     dpi: int = 150,
+    marker_styles: dict[str, str] | None = None,
 ) -> Path:
     """Draw walls (black), the nav graph (light), trajectories (lines with a legend) and
-    markers (crosses) to ``out_png``; equal aspect, metres on the axes. Returns the path.
+    markers (crosses, or the matplotlib marker ``marker_styles`` gives a label) to
+    ``out_png``; equal aspect, metres on the axes. Returns the path.
 
     ``trajectories`` / ``markers`` map a legend label to an (N, 2) (or (N, 3) x, y, theta)
-    array of world positions.
+    array of world positions. The first trajectory is drawn wide and pale under the
+    others, so that one drawn exactly on it (an estimate on the truth) leaves it visible.
     """
     out = Path(out_png)
     x0, y0, x1, y1 = vm.extent() if vm.n_segments else (0.0, 0.0, 1.0, 1.0)
@@ -67,7 +70,7 @@ def render_map(
     if graph is not None:
         _draw_graph(ax, graph)
     _draw_trajectories(ax, trajectories or {})
-    _draw_markers(ax, markers or {})
+    _draw_markers(ax, markers or {}, marker_styles or {})
     pad = 0.02 * max(w, h)
     ax.set_xlim(x0 - pad, x1 + pad)
     ax.set_ylim(y0 - pad, y1 + pad)
@@ -106,12 +109,16 @@ def _draw_graph(ax, graph: NavGraph) -> None:
 def _draw_trajectories(ax, trajectories: dict[str, np.ndarray]) -> None:
     for k, (name, traj) in enumerate(trajectories.items()):
         p = _xy(name, traj, "trajectory")
-        ax.plot(p[:, 0], p[:, 1], color=_TRAJ_COLORS[k % len(_TRAJ_COLORS)], linewidth=1.2,
-                zorder=3, label=name)
+        wide = k == 0 and len(trajectories) > 1
+        ax.plot(p[:, 0], p[:, 1], color=_TRAJ_COLORS[k % len(_TRAJ_COLORS)], linewidth=3.0 if wide else 1.0,
+                alpha=0.45 if wide else 1.0, zorder=3, label=name)
 
 
-def _draw_markers(ax, markers: dict[str, np.ndarray]) -> None:
+def _draw_markers(ax, markers: dict[str, np.ndarray], styles: dict[str, str]) -> None:
     for k, (name, pts) in enumerate(markers.items()):
         p = _xy(name, pts, "marker set")
-        ax.plot(p[:, 0], p[:, 1], linestyle="none", marker="x", markersize=6, markeredgewidth=1.5,
-                color=_MARKER_COLORS[k % len(_MARKER_COLORS)], zorder=4, label=name)
+        m = styles.get(name, "x")
+        filled = m not in ("x", "+", "1", "2", "3", "4")
+        ax.plot(p[:, 0], p[:, 1], linestyle="none", marker=m, markersize=7 if filled else 6, markeredgewidth=1.5,
+                color=_MARKER_COLORS[k % len(_MARKER_COLORS)], markerfacecolor="none" if filled else None,
+                zorder=4, label=name)

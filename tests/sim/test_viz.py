@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections import Counter
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from sim.experiments.runner import run_scenario
@@ -84,3 +85,23 @@ def test_an_unwritable_recording_path_is_a_one_line_input_error(tmp_path: Path) 
     (tmp_path / "f").write_text("")
     with pytest.raises(InputError, match="cannot write the rerun recording"):
         Recorder(tmp_path / "f" / "run.rrd")  # a file where a directory should be
+
+
+def test_the_trajectory_figure_marks_start_end_and_each_waypoints_outcome() -> None:
+    from types import SimpleNamespace
+
+    from autonomy.maps.navgraph import NavEdge, NavGraph, NavNode
+    from sim.experiments.report import waypoint_markers
+
+    g = NavGraph(nodes=tuple(NavNode(i, float(i), 0.0) for i in range(5)), edges=tuple(NavEdge(i, i + 1) for i in range(4)))
+    mission = SimpleNamespace(
+        waypoints=[1, 2, 3, 4], current=2,
+        events=[{"waypoint": 1, "status": "reached"}, {"waypoint": 2, "status": "timeout"}],
+    )
+    truth = np.array([[0.0, 0.0, 0.0], [1.0, 0.5, 0.0], [2.0, 1.0, 0.0]])
+    m = waypoint_markers(SimpleNamespace(mission=mission), g, truth)
+    np.testing.assert_allclose(m["start"], [[0.0, 0.0]])
+    np.testing.assert_allclose(m["end"], [[2.0, 1.0]])
+    np.testing.assert_allclose(m["waypoints reached"], [[1.0, 0.0]])
+    np.testing.assert_allclose(m["waypoints missed"], [[2.0, 0.0]])
+    np.testing.assert_allclose(m["waypoints not visited"], [[3.0, 0.0], [4.0, 0.0]])

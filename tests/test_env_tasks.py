@@ -176,3 +176,14 @@ def test_the_new_keys_are_in_the_docstring_table() -> None:
         assert f"| ``{key}`` |" in doc
     for task in TASKS:
         assert f"``{task}``" in doc
+
+
+def test_a_scenario_s_time_limit_counts_decisions_on_a_decision_level_task() -> None:
+    from sim.scenario import SCENARIOS_DIR
+
+    frames = EnvConfig.from_scenario(SCENARIOS_DIR / "demo.toml")
+    decisions = EnvConfig.from_scenario(SCENARIOS_DIR / "demo.toml", frames_per_step=6)
+    assert decisions.max_steps == math.ceil(frames.max_steps / 6)
+    with pytest.raises(InputError, match="frames_per_step"):
+        EnvConfig.from_scenario(SCENARIOS_DIR / "demo.toml", frames_per_step=0)
+    np.testing.assert_allclose(frames.action_scale, [0.75, 0.75, 1.5])

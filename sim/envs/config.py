@@ -279,6 +279,11 @@ class EnvConfig:
         navigate = self.stack_policy or self.observe_ranges > 0 or self.observe_plan > 0
         return StackConfig(kinect.depth_camera(), fspf, self.localization, self.avoidance, self.navigator, navigate=navigate)
 
+    @property
+    def action_scale(self) -> np.ndarray:
+        """What an action of 1 means (vx, vy in m/s, omega in rad/s): the robot's limits."""
+        return np.array([self.robot.max_speed_mps, self.robot.max_speed_mps, self.robot.max_angular_rad_s])
+
     def replace(self, **changes: Any) -> EnvConfig:
         """A copy with some fields changed; an unknown name is an InputError."""
         known = {f.name for f in fields(self)}
@@ -314,7 +319,8 @@ class EnvConfig:
             n_people=scn.actors.random_people,
             start_nodes=(scn.mission.start_node,) if scn.mission.start_node >= 0 else (),
             goal_nodes=tuple(scn.mission.waypoints),
-            max_steps=max(1, math.ceil(scn.mission.max_duration_s * scn.kinect.rate_hz - 1e-9)),
+            # The mission's time limit in steps (a step is frames_per_step camera frames).
+            max_steps=max(1, math.ceil(scn.mission.max_duration_s * scn.kinect.rate_hz / _frames_per_step(changes) - 1e-9)),
             world=scn.world,
             robot=scn.robot,
             odometry=scn.odometry,
@@ -325,6 +331,13 @@ class EnvConfig:
             navigator=scn.navigator,
         )
         return base.replace(**changes)
+
+
+def _frames_per_step(changes: dict[str, Any]) -> int:
+    """``frames_per_step`` among a scenario's changes (1 when absent or invalid: the
+    check of the fields then names it)."""
+    v = changes.get("frames_per_step", 1)
+    return v if isinstance(v, int) and not isinstance(v, bool) and v >= 1 else 1
 
 
 def _type_ok(tp: Any, v: Any) -> tuple[bool, Any]:

@@ -181,7 +181,7 @@ class DepthNavEnv(gym.Env):
         self._observations = Observations.from_config(cfg, self.intrinsics, self.depth_max_m)
         self._reward = PointGoalReward(RewardConfig.from_config(cfg))
         self._sites = SiteSchedule(cfg, self._loop_config.kinect)
-        self._action_scale = np.array([cfg.robot.max_speed_mps, cfg.robot.max_speed_mps, cfg.robot.max_angular_rad_s])
+        self._action_scale = cfg.action_scale
         self.action_space = spaces.Box(-1.0, 1.0, (3,), np.float32)
         self.observation_space = self._observations.space()
         self._recording = EnvRecording(cfg, self.intrinsics, self.step_dt) if cfg.rrd else None

@@ -106,11 +106,7 @@ class Observations:
             history=cfg.history,
             n_plan=cfg.observe_plan,
             plan_spacing_m=cfg.plan_spacing_m,
-            velocity_scale=(
-                np.array([cfg.robot.max_speed_mps, cfg.robot.max_speed_mps, cfg.robot.max_angular_rad_s])
-                if cfg.observe_velocity
-                else None
-            ),
+            velocity_scale=cfg.action_scale if cfg.observe_velocity else None,
         )
 
     def space(self) -> spaces.Dict:

@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from autonomy.common.errors import InputError
 from autonomy.common.files import output_path
 from sim.experiments.report_file import json_safe, write_json
 from sim.rl.benchmark_episodes import FrozenEpisode, benchmark_specs, frozen_count
@@ -281,8 +282,12 @@ def comparison_table(reports: Sequence[EvalReport]) -> str:
 # -- the evaluation ------------------------------------------------------------------------
 def policy_task(policy: Policy, task: str | None = None) -> str:
     """The registered task a policy is evaluated on: ``task`` when given, else the one it
-    was trained on (its ``task`` attribute), else ``DepthNav-v0``."""
-    return task or getattr(policy, "task", None) or "DepthNav-v0"
+    was trained on (its ``task`` attribute), else ``DepthNav-v0``. A trained policy on
+    another task than its own is an InputError: it was built for that task's observations."""
+    own = getattr(policy, "task", None)
+    if task and own and task != own:
+        raise InputError(f"--task {task}: policy {policy.name} was trained on {own} and observes what that task gives; evaluate it there")
+    return task or own or "DepthNav-v0"
 
 
 def episode_env_kwargs(

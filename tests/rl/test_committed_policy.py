@@ -30,3 +30,11 @@ def test_the_committed_policy_reproduces_its_first_val_episodes() -> None:
         for key in ("success", "collisions", "steps"):
             assert getattr(mine, key) == theirs[key], key
         assert mine.path_length_m == pytest.approx(theirs["path_length_m"], abs=1e-6)
+
+
+def test_the_committed_policy_on_another_task_is_one_line(capsys) -> None:
+    from sim.cli import main
+
+    assert main(["eval", "--policy", f"ppo:{POLICY}", "--task", "DepthNav-v0", "--episodes", "1", "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "trained on DepthNavLocal-v0" in err[0]

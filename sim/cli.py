@@ -1,7 +1,9 @@
 """The ``depthnav`` command line.
 
 Exit codes: 0 success; 2 user error (bad file, key or argument) with one line on stderr
-and no traceback; 1 anything else.
+and no traceback; 3 a scenario's expectations did not all hold
+(:data:`sim.experiments.expect.EXPECTATION_FAILED`); 130 stopped by SIGINT, 143 by
+SIGTERM; 1 anything else.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import warnings
 from pathlib import Path
 
 from autonomy.common.errors import InputError
+from sim.experiments.expect import EXPECTATION_FAILED, summary_line
 
 #: Packages of the ``rl`` extra that policy-research commands import on demand.
 RL_PACKAGES = frozenset({"torch", "stable_baselines3", "triton"})
@@ -275,9 +278,85 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(f"depthnav: {scn.name}: {exc}", file=sys.stderr)
         return 1
     print(run_summary(scn.name, report["metrics"]))
+    block = report.get("expect", {})
+    if block.get("checks"):
+        print(summary_line(f"  {scn.name}", block).lstrip())
     print(f"wrote {out / 'report.json'}" + (" (every metric)" if _is_mission(report["metrics"]) else "")
           + (" (interrupted)" if report["interrupted"] else ""))
-    return 130 if report["interrupted"] else 0
+    if report["interrupted"]:
+        return 130
+    return 0 if block.get("passed", True) else EXPECTATION_FAILED
+
+
+def _seed_list(text: str | None) -> list[int] | None:
+    """``--seeds 1,2,3`` as integers >= 0 (None when not given)."""
+    if text is None:
+        return None
+    try:
+        seeds = [int(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise InputError(f"--seeds {text!r}: expected integers >= 0 separated by commas, e.g. 0,1,2") from None
+    if not seeds or any(v < 0 for v in seeds):
+        raise InputError(f"--seeds {text!r}: expected integers >= 0 separated by commas, e.g. 0,1,2")
+    return seeds
+
+
+def cmd_config(args: argparse.Namespace) -> int:
+    import dataclasses
+
+    from sim.config import to_dict, to_toml
+    from sim.experiments.kinds import load_experiment, shipped_scenario
+
+    exp, cfg = load_experiment(args.scenario, args.set or [])
+    data = {f.name: to_dict(getattr(cfg, f.name)) for f in dataclasses.fields(cfg) if f.name not in ("base_dir", "expect")}
+    if isinstance(data.get("avoidance"), dict):
+        data["avoidance"].pop("robot_radius_m", None)  # not a key of its own: robot.radius_m
+    if exp.kind != "mission":
+        data = {"kind": exp.kind, **data}
+    expect = getattr(cfg, "expect", ())
+    if expect:
+        data["expect"] = {e.metric: f"{e.op} {e.value:g}" for e in expect}
+    path = shipped_scenario(Path(args.scenario))
+    print(f"# {path}: the configuration a run of it uses, every default filled in.\n"
+          f"# Relative paths are relative to {cfg.base_dir}.")
+    print(to_toml(data), end="")
+    return 0
+
+
+def cmd_test(args: argparse.Namespace) -> int:
+    import os
+    import time
+
+    from autonomy.common.files import output_path
+    from sim.experiments.scenario_tests import (
+        ERROR,
+        FAILED,
+        PASSED,
+        junit_xml,
+        outcome_line,
+        plan_cases,
+        run_cases,
+    )
+
+    seeds = _seed_list(args.seeds)
+    if args.workers is not None and args.workers < 1:
+        raise InputError(f"--workers {args.workers}: expected an integer >= 1")
+    junit = output_path(args.junit, "--junit") if args.junit else None
+    out = output_path(args.out, "--out", directory=True)
+    cases = plan_cases(args.scenario, seeds, args.set or [], out)
+    workers = min(args.workers or os.cpu_count() or 1, len(cases))
+    print(f"depthnav test: {len(cases)} case{'s' if len(cases) != 1 else ''} on {workers} worker{'s' if workers != 1 else ''}", flush=True)
+    t0 = time.perf_counter()
+    results, interrupted = run_cases(cases, workers, lambda r: print(outcome_line(r), flush=True))
+    wall = time.perf_counter() - t0
+    n = {k: sum(r["outcome"] == k for r in results) for k in (PASSED, FAILED, ERROR)}
+    print(f"{n[PASSED]} passed, {n[FAILED]} failed, {n[ERROR]} errors in {wall:.0f} s" + (" (interrupted)" if interrupted else ""))
+    if junit is not None:
+        junit.write_text(junit_xml(results, wall_s=wall), encoding="utf-8")
+        print(f"wrote {junit}")
+    if interrupted:
+        return 130
+    return 1 if n[ERROR] else EXPECTATION_FAILED if n[FAILED] else 0
 
 
 _MISSION_KEYS = ("distance_m", "duration_s", "collisions", "waypoints_reached", "loc_error_p95_m", "resets", "lost_alarms")
@@ -353,10 +432,16 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if report["interrupted"]:
         return 130
     m = report["metrics"]
-    print(f"{report.get('scenario', args.scenario)}: " + ", ".join(f"{k}={v}" for k, v in m.items()))
+    name = report.get("scenario", args.scenario)
+    print(f"{name}: " + ", ".join(f"{k}={v}" for k, v in m.items()))
+    block = report.get("expect")
+    if block is not None:
+        bad = [t for t in block["trials"] if not t["passed"]]
+        print(f"{name}: expectations held on {len(block['trials']) - len(bad)} of {len(block['trials'])} trials"
+              + "".join(f"\n  {t['id']}: " + "; ".join(t["failed"]) for t in bad))
     out = Path(report["sweep"]["out_dir"])
     print(f"wrote {out / 'report.json'} ({report['sweep']['trials']} trials in {out / report['sweep']['trials_file']})")
-    return 0
+    return 0 if block is None or block["passed"] else EXPECTATION_FAILED
 
 
 def cmd_scenarios(args: argparse.Namespace) -> int:
@@ -565,6 +650,11 @@ def build_parser() -> argparse.ArgumentParser:
     _add_map_commands(sub)
     _add_snapshot_command(sub)
     _add_run_command(sub)
+    _add_test_command(sub)
+    c = sub.add_parser("config", help="print a scenario's resolved configuration (every default filled in) as TOML")
+    c.add_argument("scenario", help="a scenario TOML file (or the name of one of the project's)")
+    c.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a scenario key first (repeatable)")
+    c.set_defaults(func=cmd_config)
     _add_sweep_command(sub)
     c = sub.add_parser(
         "reloc-sample",
@@ -657,6 +747,17 @@ def _add_run_command(sub) -> None:
     c.add_argument("--rrd", help="write a rerun recording to this file")
     c.add_argument("--spawn", action="store_true", help="open the rerun viewer (needs a display)")
     c.set_defaults(func=cmd_run)
+
+
+def _add_test_command(sub) -> None:
+    c = sub.add_parser("test", help="run scenarios as tests of their [expect] tables, in parallel; JUnit XML for CI")
+    c.add_argument("scenario", nargs="+", help="scenario TOML files (or names of the project's scenarios)")
+    c.add_argument("--junit", metavar="FILE", help="write the outcome as JUnit XML (GitHub Actions, GitLab, Jenkins)")
+    c.add_argument("--seeds", metavar="N,N,...", help="run every scenario with each of these seeds (default: each scenario's own)")
+    c.add_argument("--workers", type=int, help="scenarios run at once (default: one per core)")
+    c.add_argument("--out", default="runs/test", help="where each case writes its report (default runs/test/<scenario>-seed<N>)")
+    c.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a key of every scenario (repeatable)")
+    c.set_defaults(func=cmd_test)
 
 
 def _add_sweep_command(sub) -> None:

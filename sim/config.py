@@ -177,3 +177,51 @@ def apply_overrides(data: dict, overrides: list[str]) -> dict:
             node = nxt
         node[path[-1]] = value
     return out
+
+
+def _toml_value(v: Any, key: str) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        if math.isnan(v):
+            return "nan"
+        if math.isinf(v):
+            return "inf" if v > 0 else "-inf"
+        return repr(v)
+    if isinstance(v, str):
+        import json
+
+        return json.dumps(v, ensure_ascii=False)  # a JSON string is a TOML basic string
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x, key) for x in v) + "]"
+    raise TypeError(f"{key}: no TOML form for {type(v).__name__}")  # a bug, not user input
+
+
+def _is_table_array(v: Any) -> bool:
+    return isinstance(v, (list, tuple)) and bool(v) and all(isinstance(x, dict) for x in v)
+
+
+def to_toml(data: dict, prefix: str = "") -> str:
+    """A nested dict of TOML values (``to_dict``'s output) as TOML text: plain keys first,
+    then sub-tables and arrays of tables. Values a scenario file cannot hold are left
+    out, and loading the text fills their defaults back in: None (TOML has no null) and
+    non-finite numbers (the loader takes finite ones; a NaN default means "not set")."""
+    lines: list[str] = []
+    later: list[str] = []
+    for k, v in data.items():
+        path = f"{prefix}.{k}" if prefix else k
+        if v is None or isinstance(v, float) and not math.isfinite(v):
+            continue
+        if isinstance(v, dict):
+            body = to_toml(v, path)
+            later.append(f"\n[{path}]\n{body}" if not body.startswith("\n[") else f"\n[{path}]{body}")
+        elif _is_table_array(v):
+            for item in v:
+                body = to_toml(item, path)
+                later.append(f"\n[[{path}]]\n{body}" if not body.startswith("\n[") else f"\n[[{path}]]{body}")
+        else:
+            lines.append(f"{k} = {_toml_value(v, path)}")
+    head = "\n".join(lines) + ("\n" if lines else "")
+    return head + "".join(later)

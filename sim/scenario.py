@@ -8,6 +8,7 @@ by ``name`` is one of the buildings shipped in ``sim/assets``; a ``vectormap`` w
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tomllib
 from dataclasses import dataclass, field
@@ -21,6 +22,7 @@ from autonomy.perception.nearfield import NearField
 from autonomy.stack import LocalizationConfig as StackLocalizationConfig
 from autonomy.stack import RecoveryConfig, StackConfig
 from sim.config import apply_overrides, from_dict, read_toml
+from sim.experiments.expect import Expectation, parse_expectations
 from sim.simulator.actors import Furniture, Person
 from sim.simulator.blueprints import ASSETS_DIR, BuildingConfig
 from sim.simulator.fault_config import FaultsConfig
@@ -232,6 +234,9 @@ class Scenario:
     recovery: RecoveryConfig = field(default_factory=RecoveryConfig)
     """The robot stack's lost detection, relocalization and mount check."""
     report: ReportConfig = field(default_factory=ReportConfig)
+    expect: tuple[Expectation, ...] = ()
+    """What the run must achieve, checked on its report (the ``[expect]`` table of
+    metric = condition: :mod:`sim.experiments.expect`); none: a run passes when it ends."""
     base_dir: str = ""
     """Directory that relative paths resolve against (set by the loader)."""
 
@@ -273,7 +278,7 @@ def load_scenario(path: str | Path, overrides: list[str] | None = None) -> Scena
     if isinstance(data.get("avoidance"), dict) and "robot_radius_m" in data["avoidance"]:
         raise InputError(f"{src}: key 'avoidance.robot_radius_m': set 'robot.radius_m' (the stack avoids with the simulated body's radius)")
     data["base_dir"] = str(path.resolve().parent)
-    scn = from_dict(Scenario, data, source=src)
+    scn = with_expectations(from_dict, Scenario, data, src)
     # Map files must exist now, not halfway through a run.
     for key in ("vectormap", "navgraph"):
         value = getattr(scn.map, key)
@@ -290,6 +295,16 @@ def load_scenario(path: str | Path, overrides: list[str] | None = None) -> Scena
     except InputError as err:
         raise InputError(f"{src}: {err}") from None
     return scn
+
+
+def with_expectations(build, cls: type, data: dict, source: str):
+    """``build(cls, data, source=...)`` with the ``[expect]`` table parsed apart: its keys
+    are report metrics, not fields (:func:`sim.experiments.expect.parse_expectations`)."""
+    table = data.pop("expect", None)
+    cfg = build(cls, data, source=source)
+    if table is None:
+        return cfg
+    return dataclasses.replace(cfg, expect=parse_expectations(table, source))
 
 
 def list_scenarios(directory: Path = SCENARIOS_DIR) -> list[tuple[Path, str]]:

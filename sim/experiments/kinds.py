@@ -13,6 +13,7 @@ what that kind needs.
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import traceback
 from collections.abc import Callable
@@ -132,4 +133,8 @@ def load_experiment(path: str | Path, overrides: list[str] | None = None) -> tup
         raise InputError(f"{src}: unknown key 'base_dir' (it is set from the file's location)")
     data = apply_overrides(data, overrides or [])
     data["base_dir"] = str(path.resolve().parent)
+    if "expect" in data and "expect" in {f.name for f in dataclasses.fields(exp.config_type)}:
+        from sim.scenario import with_expectations
+
+        return exp, with_expectations(from_dict, exp.config_type, data, src)
     return exp, from_dict(exp.config_type, data, source=src)

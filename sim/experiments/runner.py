@@ -18,6 +18,7 @@ import time
 from pathlib import Path
 
 from autonomy.maps.planner import path_points
+from sim.experiments.expect import check
 from sim.experiments.kinds import stopped
 from sim.experiments.loop import drive
 from sim.experiments.report import crash_report, finish_report, write_checkpoint, write_report
@@ -39,6 +40,10 @@ def run_scenario(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     seed = scn.seed if seed is None else int(seed)
+    if spawn:
+        from sim.viz.viewer import viewer_executable
+
+        viewer_executable()  # no display or no viewer: one line now, not a hang later
     run = build_run(scn, seed)
     recorder = None
     if rrd or spawn:
@@ -57,6 +62,7 @@ def run_scenario(
             report = crash_report(run, out, recorder, rrd, wall)
     finally:
         run.camera.close()
+    report["expect"] = check(scn.expect, report["metrics"])
     write_report(out / "report.json", report)
     if run.crash is not None:
         c = run.crash

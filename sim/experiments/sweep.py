@@ -43,6 +43,7 @@ from typing import Any
 from autonomy.common.errors import InputError
 from autonomy.common.files import atomic_write_text
 from sim.config import to_dict
+from sim.experiments.expect import check, failures
 from sim.experiments.kinds import KINDS, Experiment, load_experiment
 from sim.experiments.report_file import config_json, write_json
 from sim.experiments.sweep_engines import ray_session, run_local, run_ray
@@ -316,7 +317,20 @@ def _final_report(sw: _Sweep, done: dict[str, dict], run_now: int, resumed: int,
     }
     report.setdefault("metrics", {})["sweep_wall_s"] = round(wall, 2)
     report.setdefault("interrupted", False)
+    expectations = getattr(sw.cfg, "expect", ())
+    if expectations:
+        report["expect"] = trial_expectations(expectations, [done[i] for i in sw.ids])
     return _write_report(sw.out, report)
+
+
+def trial_expectations(expectations: tuple, records: list[dict]) -> dict:
+    """The sweep report's ``expect`` block: each trial's metrics checked against the
+    scenario's expectations (:mod:`sim.experiments.expect`), and whether every trial met them."""
+    trials = []
+    for rec in records:
+        block = check(expectations, rec["result"].get("metrics", {}))
+        trials.append({"id": rec["id"], "passed": block["passed"], "failed": failures(block)})
+    return {"passed": all(t["passed"] for t in trials), "expectations": [str(e) for e in expectations], "trials": trials}
 
 
 def run_experiment(

@@ -9,6 +9,7 @@ lose the others.
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import signal
 import socket
@@ -76,16 +77,24 @@ def _deliver(result: Callable[[], dict], spec: dict, on_done, on_error) -> None:
 
 def run_local(source, kind, module, specs, workers, on_done, on_error) -> None:
     """Run ``specs`` here (``workers`` 1) or on a process pool of ``workers``."""
+    pool_map(functools.partial(execute_trial, source, kind, module), specs, workers, on_done, on_error)
+
+
+def pool_map(fn: Callable[[dict], dict], specs: list[dict], workers: int, on_done, on_error) -> None:
+    """``fn(spec)`` for every spec, here (``workers`` 1) or on a process pool of
+    ``workers`` (spawn start method: each worker imports what ``fn`` needs afresh, no
+    GL or thread state is forked); each result to ``on_done`` as it finishes, each
+    failure to ``on_error``. Ctrl-C stops the workers and is raised again."""
     if workers <= 1:
         for s in specs:
-            _deliver(lambda s=s: execute_trial(source, kind, module, s), s, on_done, on_error)
+            _deliver(lambda s=s: fn(s), s, on_done, on_error)
         return
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
     pool = ProcessPoolExecutor(max_workers=min(workers, len(specs)), mp_context=mp.get_context("spawn"), initializer=_worker_init)
     try:
-        futs = {pool.submit(execute_trial, source, kind, module, s): s for s in specs}
+        futs = {pool.submit(fn, s): s for s in specs}
         for fut in as_completed(futs):
             _deliver(fut.result, futs[fut], on_done, on_error)
     except KeyboardInterrupt:

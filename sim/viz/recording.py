@@ -43,6 +43,7 @@ from autonomy.common.errors import InputError
 from autonomy.maps.navgraph import NavGraph
 from autonomy.maps.vectormap import VectorMap
 from autonomy.perception.camera import CameraIntrinsics, CameraMount
+from sim.viz.viewer import viewer_executable
 
 TRUTH_COLOR = (40, 170, 60)
 ESTIMATE_COLOR = (230, 90, 30)
@@ -142,7 +143,7 @@ class Recorder:
             except (OSError, RuntimeError) as exc:
                 raise InputError(f"{self.path}: cannot write the rerun recording: {getattr(exc, 'strerror', None) or exc}") from None
         elif spawn:
-            self.rec.spawn()
+            rr.spawn(executable_path=viewer_executable(), recording=self.rec)
         else:
             self._memory = self.rec.memory_recording()
         self.rec.send_blueprint(default_blueprint())

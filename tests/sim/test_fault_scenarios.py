@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from sim.experiments.loop import drive
+from sim.experiments.metric_names import METRICS
 from sim.experiments.metrics import fault_report, run_metrics
 from sim.experiments.runner import run_scenario
 from sim.experiments.site import build_run
@@ -88,6 +89,7 @@ KIDNAP_SEED = 2
 def test_kidnap_is_noticed_and_relocalized_without_truth(tmp_path):
     rep = run(tmp_path, KIDNAP, 30.0, KIDNAP_SEED)
     f, m = the_fault(rep, "kidnap"), rep["metrics"]
+    assert set(m) <= set(METRICS), set(m) - set(METRICS)  # the fault metrics are documented too
     assert f["noticed_t"] is not None and f["noticed_t"] >= f["t_start"]
     # The view jumped while the wheels stood still: noticed on the next frame.
     lost = [e for e in rep["recovery"]["events"] if e["event"] == "lost"]

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from sim.cli import main
+from sim.experiments.metric_names import METRICS
 from sim.experiments.runner import run_scenario
 from sim.scenario import SCENARIOS_DIR, load_scenario
 from tests.helpers import interrupt
@@ -33,6 +34,9 @@ def test_short_run_writes_the_report_contract(tmp_path: Path) -> None:
     assert on_disk == json.loads(json.dumps(rep))
     assert on_disk["scenario"] == "demo" and on_disk["seed"] == 3
     assert REQUIRED_METRICS <= set(on_disk["metrics"])
+    # Every metric is in the documented list an [expect] table may name.
+    assert set(on_disk["metrics"]) <= set(METRICS), set(on_disk["metrics"]) - set(METRICS)
+    assert on_disk["expect"] == {"passed": True, "checks": []}
     assert isinstance(on_disk["paper"], dict)
     assert {"physics", "render", "noise"} <= set(on_disk["timing_ms"])
     m = on_disk["metrics"]

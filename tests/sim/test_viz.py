@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from sim.experiments.metric_names import METRICS
 from sim.experiments.runner import run_scenario
 from sim.scenario import SCENARIOS_DIR, load_scenario
 from tests.helpers import rerun_cli, rrd_chunks
@@ -22,6 +23,7 @@ def recording(tmp_path_factory) -> Path:
     )
     rep = run_scenario(scn, out, seed=2, rrd=out / "run.rrd", progress=False)
     assert rep["files"]["recording"] == "run.rrd"
+    assert set(rep["metrics"]) <= set(METRICS), set(rep["metrics"]) - set(METRICS)  # the recording's too
     return out / "run.rrd"
 
 

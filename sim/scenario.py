@@ -209,6 +209,18 @@ class ReportConfig:
 
 
 @dataclass(frozen=True)
+class DriverConfig:
+    """What drives the robot: the project's robot stack, or your own
+    (:mod:`autonomy.stack.driver`)."""
+
+    factory: str = ""
+    """Empty: :class:`autonomy.stack.RobotStack`. Else the function that makes your
+    :class:`autonomy.stack.driver.Driver` from a
+    :class:`autonomy.stack.driver.DriverSetup`: ``package.module:function`` (importable)
+    or ``file.py:function`` (relative to the scenario file)."""
+
+
+@dataclass(frozen=True)
 class Scenario:
     """A runnable scenario (see scenarios/*.toml)."""
 
@@ -234,6 +246,8 @@ class Scenario:
     recovery: RecoveryConfig = field(default_factory=RecoveryConfig)
     """The robot stack's lost detection, relocalization and mount check."""
     report: ReportConfig = field(default_factory=ReportConfig)
+    driver: DriverConfig = field(default_factory=DriverConfig)
+    """What drives the robot (``[driver] factory = "..."``: your own stack)."""
     expect: tuple[Expectation, ...] = ()
     """What the run must achieve, checked on its report (the ``[expect]`` table of
     metric = condition: :mod:`sim.experiments.expect`); none: a run passes when it ends."""
@@ -245,7 +259,12 @@ class Scenario:
             raise InputError(f"seed: expected an integer >= 0, got {self.seed!r}")
         # The stack avoids with the body the simulator drives: one radius, robot.radius_m.
         object.__setattr__(self, "avoidance", avoidance_for_body(self.avoidance, self.robot, "scenario"))
-        if not self.localization.start_known and not (self.localization.enabled and self.recovery.enabled):
+        if self.driver.factory and self.mission.follower != "navigator":
+            raise InputError(
+                f"mission.follower = {self.mission.follower!r} drives the project's navigator on the true pose; "
+                "a [driver] of your own gets no truth (use follower = 'navigator')"
+            )
+        if not self.localization.start_known and not self.driver.factory and not (self.localization.enabled and self.recovery.enabled):
             raise InputError(
                 "localization.start_known = false: a robot that does not know where it starts must find itself on the map; "
                 "it needs localization.enabled and recovery.enabled"
@@ -284,6 +303,10 @@ def load_scenario(path: str | Path, overrides: list[str] | None = None) -> Scena
         value = getattr(scn.map, key)
         if value and not scn.resolve(value).is_file():
             raise InputError(f"{src}: key 'map.{key}': file not found: {scn.resolve(value)}")
+    if scn.driver.factory:
+        from sim.experiments.driver_stack import load_factory
+
+        load_factory(scn.driver.factory, scn.base_dir, src)  # found now, not when the run starts
     if scn.map.name and not (ASSETS_DIR / f"{scn.map.name}.vectormap.txt").is_file():
         names = ", ".join(sorted(p.name.removesuffix(".vectormap.txt") for p in ASSETS_DIR.glob("*.vectormap.txt")))
         raise InputError(f"{src}: key 'map.name': no building {scn.map.name!r} in sim/assets (have: {names})")

@@ -129,6 +129,8 @@ def note_blind(run: Run, step_m: float) -> None:
     shows the camera no wall for metres on end, the belief dead-reckons and its error
     grows with the odometry's (a degree of heading costs 17 cm over 10 m)."""
     out = run.out
+    if run.driven_by_own_stack:
+        return  # blind driving is CGR's figure; a driver's belief is its own
     if not out.localizing or out.relocalizing:
         # The search, not CGR, holds the belief; what it accepts is a fix.
         run.blind_stretch_m = 0.0

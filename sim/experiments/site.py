@@ -13,8 +13,10 @@ import numpy as np
 from autonomy.maps.vectormap import load_navgraph, load_vectormap
 from autonomy.perception.camera import DepthCamera
 from autonomy.stack import RobotStack, StackOutput
+from autonomy.stack.driver import DriverSetup
 from sim.experiments.blackbox import FlightRecorder
 from sim.experiments.columns import Column
+from sim.experiments.driver_stack import DriverStack, load_factory
 from sim.experiments.waypoints import Mission, plan_mission
 from sim.scenario import Scenario
 from sim.simulator import blueprints
@@ -62,7 +64,8 @@ class Run:
     mission: Mission
     world: World
     sim: SimStep
-    stack: RobotStack
+    stack: RobotStack | DriverStack
+    """The project's robot stack, or the scenario's own driver in its place."""
     out: StackOutput
     """The stack's last output (its command drives the next physics step)."""
     use_estimate: bool
@@ -126,6 +129,11 @@ class Run:
         return open_failure or self.out.relocalizing
 
     @property
+    def driven_by_own_stack(self) -> bool:
+        """A scenario's own driver drives (no CGR inside to account for)."""
+        return isinstance(self.stack, DriverStack)
+
+    @property
     def localizing(self) -> bool:
         return self.out.localizing
 
@@ -137,6 +145,17 @@ class Run:
     def robot_camera(self) -> DepthCamera:
         """The camera as the robot stack knows it (field of view, mount, range)."""
         return self.scn.kinect.depth_camera()
+
+
+def driver_stack(scn: Scenario, vectormap, graph, seed: int) -> DriverStack:
+    """The scenario's own driver (``[driver] factory``) made for this run, as the loop's stack."""
+    factory = load_factory(scn.driver.factory, scn.base_dir, scn.name)
+    setup = DriverSetup(
+        vectormap=vectormap, navgraph=graph, camera=scn.kinect.depth_camera(), robot_radius_m=scn.robot.radius_m,
+        max_speed_mps=scn.robot.max_speed_mps, max_angular_rad_s=scn.robot.max_angular_rad_s,
+        frame_rate_hz=scn.kinect.rate_hz, seed=int(seed),
+    )
+    return DriverStack(factory(setup), setup, scn.navigator, scn.driver.factory)
 
 
 def build_run(scn: Scenario, seed: int) -> Run:
@@ -159,9 +178,15 @@ def build_run(scn: Scenario, seed: int) -> Run:
     camera = KinectCamera(world.model, world.camera_id, scn.kinect)
     sim = SimStep(world, camera, Odometry(scn.odometry, seeds.odometry, mission.start_pose), seeds.noise_seed)
     scfg = scn.stack_config()
-    stack = RobotStack(building.vectormap, graph, scfg, rng=seeds.localization, fspf_seed=seeds.fspf_seed, map_path=building.map_path)
+    stack: RobotStack | DriverStack
+    if scn.driver.factory:
+        stack = driver_stack(scn, building.vectormap, graph, seed)
+        start_known = scn.localization.start_known
+    else:
+        stack = RobotStack(building.vectormap, graph, scfg, rng=seeds.localization, fspf_seed=seeds.fspf_seed, map_path=building.map_path)
+        start_known = scn.localization.start_known or not scfg.recovers
     stack.prepare_recovery()
-    out = stack.reset(mission.start_pose if scn.localization.start_known or not scfg.recovers else None)
+    out = stack.reset(mission.start_pose if start_known else None)
     use_estimate = scn.mission.follower == "navigator" and out.localizing
     run = Run(scn, seed, seeds, building, furniture, people, mission, world, sim, stack, out, use_estimate)
     run.last_in_view = np.full(len(world.people.people), -np.inf)

@@ -478,7 +478,7 @@ def test_blind_driving_counts_the_metres_cgr_dead_reckoned_and_the_longest_stret
 
     seen, unseen = UpdateStats(observation=True), UpdateStats(observation=False)
     out = SimpleNamespace(localizing=True, relocalizing=False, cgr_stats=None)
-    run = SimpleNamespace(out=out, tracked_m=0.0, blind_m=0.0, blind_stretch_m=0.0, blind_stretch_max_m=0.0)
+    run = SimpleNamespace(out=out, driven_by_own_stack=False, tracked_m=0.0, blind_m=0.0, blind_stretch_m=0.0, blind_stretch_max_m=0.0)
     # (what CGR did, relocalizing, metres): 1 m seen, 3 m blind (a refused frame among
     # them), 1 m seen, 2 m blind, 4 m relocalizing (the search's, not CGR's), 2.5 m blind.
     frames = [(seen, False, 1.0), (unseen, False, 1.0), (None, False, 1.0), (unseen, False, 1.0), (seen, False, 1.0),

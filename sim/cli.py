@@ -226,31 +226,47 @@ def cmd_snapshot(args: argparse.Namespace) -> int:
     cam = KinectCamera(world.model, world.camera_id, cfg)
     depth = cam.render_clean(world.data).copy() if args.no_noise else cam.capture(world.data, args.seed)
     np.save(out / "depth.npy", depth.astype(np.float32))
-    _save_depth_png(depth, out / "depth.png")
+    sensor = (float(cfg.noise.min_range_m), float(cfg.noise.max_range_m))
+    _save_depth_png(depth, out / "depth.png", sensor, args.no_noise)
     valid = depth > 0
     print(
         f"wrote {out / 'depth.npy'} and {out / 'depth.png'}: {depth.shape[1]}x{depth.shape[0]}, "
         f"{valid.mean() * 100:.1f}% valid, depth {depth[valid].min() if valid.any() else 0:.3f}-"
         f"{depth[valid].max() if valid.any() else 0:.3f} m ({cam.backend_name})"
+        + (f"; a clean render keeps depths beyond the sensor's {sensor[0]:g}-{sensor[1]:g} m" if args.no_noise else "")
     )
     cam.close()
     return 0
 
 
-def _save_depth_png(depth, path: Path) -> None:
+def _save_depth_png(depth, path: Path, sensor_range: tuple[float, float], clean: bool) -> None:
+    """The depth image with a colour bar in metres; pixels with no depth (0) in black,
+    said so under it, with what the range means for a clean or a noisy image."""
     import matplotlib
 
     matplotlib.use("Agg")
     import numpy as np
-    from matplotlib import colormaps
-    from matplotlib.image import imsave
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
     d = np.asarray(depth, dtype=np.float64)
     valid = d > 0
-    norm = np.clip((d - 0.5) / (4.5 - 0.5), 0, 1)
-    rgba = colormaps["turbo"](norm)
-    rgba[~valid] = (0, 0, 0, 1)
-    imsave(path, rgba)
+    lo, hi = sensor_range
+    top = float(d[valid].max()) if clean and valid.any() else hi
+    h, w = d.shape
+    fig = Figure(figsize=(7.0, 7.0 * h / w + 1.0), dpi=120)
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot(1, 1, 1)
+    ax.set_facecolor("black")
+    img = ax.imshow(np.ma.masked_where(~valid, d), cmap="turbo", vmin=0.0, vmax=max(top, lo + 0.1), interpolation="nearest")
+    ax.set_xticks([])
+    ax.set_yticks([])
+    fig.colorbar(img, ax=ax, fraction=0.035, pad=0.02).set_label("depth [m]")
+    what = (f"clean render: every depth the far plane keeps, up to {top:.1f} m (the sensor returns {lo:g}-{hi:g} m)"
+            if clean else f"Kinect model: returns {lo:g}-{hi:g} m")
+    ax.set_title(f"{w}x{h}, {valid.mean() * 100:.1f}% valid; black: no depth\n{what}", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path)
 
 
 def cmd_warmup(args: argparse.Namespace) -> int:

@@ -86,6 +86,21 @@ def crash_report(run: Run, out: Path, recorder: RunLogger | None, rrd: str | Pat
     return report
 
 
+#: The trajectory figure's label for where the robot touched something.
+CONTACTS_LABEL = "contacts"
+
+
+def contact_markers(collision_log: list[dict]) -> dict[str, np.ndarray]:
+    """Where the robot was at each contact's onset (none: no marker set)."""
+    xy = [[c["x"], c["y"]] for c in collision_log]
+    return {CONTACTS_LABEL: np.array(xy)} if xy else {}
+
+
+def estimate_label(run: Run) -> str:
+    """Whose belief the figure draws: CGR's, or a scenario's own driver's."""
+    return "driver's estimate" if run.driven_by_own_stack else "CGR estimate"
+
+
 def failure_markers(failures: list[dict]) -> dict[str, np.ndarray]:
     """The trajectory figure's markers for where localization failures started: the
     paper's resets (nothing injected behind them) apart from the failures a fault caused
@@ -137,9 +152,12 @@ def write_outputs(run: Run, out: Path, metrics: dict, rrd: str | Path | None) ->
             vm,
             out / "trajectory.png",
             graph,
-            trajectories={"ground truth": truth[:, :2], **({"CGR estimate": np.array(run.estimates)[:, :2]} if run.localizing else {})},
-            markers={**waypoint_markers(run, graph, truth), **failure_markers(run.failures)},
-            marker_styles={"start": "o", "end": "s", "waypoints reached": "^", "waypoints missed": "v", "waypoints not visited": "D"},
+            trajectories={"ground truth": truth[:, :2], **({estimate_label(run): np.array(run.estimates)[:, :2]} if run.localizing else {})},
+            markers={**waypoint_markers(run, graph, truth), **failure_markers(run.failures), **contact_markers(run.world.collision_log)},
+            marker_styles={"start": "o", "end": "s", "waypoints reached": "^", "waypoints missed": "v", "waypoints not visited": "D",
+                           CONTACTS_LABEL: "*"},
+            boxes=np.array([(f.x, f.y, f.yaw, f.dims[0], f.dims[1]) for f in run.furniture]).reshape(-1, 5),
+            routes=[np.array(p.route) for p in run.people],
             title=f"{scn.name} (seed {run.seed}): {run.distance_m:.0f} m, {failures_title(run.failures)}, {run.collisions} contacts in {metrics['collision_incidents']} incidents",
         )
         files["trajectory_figure"] = "trajectory.png"

@@ -15,7 +15,7 @@ import numpy as np
 matplotlib.use("Agg")
 
 from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: E402
-from matplotlib.collections import LineCollection  # noqa: E402
+from matplotlib.collections import LineCollection, PolyCollection  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
 from autonomy.common.errors import InputError  # noqa: E402
@@ -49,6 +49,8 @@ def render_map(
     title: str | None = None,
     dpi: int = 150,
     marker_styles: dict[str, str] | None = None,
+    boxes: np.ndarray | None = None,
+    routes: list[np.ndarray] | None = None,
 ) -> Path:
     """Draw walls (black), the nav graph (light), trajectories (lines with a legend) and
     markers (crosses, or the matplotlib marker ``marker_styles`` gives a label) to
@@ -57,6 +59,8 @@ def render_map(
     ``trajectories`` / ``markers`` map a legend label to an (N, 2) (or (N, 3) x, y, theta)
     array of world positions. The first trajectory is drawn wide and pale under the
     others, so that one drawn exactly on it (an estimate on the truth) leaves it visible.
+    ``boxes`` (N, 5) x, y, yaw, length, width: footprints the map does not hold (the
+    furniture), filled; ``routes``: polylines (K, 2) walked by people, thin and dashed.
     """
     out = Path(out_png)
     x0, y0, x1, y1 = vm.extent() if vm.n_segments else (0.0, 0.0, 1.0, 1.0)
@@ -69,6 +73,8 @@ def render_map(
     _draw_walls(ax, vm)
     if graph is not None:
         _draw_graph(ax, graph)
+    _draw_boxes(ax, np.zeros((0, 5)) if boxes is None else np.asarray(boxes, dtype=np.float64).reshape(-1, 5))
+    _draw_routes(ax, routes or [])
     _draw_trajectories(ax, trajectories or {})
     _draw_markers(ax, markers or {}, marker_styles or {})
     pad = 0.02 * max(w, h)
@@ -78,7 +84,7 @@ def render_map(
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_title(title if title is not None else (vm.name or "vector map"))
-    if graph is not None or trajectories or markers:
+    if graph is not None or trajectories or markers or routes or (boxes is not None and len(boxes)):
         ax.legend(loc="upper right", fontsize=7, framealpha=0.8)
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -104,6 +110,29 @@ def _draw_graph(ax, graph: NavGraph) -> None:
     xy = graph.node_xy()
     ax.plot(xy[:, 0], xy[:, 1], linestyle="none", marker="o", markersize=1.5,
             color="#6baed6", zorder=1, label="nav graph")
+
+
+def _draw_boxes(ax, boxes: np.ndarray) -> None:
+    """Footprints (x, y, yaw, length, width) as filled rectangles, one legend entry."""
+    if len(boxes) == 0:
+        return
+    x, y, yaw, length, width = boxes.T
+    c, s = np.cos(yaw), np.sin(yaw)
+    corners = np.array([[1, 1], [-1, 1], [-1, -1], [1, -1]], dtype=np.float64) / 2.0  # (4, 2) unit box
+    lx = corners[None, :, 0] * length[:, None]
+    ly = corners[None, :, 1] * width[:, None]
+    px = x[:, None] + c[:, None] * lx - s[:, None] * ly
+    py = y[:, None] + s[:, None] * lx + c[:, None] * ly
+    ax.add_collection(PolyCollection(np.stack([px, py], axis=2), facecolors="#bdbdbd", edgecolors="#636363",
+                                     linewidths=0.5, zorder=2, label="furniture"))
+
+
+def _draw_routes(ax, routes: list[np.ndarray]) -> None:
+    """People's routes as thin dashed lines, one legend entry."""
+    segs = [np.asarray(r, dtype=np.float64)[:, :2] for r in routes if len(r) >= 2]
+    if segs:
+        ax.add_collection(LineCollection(segs, colors="#31a354", linewidths=0.7, linestyles="dashed", alpha=0.7,
+                                         zorder=2, label="people's routes"))
 
 
 def _draw_trajectories(ax, trajectories: dict[str, np.ndarray]) -> None:

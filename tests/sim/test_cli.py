@@ -236,3 +236,20 @@ def test_a_map_error_names_the_file_given(tmp_path: Path, capsys) -> None:
     f.write_text("0,0,1,0\n")
     assert main(["map", "check", str(f)]) == 2
     assert err_line(capsys).startswith(f"depthnav: error: {f}: ")
+
+
+def test_snapshot_depth_png_has_a_colour_bar_and_a_clean_render_says_its_range(tmp_path: Path, capsys) -> None:
+    from matplotlib.image import imread
+
+    backend = "gl" if GL else "raycast"
+    assert main(["snapshot", "corridor_loop", "--pose", "16.5,6.3,0", "--no-noise", "--backend", backend, "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "a clean render keeps depths beyond the sensor's 0.8-4 m" in out
+    img = imread(str(tmp_path / "depth.png"))[..., :3]
+    # A figure (title, colour bar, margins on white), not the bare 640 x 480 image.
+    assert img.shape[:2] != (480, 640) and (img.min(axis=2) > 0.99).mean() > 0.1
+    # The colour bar: a column right of the image running through the colour map, dark
+    # blue at the bottom to dark red at the top.
+    col = img[:, int(img.shape[1] * 0.9)]
+    coloured = col[(col.max(axis=1) - col.min(axis=1)) > 0.3]
+    assert len(coloured) > 100 and coloured[0][2] < coloured[0][0] and coloured[-1][2] > coloured[-1][0]

@@ -57,3 +57,23 @@ def test_render_9000_segments(tmp_path):
     assert bp.vectormap.n_segments >= 9000
     out = render_map(bp.vectormap, tmp_path / "large.png", bp.navgraph, dpi=120)
     assert out.stat().st_size > 50_000
+
+
+def _grey_pixels(png) -> int:
+    from matplotlib.image import imread
+
+    img = (imread(str(png))[..., :3] * 255).round()
+    return int((np.abs(img - 189).max(axis=2) <= 2).sum())  # the furniture's face colour, #bdbdbd
+
+
+def test_furniture_is_drawn_where_it_stands_and_routes_are_drawn(tmp_path):
+    from tests.helpers import box_room
+
+    vm = box_room(10.0, 6.0)
+    empty = render_map(vm, tmp_path / "a.png", dpi=60)
+    one = render_map(vm, tmp_path / "b.png", dpi=60, boxes=np.array([[5.0, 3.0, 0.3, 2.0, 1.0]]))
+    two = render_map(vm, tmp_path / "c.png", dpi=60, boxes=np.array([[5.0, 3.0, 0.3, 2.0, 1.0], [2.0, 2.0, 0.0, 2.0, 1.0]]),
+                     routes=[np.array([[1.0, 1.0], [9.0, 5.0]])])
+    g0, g1, g2 = _grey_pixels(empty), _grey_pixels(one), _grey_pixels(two)
+    # A 2 m2 box at 60 dpi on a 10 m wide map covers some hundreds of pixels; two boxes twice that.
+    assert g0 < 50 and g1 > 200 and 1.6 < (g2 - g0) / (g1 - g0) < 2.4, (g0, g1, g2)

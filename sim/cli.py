@@ -283,11 +283,15 @@ def _seed_arg(seed: int | None) -> None:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
+    from autonomy.common.files import output_path
     from sim.experiments.kinds import RunCrashed, load_experiment
 
     _seed_arg(args.seed)
     exp, scn = load_experiment(args.scenario, args.set or [])
-    out = Path(args.out) if args.out else Path("runs") / scn.name
+    # Where it writes, checked before the run: a file given as --out, a directory as --rrd.
+    out = output_path(args.out if args.out else Path("runs") / scn.name, "--out", directory=True)
+    if args.rrd:
+        output_path(args.rrd, "--rrd")
     try:
         report = exp.run(scn, out, seed=args.seed, rrd=args.rrd, spawn=args.spawn)
     except RunCrashed as exc:

@@ -400,7 +400,9 @@ def run_sweep(
     """``depthnav sweep``: load the scenario and run its sweep (see the module docstring)."""
     overrides = list(overrides or [])
     exp, cfg = load_experiment(scenario_path, overrides)
-    out = Path(out_dir) if out_dir else Path("runs") / f"{cfg.name}-sweep"
+    from autonomy.common.files import output_path
+
+    out = output_path(Path(out_dir) if out_dir else Path("runs") / f"{cfg.name}-sweep", "--out", directory=True)
     path = str(Path(scenario_path).resolve())
     sets = "".join(f" --set {o}" for o in overrides)
     hint = f"depthnav sweep {scenario_path} --out {out} --resume" + (f" --trials {trials}" if trials is not None else "") + (f" --seed {seed}" if seed is not None else "") + sets + (f" --engine {engine}" if engine != "local" else "")

@@ -253,3 +253,21 @@ def test_snapshot_depth_png_has_a_colour_bar_and_a_clean_render_says_its_range(t
     col = img[:, int(img.shape[1] * 0.9)]
     coloured = col[(col.max(axis=1) - col.min(axis=1)) > 0.3]
     assert len(coloured) > 100 and coloured[0][2] < coloured[0][0] and coloured[-1][2] > coloured[-1][0]
+
+
+@pytest.mark.parametrize(("flag", "target", "pattern"), [("--out", "file", "is a file (expected a directory)"), ("--rrd", "dir", "is a directory (expected a file name)")])
+def test_run_checks_where_it_writes_before_the_run(tmp_path: Path, capsys, monkeypatch, flag: str, target: str, pattern: str) -> None:
+    import sim.experiments.runner as runner
+
+    monkeypatch.setattr(runner, "build_run", lambda *a: pytest.fail("the run started"))
+    (tmp_path / "file").write_text("x")
+    (tmp_path / "dir").mkdir()
+    argv = ["run", "demo", flag, str(tmp_path / target)] + (["--out", str(tmp_path / "o")] if flag == "--rrd" else [])
+    assert main(argv) == 2
+    assert err_line(capsys) == f"depthnav: error: {flag} {tmp_path / target}: {pattern}"
+
+
+def test_sweep_out_an_existing_file_is_one_line(tmp_path: Path, capsys) -> None:
+    (tmp_path / "file").write_text("x")
+    assert main(["sweep", "demo", "--trials", "1", "--out", str(tmp_path / "file")]) == 2
+    assert err_line(capsys) == f"depthnav: error: --out {tmp_path / 'file'}: is a file (expected a directory)"

@@ -132,7 +132,7 @@ def test_reward_is_exactly_the_sum_of_its_terms() -> None:
     for _ in range(150):
         obs, reward, term, trunc, info = env.step(rng.uniform(-1, 1, 3).astype(np.float32))
         terms = info["reward_terms"]
-        assert list(terms) == ["progress", "success", "collision", "time"]
+        assert list(terms) == ["progress", "success", "collision", "time", "clearance"] and terms["clearance"] == 0.0
         assert reward == sum(terms.values())
         assert terms["time"] == -0.01
         assert terms["collision"] == (-10.0 if info["collided"] else 0.0)

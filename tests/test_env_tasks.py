@@ -187,3 +187,28 @@ def test_a_scenario_s_time_limit_counts_decisions_on_a_decision_level_task() -> 
     with pytest.raises(InputError, match="frames_per_step"):
         EnvConfig.from_scenario(SCENARIOS_DIR / "demo.toml", frames_per_step=0)
     np.testing.assert_allclose(frames.action_scale, [0.75, 0.75, 1.5])
+
+
+@needs_gl
+def test_the_clearance_term_counts_how_far_inside_the_margin_the_nearest_wall_is() -> None:
+    """Beside the corridor's west wall, the term is the weight times (1 - gap / margin),
+    the gap from the robot's surface to the nearest thing the stack knows of; far from
+    everything it is 0, and off by default."""
+    env = make(POINTNAV, clearance_reward=-0.2, clearance_m=0.4)
+    radius = env.unwrapped.config.robot.radius_m
+    env.reset(seed=0, options={"start_pose": (0.5, 5.1, math.pi), "goal": (8.0, 5.1)})
+    _, _, _, _, info = env.step(np.zeros(3, np.float32))
+    known = env.unwrapped._reading.output.known
+    gap = float(np.min(np.hypot(*known.T))) - radius
+    assert 0 < gap < 0.4
+    assert info["reward_terms"]["clearance"] == pytest.approx(-0.2 * (1 - gap / 0.4), rel=1e-9)
+    env.close()
+    env = make(POINTNAV)
+    env.reset(seed=0, options={"start_pose": (0.5, 5.1, math.pi), "goal": (8.0, 5.1)})
+    assert env.step(np.zeros(3, np.float32))[4]["reward_terms"]["clearance"] == 0.0
+    env.close()
+
+
+def test_a_clearance_term_needs_the_ranges() -> None:
+    with pytest.raises(InputError, match="clearance_reward"):
+        DepthNavEnv(clearance_reward=-0.1)

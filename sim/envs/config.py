@@ -118,6 +118,14 @@ class EnvConfig:
     episode's return stays bounded."""
     time_reward: float = -0.01
     """Reward every step."""
+    clearance_reward: float = 0.0
+    """Reward every step, times how far inside ``clearance_m`` of the robot's surface the
+    nearest thing the robot stack knows of is (0 outside it, 1 touching; the stack's
+    ``known`` points, the ``ranges`` observation's source): a negative weight teaches
+    keeping off walls before touching them (0: no such term; needs a task that observes
+    ``ranges``)."""
+    clearance_m: float = 0.3
+    """... the margin it counts from."""
     # -- observations ---------------------------------------------------------------
     depth_shape: tuple[int, int] = (120, 160)
     """(rows, columns) of the depth observation; same aspect ratio as kinect.intrinsics.
@@ -245,6 +253,9 @@ class EnvConfig:
         need(self.frames_per_step >= 1, "frames_per_step", "an integer >= 1")
         need(self.collision_debounce_s >= 0, "collision_debounce_s", "a number >= 0")
         need(self.collision_penalties >= 0, "collision_penalties", "an integer >= 0 (0: no limit)")
+        need(self.clearance_m > 0, "clearance_m", "a positive number of metres")
+        need(self.clearance_reward == 0 or self.observe_ranges > 0, "clearance_reward",
+             "0 unless observe_ranges > 0 (the term reads what the robot stack knows round the robot)")
         need(self.observe_ranges >= 0, "observe_ranges", "an integer >= 0 (0: no 'ranges' key)")
         need(self.ranges_max_m > 0, "ranges_max_m", "a positive number")
         need(self.observe_plan >= 0, "observe_plan", "an integer >= 0 (0: no 'plan' key)")

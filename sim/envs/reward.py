@@ -10,11 +10,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields
 
+import numpy as np
+
 from sim.envs.config import EnvConfig
 from sim.envs.loop import Reading
 from sim.envs.task import Episode
 
-REWARD_TERMS = ("progress", "success", "collision", "time")
+REWARD_TERMS = ("progress", "success", "collision", "time", "clearance")
 
 
 @dataclass(frozen=True)
@@ -27,6 +29,8 @@ class RewardConfig:
     collision_debounce_s: float
     collision_penalties: int
     time_reward: float
+    clearance_reward: float
+    clearance_m: float
     goal_radius_m: float
     terminate_on_success: bool
     terminate_on_collision: bool
@@ -34,11 +38,13 @@ class RewardConfig:
     frames_per_step: int
     frame_s: float
     """Seconds per camera frame."""
+    robot_radius_m: float
+    """The base's radius (clearance counts from its surface)."""
 
     @classmethod
     def from_config(cls, cfg: EnvConfig) -> RewardConfig:
-        names = [f.name for f in fields(cls) if f.name != "frame_s"]
-        return cls(**{n: getattr(cfg, n) for n in names}, frame_s=1.0 / cfg.kinect.rate_hz)
+        names = [f.name for f in fields(cls) if f.name not in ("frame_s", "robot_radius_m")]
+        return cls(**{n: getattr(cfg, n) for n in names}, frame_s=1.0 / cfg.kinect.rate_hz, robot_radius_m=cfg.robot.radius_m)
 
 
 @dataclass(frozen=True)
@@ -61,6 +67,16 @@ class PointGoalReward:
     def begin(self, episode: Episode, reading: Reading) -> None:
         """Note the geodesic distance at the start, the first progress term's reference."""
         episode.phi, _ = episode.field.distance(reading.pose[:2])
+
+    def _intrusion(self, reading: Reading) -> float:
+        """How far inside ``clearance_m`` of the robot's surface the nearest point the
+        stack knows of is, as a fraction (0: none within it, 1: at the surface)."""
+        out = reading.output
+        known = None if out is None else out.known
+        if known is None or len(known) == 0:
+            return 0.0
+        gap = float(np.sqrt(np.min(np.einsum("ij,ij->i", known, known)))) - self.config.robot_radius_m
+        return min(max(1.0 - gap / self.config.clearance_m, 0.0), 1.0)
 
     def score(self, episode: Episode, reading: Reading) -> StepScore:
         """Count the step into ``episode`` and score it on the true pose."""
@@ -90,9 +106,10 @@ class PointGoalReward:
             "success": c.success_reward if first_success else 0.0,
             "collision": c.collision_reward * penalised,
             "time": c.time_reward,
+            "clearance": c.clearance_reward * self._intrusion(reading) if c.clearance_reward else 0.0,
         }
         ep.phi = phi
-        reward = float(terms["progress"] + terms["success"] + terms["collision"] + terms["time"])
+        reward = float(sum(terms[k] for k in REWARD_TERMS))
         terminated = bool((c.terminate_on_success and reached) or (c.terminate_on_collision and reading.new_contacts > 0))
         truncated = bool(ep.steps >= c.max_steps and not terminated)
         return StepScore(reward, terms, terminated, truncated)

@@ -99,8 +99,8 @@ class DepthNavEnv(gym.Env):
 
     ## Rewards
 
-    ``reward = progress + success + collision + time`` (exactly, in that order), each term in
-    ``info["reward_terms"]``:
+    ``reward = progress + success + collision + time + clearance`` (exactly, in that order),
+    each term in ``info["reward_terms"]``:
 
     - ``progress``: ``progress_reward_per_m`` times the decrease of the geodesic distance to
       the goal (shortest route over the navigation graph, straight where the goal or a node
@@ -111,7 +111,10 @@ class DepthNavEnv(gym.Env):
       a wall, furniture or a person, counted as :meth:`sim.simulator.world.World.step_frame` does),
       none again within ``collision_debounce_s`` of the last penalised one and at most
       ``collision_penalties`` an episode (0: no limit; ``collisions`` counts them all);
-    - ``time``: ``time_reward`` every step.
+    - ``time``: ``time_reward`` every step;
+    - ``clearance``: ``clearance_reward`` times how far inside ``clearance_m`` of the robot's
+      surface the nearest thing the robot stack knows of is (0 outside, 1 touching); off
+      (0) by default.
 
     ## Episode end
 

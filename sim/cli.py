@@ -580,6 +580,31 @@ def cmd_demos_bc(args: argparse.Namespace) -> int:
     return 0
 
 
+def _env_overrides(items: list[str], task: str, env_kwargs: dict) -> dict:
+    """``--env KEY=VALUE`` (VALUE in TOML syntax) as training env kwargs, each key a field
+    of the env's configuration (:class:`sim.envs.config.EnvConfig`), checked by building
+    ``task``'s configuration with them over the recipe's ``env_kwargs``."""
+    import dataclasses
+
+    from sim.config import parse_override
+    from sim.envs.config import EnvConfig
+    from sim.envs.tasks import TASKS
+
+    fields = {f.name for f in dataclasses.fields(EnvConfig)}
+    out = {}
+    for text in items:
+        path, value = parse_override(text)
+        key = ".".join(path)
+        if key not in fields:
+            raise InputError(f"--env {text!r}: no env setting {key!r} (the fields of sim.envs.config.EnvConfig)")
+        out[key] = tuple(value) if isinstance(value, list) else value
+    try:
+        EnvConfig(**{**TASKS[task], **{k: v for k, v in env_kwargs.items() if k in fields}, **out})
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"--env: {exc}") from None
+    return out
+
+
 def cmd_train_ppo(args: argparse.Namespace) -> int:
     from autonomy.common.files import output_path
     from sim.envs.tasks import TASKS
@@ -610,7 +635,7 @@ def cmd_train_ppo(args: argparse.Namespace) -> int:
 
     if args.resume:
         kept = [f"--{k.replace('_', '-')}" for k in HYPERPARAMETERS if k in given]
-        kept += [f for f, v in (("--end-on-collision", args.end_on_collision), ("--log-std-init", args.log_std_init)) if v]
+        kept += [f for f, v in (("--end-on-collision", args.end_on_collision), ("--log-std-init", args.log_std_init), ("--env", args.env)) if v]
         if kept:
             raise InputError(f"{', '.join(kept)}: a resumed run keeps its checkpoint's hyper-parameters; drop them with --resume")
         cfg = resume_config(args.out, **given)
@@ -624,6 +649,8 @@ def cmd_train_ppo(args: argparse.Namespace) -> int:
         cfg = PPOTrainConfig.for_task(args.task or "DepthNav-v0", out=args.out, **given)
         if args.end_on_collision:
             cfg = config_with(cfg, terminate_on_collision=True)
+        if args.env:
+            cfg = config_with(cfg, **_env_overrides(args.env, cfg.task, cfg.env_kwargs))
     train_ppo = ppo.train_ppo
     try:
         result = train_ppo(cfg, resume=args.resume, progress=not args.no_progress and sys.stderr.isatty(),
@@ -858,6 +885,8 @@ def _add_train_command(sub) -> None:
     c.add_argument("--learning-rate", type=float, help="Adam step size (default 3e-4)")
     c.add_argument("--log-std-init", type=float, metavar="X",
                    help="initial log standard deviation of the Gaussian policy (SB3's default: 0, a spread of 1)")
+    c.add_argument("--env", action="append", metavar="KEY=VALUE",
+                   help="a training env setting over the task's recipe, e.g. clearance_reward=-0.1 (repeatable; the evaluation keeps the task's)")
     c.add_argument("--end-on-collision", action="store_true",
                    help="training episodes end at the first collision (the evaluation still counts them)")
     c.add_argument("--no-progress", action="store_true", help="no progress bar (one line per checkpoint still)")

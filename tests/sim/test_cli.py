@@ -271,3 +271,20 @@ def test_sweep_out_an_existing_file_is_one_line(tmp_path: Path, capsys) -> None:
     (tmp_path / "file").write_text("x")
     assert main(["sweep", "demo", "--trials", "1", "--out", str(tmp_path / "file")]) == 2
     assert err_line(capsys) == f"depthnav: error: --out {tmp_path / 'file'}: is a file (expected a directory)"
+
+
+@pytest.mark.parametrize(
+    ("argv", "needle"),
+    [
+        (["--env", "nonsense=1"], "--env 'nonsense=1': no env setting 'nonsense'"),
+        (["--task", "DepthNav-v0", "--env", "clearance_reward=-0.1"], "--env: DepthNav: argument 'clearance_reward' expected 0 unless observe_ranges"),
+    ],
+)
+def test_train_env_overrides_are_checked_before_training(tmp_path: Path, capsys, argv: list[str], needle: str) -> None:
+    pytest.importorskip("stable_baselines3")
+    base = ["train", "ppo", "--steps", "10", "--out", str(tmp_path / "ppo")]
+    if "--task" not in argv:
+        base += ["--task", "DepthNavLocal-v0"]
+    assert main(base + argv) == 2
+    assert needle in err_line(capsys)
+    assert not (tmp_path / "ppo" / "model.zip").exists()

@@ -86,7 +86,10 @@ class DriverStack:
 
     def reset(self, pose: np.ndarray | None) -> StackOutput:
         self.odometry = np.zeros(3) if pose is None else np.asarray(pose, dtype=np.float64).copy()
-        self.driver.reset(None if pose is None else self.odometry.copy())
+        try:
+            self.driver.reset(None if pose is None else self.odometry.copy())
+        except Exception as exc:  # before the run: named, in one line
+            raise InputError(f"driver.factory {self.factory!r}: its reset raised {type(exc).__name__}: {exc}") from None
         self.command = DriverCommand(np.zeros(3), None if pose is None else self.odometry.copy())
         return self._output(self.odometry)
 

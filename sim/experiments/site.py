@@ -10,6 +10,7 @@ from functools import cached_property
 
 import numpy as np
 
+from autonomy.common.errors import InputError
 from autonomy.maps.vectormap import load_navgraph, load_vectormap
 from autonomy.perception.camera import DepthCamera
 from autonomy.stack import RobotStack, StackOutput
@@ -155,7 +156,11 @@ def driver_stack(scn: Scenario, vectormap, graph, seed: int) -> DriverStack:
         max_speed_mps=scn.robot.max_speed_mps, max_angular_rad_s=scn.robot.max_angular_rad_s,
         frame_rate_hz=scn.kinect.rate_hz, seed=int(seed),
     )
-    return DriverStack(factory(setup), setup, scn.navigator, scn.driver.factory)
+    try:
+        driver = factory(setup)
+    except Exception as exc:  # the user's code: named, in one line
+        raise InputError(f"{scn.name}: driver.factory {scn.driver.factory!r} raised {type(exc).__name__}: {exc}") from None
+    return DriverStack(driver, setup, scn.navigator, scn.driver.factory)
 
 
 def build_run(scn: Scenario, seed: int) -> Run:
@@ -171,12 +176,8 @@ def build_run(scn: Scenario, seed: int) -> Run:
         extra_furniture, extra_people = fault_actors(scn.faults)
         furniture, people = furniture + extra_furniture, people + extra_people
     mission = plan_mission(scn.mission, graph, seeds.mission)
-    world = build_world(
-        building.vectormap, world=scn.world, robot=scn.robot, intrinsics=scn.kinect.intrinsics, mount=scn.kinect.mount,
-        furniture=furniture, people=people, start_pose=tuple(mission.start_pose),
-    )
-    camera = KinectCamera(world.model, world.camera_id, scn.kinect)
-    sim = SimStep(world, camera, Odometry(scn.odometry, seeds.odometry, mission.start_pose), seeds.noise_seed)
+    # The robot's stack first: a driver of the user's that fails to start is then one line,
+    # with no world or render process made.
     scfg = scn.stack_config()
     stack: RobotStack | DriverStack
     if scn.driver.factory:
@@ -187,6 +188,12 @@ def build_run(scn: Scenario, seed: int) -> Run:
         start_known = scn.localization.start_known or not scfg.recovers
     stack.prepare_recovery()
     out = stack.reset(mission.start_pose if start_known else None)
+    world = build_world(
+        building.vectormap, world=scn.world, robot=scn.robot, intrinsics=scn.kinect.intrinsics, mount=scn.kinect.mount,
+        furniture=furniture, people=people, start_pose=tuple(mission.start_pose),
+    )
+    camera = KinectCamera(world.model, world.camera_id, scn.kinect)
+    sim = SimStep(world, camera, Odometry(scn.odometry, seeds.odometry, mission.start_pose), seeds.noise_seed)
     use_estimate = scn.mission.follower == "navigator" and out.localizing
     run = Run(scn, seed, seeds, building, furniture, people, mission, world, sim, stack, out, use_estimate)
     run.last_in_view = np.full(len(world.people.people), -np.inf)

@@ -61,6 +61,16 @@ def make(setup):
 def make_nothing(setup):
     return object()
 
+def make_raising(setup):
+    raise RuntimeError("no such robot")
+
+class NeedsStart(Straight):
+    def reset(self, start_pose):
+        raise ValueError("needs the start pose")
+
+def make_needs_start(setup):
+    return NeedsStart(setup)
+
 def make_bad(setup):
     class Bad(Straight):
         def step(self, frame):
@@ -168,6 +178,19 @@ def test_a_factory_that_returns_no_driver_is_one_line(tmp_path: Path, capsys) ->
     p = write(tmp_path, factory="driver.py:make_nothing")
     assert main(["run", str(p), "--out", str(tmp_path / "o")]) == 2
     assert "returned object, which lacks reset, set_goal or step" in err_line(capsys)
+
+
+@pytest.mark.skipif(not GL, reason="no EGL/OSMesa context on this machine")
+@pytest.mark.parametrize(
+    ("factory", "needle"),
+    [("driver.py:make_raising", "'driver.py:make_raising' raised RuntimeError: no such robot"),
+     ("driver.py:make_needs_start", "'driver.py:make_needs_start': its reset raised ValueError: needs the start pose")],
+)
+def test_a_driver_that_fails_before_the_run_is_one_line(tmp_path: Path, capsys, factory: str, needle: str) -> None:
+    p = write(tmp_path, factory=factory)
+    assert main(["run", str(p), "--out", str(tmp_path / "o")]) == 2
+    line = err_line(capsys)
+    assert needle in line, line
 
 
 @pytest.mark.skipif(not GL, reason="no EGL/OSMesa context on this machine")

@@ -212,3 +212,32 @@ def test_the_clearance_term_counts_how_far_inside_the_margin_the_nearest_wall_is
 def test_a_clearance_term_needs_the_ranges() -> None:
     with pytest.raises(InputError, match="clearance_reward"):
         DepthNavEnv(clearance_reward=-0.1)
+
+
+@needs_gl
+def test_the_safety_layer_stops_a_robot_driven_at_a_wall() -> None:
+    """Facing the corridor's west wall 0.5 m away, full speed ahead for 4 s touches it;
+    through the safety layer the robot stops short of it and still turns."""
+    start = {"start_pose": (1.2, 5.1, math.pi), "goal": (8.0, 5.1)}
+    ahead = np.array([1.0, 0.0, 0.0], np.float32)
+    env = make(POINTNAV)
+    env.reset(seed=0, options=start)
+    for _ in range(20):
+        info = env.step(ahead)[4]
+    assert info["collisions"] >= 1
+    env.close()
+    env = make(POINTNAV, safety_layer=True)
+    env.reset(seed=0, options=start)
+    for _ in range(20):
+        info = env.step(ahead)[4]
+    assert info["collisions"] == 0
+    assert 0.05 < abs(info["pose"][0] - 1.2) < 1.0
+    heading = info["pose"][2]
+    info = env.step(np.array([0.0, 0.0, 1.0], np.float32))[4]
+    assert abs(info["pose"][2] - heading) > 0.05
+    env.close()
+
+
+def test_a_safety_layer_needs_the_ranges() -> None:
+    with pytest.raises(InputError, match="safety_layer"):
+        DepthNavEnv(safety_layer=True)

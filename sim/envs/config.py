@@ -102,6 +102,13 @@ class EnvConfig:
     """End the episode (terminated) on reaching the goal."""
     terminate_on_collision: bool = True
     """End the episode (terminated) on a collision."""
+    safety_layer: bool = False
+    """Pass the action through the robot's safety layer
+    (:func:`autonomy.navigation.safety.safe_command`): its direction kept, its speed
+    capped so that the robot stops short of everything the robot stack knows of round it
+    (the ``ranges`` observation's source) while the command is held for a decision, as a
+    learned local planner drives through a real robot's safety controller. Needs a task
+    that observes ``ranges``."""
     # -- rewards --------------------------------------------------------------------
     progress_reward_per_m: float = 1.0
     """Reward per metre of geodesic progress towards the goal (negative when receding)."""
@@ -256,6 +263,8 @@ class EnvConfig:
         need(self.clearance_m > 0, "clearance_m", "a positive number of metres")
         need(self.clearance_reward == 0 or self.observe_ranges > 0, "clearance_reward",
              "0 unless observe_ranges > 0 (the term reads what the robot stack knows round the robot)")
+        need(not self.safety_layer or self.observe_ranges > 0, "safety_layer",
+             "False unless observe_ranges > 0 (it brakes before what 'ranges' reads)")
         need(self.observe_ranges >= 0, "observe_ranges", "an integer >= 0 (0: no 'ranges' key)")
         need(self.ranges_max_m > 0, "ranges_max_m", "a positive number")
         need(self.observe_plan >= 0, "observe_plan", "an integer >= 0 (0: no 'plan' key)")

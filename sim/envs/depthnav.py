@@ -23,6 +23,7 @@ import numpy as np
 from gymnasium import spaces
 
 from autonomy.common.errors import InputError
+from autonomy.navigation.safety import SafetyLayerConfig, safe_command
 from sim.envs.config import EnvConfig
 from sim.envs.loop import EpisodeLoop, LoopConfig, Reading
 from sim.envs.observation import Observations
@@ -185,6 +186,12 @@ class DepthNavEnv(gym.Env):
         self._reward = PointGoalReward(RewardConfig.from_config(cfg))
         self._sites = SiteSchedule(cfg, self._loop_config.kinect)
         self._action_scale = cfg.action_scale
+        av = cfg.avoidance
+        self._safety = (
+            SafetyLayerConfig(av.robot_radius_m, av.safety_margin_m, av.max_decel_mps2, av.stop_distance_m, cfg.ranges_max_m)
+            if cfg.safety_layer
+            else None
+        )
         self.action_space = spaces.Box(-1.0, 1.0, (3,), np.float32)
         self.observation_space = self._observations.space()
         self._recording = EnvRecording(cfg, self.intrinsics, self.step_dt) if cfg.rrd else None
@@ -246,7 +253,11 @@ class DepthNavEnv(gym.Env):
         if not np.all(np.isfinite(a)):
             raise InputError(f"DepthNav: action expected finite numbers, got {a!r}")
         ep = self._episode
-        self._reading = self._loop.step(np.clip(a, -1.0, 1.0) * self._action_scale)
+        command = np.clip(a, -1.0, 1.0) * self._action_scale
+        known = None if self._reading is None or self._reading.output is None else self._reading.output.known
+        if self._safety is not None and known is not None:
+            command = safe_command(command, known, self.step_dt, self._safety)
+        self._reading = self._loop.step(command)
         score = self._reward.score(ep, self._reading)
         if self._recording is not None:
             self._recording.log(self._loop.site, ep, self._reading, new_episode=False)

@@ -17,8 +17,9 @@ floor looks alike wherever the robot stands. Against the newest stored frame at 
 moved into the current robot frame by the odometry between the two frames, projected
 into the current image, and compared with the depths within ``window_px`` of its pixel
 (lateral noise and a little odometry error move it by a pixel or two): it **agrees** when
-one of them is within ``tol_m + tol_per_m2 z^2`` of its predicted depth z (the Kinect's
-axial noise and disparity steps grow with z squared). It **disagrees** too when none of
+one of them is within ``tol_m + tol_per_m2 z^2 + movers_mps dt`` of its predicted depth z
+(the Kinect's axial noise and disparity steps grow with z squared; people in view walk on
+during the dt seconds between the two frames). It **disagrees** too when none of
 them returned anything although z lies well inside the camera's range (``empty_margin_m``
 from either end) and the image column returned the floor at a depth of z or more
 (:func:`autonomy.perception.floor_rays.floor_reach`): the camera would have seen the point there.
@@ -31,7 +32,8 @@ nothing.
 
 The agreement fraction is NaN (no evidence) with fewer than ``min_points`` compared;
 :class:`autonomy.localization.health.HealthMonitor` says lost when it falls below a threshold. Between
-two frames a person walking in front of the camera moves a few centimetres, the robot's
+two frames a person walking in front of the camera moves a few centimetres (up to
+``movers_mps`` times the time between them, allowed for), the robot's
 odometry errs by a fraction of a degree, and a camera tilted by a bump keeps agreeing on
 vertical walls. What the check cannot tell: a landing facing a plain wall at the same
 distance as before, and a robot carried so slowly that its view changes little from one
@@ -84,7 +86,14 @@ class ViewCheckConfig:
     tol_m: float = 0.05
     """Two depths agree within ``tol_m`` ..."""
     tol_per_m2: float = 0.01
-    """... plus this times the depth squared (m per m^2)."""
+    """... plus this times the depth squared (m per m^2) ..."""
+    movers_mps: float = 2.0
+    """... plus this speed times the time between the two frames: what the camera sees
+    may have moved that fast meanwhile. People walk at up to 1.5-2 m/s (a walk and a
+    step aside), 5-7 cm between two frames at 30 Hz, more than ``tol_m``: a person
+    closing in on the robot fills its view, and every point of it would disagree while
+    the belief is right. A robot carried or pushed away moves its view by decimetres or
+    more, far beyond it (0: a static world)."""
     window_px: int = 2
     """The current depths within this many pixels of the predicted pixel are tried."""
     count_empty: bool = True
@@ -112,7 +121,7 @@ class ViewCheckConfig:
         require_int(self, "recovery.view.", "min_points", minimum=1)
         require_int(self, "recovery.view.", "max_gap_frames", minimum=0)
         require_positive(self, "recovery.view.", "max_lag_s", "tol_m")
-        require_non_negative(self, "recovery.view.", "lag_s", "floor_m", "tol_per_m2", "empty_margin_m")
+        require_non_negative(self, "recovery.view.", "lag_s", "floor_m", "tol_per_m2", "empty_margin_m", "movers_mps")
         if self.lag_s > self.max_lag_s:
             raise InputError(f"recovery.view.lag_s: expected at most max_lag_s = {self.max_lag_s}, got {self.lag_s!r}")
 
@@ -267,15 +276,15 @@ class ViewCheck:
         self._gap = 0
         """Frames given to :meth:`update` since the last one stored."""
 
-    def _agreement(self, pts: np.ndarray, then: np.ndarray, now: np.ndarray, depth: np.ndarray, reach: np.ndarray) -> tuple[int, int]:
+    def _agreement(self, pts: np.ndarray, then: np.ndarray, now: np.ndarray, depth: np.ndarray, reach: np.ndarray, dt: float) -> tuple[int, int]:
         """(compared, agreeing) of ``pts`` seen at odometry pose ``then`` against ``depth``
-        (floor reach ``reach``) seen at ``now``."""
+        (floor reach ``reach``) seen at ``now``, ``dt`` seconds apart."""
         if not len(pts):
             return 0, 0
         cfg = self.cfg
         return view_agreement(
             move_points(pts, then, now), depth, self.intr, self.robot_from_camera, self.min_range_m, self.max_range_m,
-            cfg.tol_m, cfg.tol_per_m2, cfg.window_px, cfg.empty_margin_m if cfg.count_empty else None, reach,
+            cfg.tol_m + cfg.movers_mps * dt, cfg.tol_per_m2, cfg.window_px, cfg.empty_margin_m if cfg.count_empty else None, reach,
         )
 
     def _returned(self, depth: np.ndarray) -> bool:
@@ -326,9 +335,10 @@ class ViewCheck:
         reach = floor_reach(depth, self.intr, self.robot_from_camera)
         frac = math.nan
         if ref is not None and self._returned(depth):
-            _, odom0, pts0, depth0, reach0 = ref
-            n1, ok1 = self._agreement(pts0, odom0, odom, depth, reach)
-            n2, ok2 = self._agreement(pts, odom, odom0, depth0, reach0)
+            t0, odom0, pts0, depth0, reach0 = ref
+            dt = t - t0
+            n1, ok1 = self._agreement(pts0, odom0, odom, depth, reach, dt)
+            n2, ok2 = self._agreement(pts, odom, odom0, depth0, reach0, dt)
             if n1 + n2 >= cfg.min_points:
                 frac = (ok1 + ok2) / (n1 + n2)
         # A frame showing something that could not be checked against a stored one does

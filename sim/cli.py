@@ -271,7 +271,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UnfrozenEpisodesWarning)
-            reports = compare(policies, split, args.episodes, args.seed, progress=not args.no_progress and sys.stderr.isatty(), out=args.out, task=args.task)
+            reports = compare(policies, split, args.episodes, args.seed, progress=not args.no_progress and sys.stderr.isatty(), out=args.out, task=args.task,
+                              env_kwargs={"safety_layer": True} if args.safety_layer else None)
     except KeyboardInterrupt:
         print("depthnav: eval interrupted" + (f"; the finished episodes are in {args.out}" if args.out else ""), file=sys.stderr)
         return 130
@@ -546,6 +547,9 @@ def _add_eval_command(sub) -> None:
                         "frozen benchmark's, sim/rl/episodes/DepthNav-v0.json)")
     c.add_argument("--task", help="the registered task (DepthNav-v0, DepthNavPointGoal-v0, DepthNavLocal-v0); "
                                   "default: the one each policy was trained on (DepthNav-v0 for random and classical)")
+    c.add_argument("--safety-layer", action="store_true",
+                   help="drive every policy through the robot's safety layer (a task that observes ranges; "
+                        "a policy trained with it is always evaluated with it)")
     c.add_argument("--out", help="write the reports (every episode) to this JSON file")
     c.add_argument("--no-progress", action="store_true", help="no progress bar")
     c.set_defaults(func=cmd_eval)
@@ -601,7 +605,8 @@ def _add_train_command(sub) -> None:
     c.add_argument("--log-std-init", type=float, metavar="X",
                    help="initial log standard deviation of the Gaussian policy (SB3's default: 0, a spread of 1)")
     c.add_argument("--env", action="append", metavar="KEY=VALUE",
-                   help="a training env setting over the task's recipe, e.g. clearance_reward=-0.1 (repeatable; the evaluation keeps the task's)")
+                   help="a training env setting over the task's recipe, e.g. clearance_reward=-0.1 (repeatable; the evaluation keeps the task's, "
+                        "but a policy trained with safety_layer=true is evaluated with it)")
     c.add_argument("--end-on-collision", action="store_true",
                    help="training episodes end at the first collision (the evaluation still counts them)")
     c.add_argument("--no-progress", action="store_true", help="no progress bar (one line per checkpoint still)")

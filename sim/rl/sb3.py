@@ -49,6 +49,10 @@ OBSERVATION_FIELDS = (
     "history",
     "goal_scale_m",
 )
+#: EnvConfig fields that say how a policy's action is carried out: a saved policy's
+#: env_kwargs() include the ones of these it was trained with (it is evaluated the way it
+#: learnt to drive).
+ACTION_FIELDS = ("safety_layer",)
 ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"PPO": PPO}
 
 
@@ -122,8 +126,11 @@ class SB3Policy:
         return cls(model, meta, d)
 
     def env_kwargs(self) -> dict[str, Any]:
-        """The observation settings the policy was trained with (EnvConfig fields)."""
-        return {k: env_value(v) for k, v in self.meta["observation"].items()}
+        """The observation settings the policy was trained with and how its actions were
+        carried out (EnvConfig fields: OBSERVATION_FIELDS, ACTION_FIELDS)."""
+        trained = self.meta.get("env_kwargs") or {}
+        action = {k: env_value(trained[k]) for k in ACTION_FIELDS if k in trained}
+        return {**{k: env_value(v) for k, v in self.meta["observation"].items()}, **action}
 
     def reset(self, seed: int) -> None:
         """Nothing to reset: the policy is feed-forward and deterministic."""

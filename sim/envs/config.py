@@ -104,9 +104,9 @@ class EnvConfig:
     """End the episode (terminated) on a collision."""
     safety_layer: bool = False
     """Pass the action through the robot's safety layer
-    (:func:`autonomy.navigation.safety.safe_command`): its direction kept, its speed
-    capped so that the robot stops short of everything the robot stack knows of round it
-    (the ``ranges`` observation's source) while the command is held for a decision, as a
+    (:func:`autonomy.navigation.safety.safe_command`): the velocity nearest to it from
+    which the robot stops short of everything the robot stack knows of round it (the
+    ``ranges`` observation's source) while the command is held for a decision, as a
     learned local planner drives through a real robot's safety controller. Needs a task
     that observes ``ranges``."""
     # -- rewards --------------------------------------------------------------------

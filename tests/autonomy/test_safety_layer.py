@@ -12,7 +12,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from autonomy.common.errors import InputError
-from autonomy.navigation.safety import FAN_DIRECTIONS, SWEEP_SAMPLES, SafetyLayerConfig, braking_speed, safe_command
+from autonomy.navigation.safety import (
+    FAN_DIRECTIONS,
+    SWEEP_SAMPLES,
+    SafetyLayerConfig,
+    braking_speed,
+    safe_command,
+)
 
 CFG = SafetyLayerConfig(robot_radius_m=0.25, safety_margin_m=0.05, max_decel_mps2=1.0, stop_distance_m=0.05, max_range_m=4.0)
 R = CFG.robot_radius_m + CFG.safety_margin_m

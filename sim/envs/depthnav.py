@@ -47,7 +47,10 @@ class DepthNavEnv(gym.Env):
     building's navigation graph and must reach a goal node drawn at a geodesic distance in
     ``[min_goal_distance_m, max_goal_distance_m]``. One env step is ``frames_per_step``
     camera frames (one by default: ``1 / kinect.rate_hz`` s, 30 Hz): the action sets the
-    velocity command, held over the step; people walk and physics advances every frame;
+    velocity command, held over the step (with ``safety_layer=True`` it first passes the
+    robot's safety layer, :mod:`autonomy.navigation.safety`, which replaces it by the
+    nearest velocity from which the robot stops short of what the stack knows round it);
+    people walk and physics advances every frame;
     on the step's last frame a noisy depth frame is rendered at the observation size, and
     (if enabled) FSPF and CGR localization run on it with the odometry of all the step's
     frames. The goal is observed in the robot frame of the pose *estimate* (CGR, or dead

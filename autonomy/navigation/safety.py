@@ -19,52 +19,26 @@ command that is safe passes unchanged, one towards a wall at an angle slides alo
 instead of stopping dead (a policy that keeps asking for the same blocked direction
 would otherwise stand there for good), one straight at a wall slows to its safe speed.
 The open lengths are Eq. 3-4's (:func:`autonomy.navigation.avoidance.open_path_lengths`),
-round the robot's circle widened by the safety margin; turning in place never moves a
-round robot's body, so the turn rate passes unchanged.
+round the robot's circle widened by the safety margin; the radius, margin, deceleration,
+stop distance and range are the robot's obstacle avoidance's (:class:`AvoidanceConfig`).
+Turning in place never moves a round robot's body, so the turn rate passes unchanged.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
-from autonomy.common.constants import KINECT_MAX_RANGE_M, ROBOT_RADIUS_M, SAFETY_MARGIN_M
 from autonomy.common.errors import InputError
-from autonomy.navigation.avoidance import open_path_lengths
+from autonomy.navigation.avoidance import AvoidanceConfig, open_path_lengths
 
-__all__ = ["SafetyLayerConfig", "safe_command", "safe_speeds", "braking_speed"]
+__all__ = ["safe_command", "safe_speeds", "braking_speed"]
 
 #: Directions sampled over a turning command's sweep (the command's own included).
 SWEEP_SAMPLES = 5
 #: Directions of the fan the filtered translation is chosen from (5 degrees apart).
 FAN_DIRECTIONS = 72
-
-
-@dataclass(frozen=True)
-class SafetyLayerConfig:
-    """How close the safety layer lets the robot come to what it knows of."""
-
-    robot_radius_m: float = ROBOT_RADIUS_M
-    safety_margin_m: float = SAFETY_MARGIN_M
-    """Added to the radius for the corridor swept along the command (Eq. 3-4's r)."""
-    max_decel_mps2: float = 1.0
-    """a: the braking deceleration counted on (the base's acceleration limit)."""
-    stop_distance_m: float = 0.05
-    """Open length kept in reserve after braking."""
-    max_range_m: float = KINECT_MAX_RANGE_M
-    """Open lengths are capped here: nothing is known farther."""
-
-    def __post_init__(self) -> None:
-        for name in ("robot_radius_m", "max_decel_mps2", "max_range_m"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise InputError(f"safety.{name}: expected a positive number, got {v!r}")
-        for name in ("safety_margin_m", "stop_distance_m"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
-                raise InputError(f"safety.{name}: expected a number >= 0, got {v!r}")
 
 
 def braking_speed(open_m, hold_s: float, decel: float, stop_m: float):
@@ -75,13 +49,13 @@ def braking_speed(open_m, hold_s: float, decel: float, stop_m: float):
     return float(v) if v.ndim == 0 else v
 
 
-def safe_command(command: np.ndarray, points2d: np.ndarray, hold_s: float, cfg: SafetyLayerConfig | None = None) -> np.ndarray:
+def safe_command(command: np.ndarray, points2d: np.ndarray, hold_s: float, cfg: AvoidanceConfig | None = None) -> np.ndarray:
     """``command`` (body-frame vx, vy in m/s, omega in rad/s) with its translation
     replaced by the nearest one from which the robot stops short of ``points2d`` ((n, 2)
     obstacles in the robot frame) when the command is held ``hold_s`` seconds: along one
     of :data:`FAN_DIRECTIONS` directions all round or the command's own, at most that
     direction's safe speed (module docstring). The turn rate is kept."""
-    cfg = SafetyLayerConfig() if cfg is None else cfg
+    cfg = AvoidanceConfig() if cfg is None else cfg
     cmd = np.asarray(command, dtype=np.float64)
     if cmd.shape != (3,) or not np.isfinite(cmd).all():
         raise InputError(f"safe_command: expected a finite (vx, vy, omega), got {command!r}")
@@ -105,12 +79,11 @@ def safe_command(command: np.ndarray, points2d: np.ndarray, hold_s: float, cfg: 
     return out
 
 
-def safe_speeds(directions: np.ndarray, omega: float, points2d: np.ndarray, hold_s: float, cfg: SafetyLayerConfig) -> np.ndarray:
+def safe_speeds(directions: np.ndarray, omega: float, points2d: np.ndarray, hold_s: float, cfg: AvoidanceConfig) -> np.ndarray:
     """The safe speed along each body-frame direction for a command turning at ``omega``
     held ``hold_s`` seconds: the braking speed of the shortest open length over the
     directions it sweeps through (:data:`SWEEP_SAMPLES` of them)."""
     dirs = np.asarray(directions, dtype=np.float64).reshape(-1)
     sweep = dirs[:, None] + np.linspace(0.0, omega * hold_s, SWEEP_SAMPLES)[None, :]
-    r = cfg.robot_radius_m + cfg.safety_margin_m
-    d = open_path_lengths(points2d, sweep.ravel(), r, cfg.max_range_m).reshape(sweep.shape).min(axis=1)
+    d = open_path_lengths(points2d, sweep.ravel(), cfg.radius_m, cfg.max_range_m).reshape(sweep.shape).min(axis=1)
     return braking_speed(d, hold_s, cfg.max_decel_mps2, cfg.stop_distance_m)

@@ -23,7 +23,7 @@ import numpy as np
 from gymnasium import spaces
 
 from autonomy.common.errors import InputError
-from autonomy.navigation.safety import SafetyLayerConfig, safe_command
+from autonomy.navigation.safety import safe_command
 from sim.envs.config import EnvConfig
 from sim.envs.loop import EpisodeLoop, LoopConfig, Reading
 from sim.envs.observation import Observations
@@ -189,12 +189,8 @@ class DepthNavEnv(gym.Env):
         self._reward = PointGoalReward(RewardConfig.from_config(cfg))
         self._sites = SiteSchedule(cfg, self._loop_config.kinect)
         self._action_scale = cfg.action_scale
-        av = cfg.avoidance
-        self._safety = (
-            SafetyLayerConfig(av.robot_radius_m, av.safety_margin_m, av.max_decel_mps2, av.stop_distance_m, cfg.ranges_max_m)
-            if cfg.safety_layer
-            else None
-        )
+        self._safety = cfg.avoidance if cfg.safety_layer else None
+        """The robot stack's avoidance settings the safety layer brakes with (None: off)."""
         self.action_space = spaces.Box(-1.0, 1.0, (3,), np.float32)
         self.observation_space = self._observations.space()
         self._recording = EnvRecording(cfg, self.intrinsics, self.step_dt) if cfg.rrd else None

@@ -12,15 +12,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from autonomy.common.errors import InputError
+from autonomy.navigation.avoidance import AvoidanceConfig
 from autonomy.navigation.safety import (
     FAN_DIRECTIONS,
     SWEEP_SAMPLES,
-    SafetyLayerConfig,
     braking_speed,
     safe_command,
 )
 
-CFG = SafetyLayerConfig(robot_radius_m=0.25, safety_margin_m=0.05, max_decel_mps2=1.0, stop_distance_m=0.05, max_range_m=4.0)
+CFG = AvoidanceConfig(robot_radius_m=0.25, safety_margin_m=0.05, max_decel_mps2=1.0, stop_distance_m=0.05, max_range_m=4.0)
 R = CFG.robot_radius_m + CFG.safety_margin_m
 
 
@@ -135,5 +135,3 @@ def test_bad_arguments_are_one_line_errors() -> None:
         safe_command(np.array([1.0, np.nan, 0.0]), np.zeros((0, 2)), 0.2)
     with pytest.raises(InputError, match="hold_s"):
         safe_command(np.zeros(3), np.zeros((0, 2)), -1.0)
-    with pytest.raises(InputError, match="safety.max_decel_mps2"):
-        SafetyLayerConfig(max_decel_mps2=0.0)

@@ -76,6 +76,13 @@ class CGRConfig:
     """Floor on the per-frame translation noise (keeps diversity when nearly still)."""
     min_rotation_std_rad: float = 0.001
     """Floor on the per-frame rotation noise."""
+    mean_preserving_motion: bool = True
+    """Draw each frame's motion noise with zero sample mean over the particles (moment
+    matching, rescaled to keep its variance), so that the particles' mean moves exactly
+    with the odometry (ours). With i.i.d. draws the mean of 20 particles wanders: its
+    heading by the particle spread over sqrt(20), about a degree after 20 m without a wall
+    in view, which turns into 15-25 cm beside the odometry's own few centimetres over a
+    blind crossing of an atrium."""
     step_fraction: float = 0.5
     """kappa: fraction of the preconditioned gradient step taken per refinement."""
     trust_region_m: float = 0.5
@@ -320,6 +327,8 @@ class CGRLocalizer:
         s_r = max(cfg.alpha1 * abs(dth) + cfg.alpha2_rad_per_m * tr, cfg.min_rotation_std_rad)
         n = cfg.n_particles
         e = self.rng.standard_normal((n, 3))
+        if cfg.mean_preserving_motion and n > 1:
+            e = (e - e.mean(axis=0)) * math.sqrt(n / (n - 1.0))
         ix, iy, it = dx + s_t * e[:, 0], dy + s_t * e[:, 1], dth + s_r * e[:, 2]
         th = self.particles[:, 2]
         c, s = np.cos(th), np.sin(th)

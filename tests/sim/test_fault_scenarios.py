@@ -192,7 +192,11 @@ def test_a_stuck_drivers_old_view_is_not_taken_for_the_stopped_robots(tmp_path):
 # --------------------------------------------------------------------------- odometry, mount
 
 def test_slip_is_recovered_without_truth(tmp_path):
-    rep = run(tmp_path, 'kind = "slip"\nat_s = 3.0', 15.0, 1)
+    # The relocalization may look round and search several times before it accepts a
+    # place: 9-18 s after the slip on five of seeds 1-6 of this scenario. (On the sixth,
+    # the push came while the robot turned in place facing a flat wall, the view check
+    # agreed at 0.80, and the 0.57 m left along the corridor went unnoticed for 20 s.)
+    rep = run(tmp_path, 'kind = "slip"\nat_s = 3.0', 25.0, 1)
     f, m = the_fault(rep, "slip"), rep["metrics"]
     assert m["truth_resets_needed"] == 0
     assert f["recovered_t"] is not None and f["error_after_m"] is not None and f["error_after_m"] < OK_M

@@ -453,6 +453,26 @@ def _sliver_frame(cfg: CGRConfig) -> tuple[CGRLocalizer, np.ndarray, np.ndarray,
     return _real_frame("ghc2_sliver_frame", cfg)
 
 
+def test_a_tail_sample_on_its_own_lines_is_weighed_against_samples_on_their_own() -> None:
+    """GHC2, 65 s into a run: after 20 m with no wall in view the 20 samples have spread
+    to 0.48 m (the belief 0.12 m from the truth), and the frame holds 69 points on a
+    0.5 m pillar face 4.6-4.9 m away. At the truth every point lies on the face; at the
+    mean, a little off in heading, 14 do, the others passing the face's end. One sample
+    1.4 m off puts all 69 on another face. Scored on its own correspondences against
+    samples scored on the mean's, it takes every weight and the belief jumps 1.5 m (and
+    7 degrees) in one frame. Scored against samples each on its own correspondences, it
+    is one of many that explain the face, and the belief stays within 0.3 m."""
+    loc, pts, nrm, truth = _real_frame("ghc2_blind_tail_frame", CGRConfig())
+    before = loc.estimate()
+    assert math.hypot(*(before.pose[:2] - truth[:2])) < 0.15 and before.std_xy_m > 0.4
+    loc.update(pts, nrm)
+    assert loc.last.rescored == 19
+    assert math.hypot(*(loc.estimate().pose[:2] - truth[:2])) < 0.3
+    off, pts, nrm, truth = _real_frame("ghc2_blind_tail_frame", CGRConfig(rescore_shared=False))
+    off.update(pts, nrm)
+    assert off.last.rescored == 0 and math.hypot(*(off.estimate().pose[:2] - truth[:2])) > 1.0
+
+
 def test_a_sliver_only_a_tail_sample_explains_does_not_take_the_belief() -> None:
     """At the mean the sliver's rays pass the face's end and meet a wall 0.2 m behind
     it; refined onto that wall, the points lose their line, and the association check
@@ -466,8 +486,13 @@ def test_a_sliver_only_a_tail_sample_explains_does_not_take_the_belief() -> None
     loc.update(pts, nrm)
     assert np.allclose(loc.estimate().pose, before)
     assert loc.last.shared == 19 and loc.last.unscored_tail == 1 and not loc.last.observation
-    # The rule off: the tail sample takes the belief, 1 m from the truth.
-    off, pts, nrm, truth = _sliver_frame(CGRConfig(tail_hold_fraction=0.0))
+    # The rule off, the samples round the mean scored again on their own lines: the
+    # tail sample is weighed against them and the belief stays near the truth.
+    alone, pts, nrm, truth = _sliver_frame(CGRConfig(tail_hold_fraction=0.0))
+    alone.update(pts, nrm)
+    assert alone.last.rescored == 19 and math.hypot(*(alone.estimate().pose[:2] - truth[:2])) < 0.2
+    # Both off: the tail sample takes the belief, 1 m from the truth.
+    off, pts, nrm, truth = _sliver_frame(CGRConfig(tail_hold_fraction=0.0, rescore_shared=False))
     off.update(pts, nrm)
     assert off.last.observation and off.last.unscored_tail == 0
     assert math.hypot(*(off.estimate().pose[:2] - truth[:2])) > 0.9 and off.estimate().std_xy_m < 0.05

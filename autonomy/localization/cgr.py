@@ -413,26 +413,19 @@ class CGRLocalizer:
             # fewer than min_points were matched): the frame is ambiguous, not evidence
             # against them. So the few in the tail are not scored either: one refined on
             # its own correspondences would otherwise take every weight from samples that
-            # were not scored at all (a 4 cm sliver of wall 4.8 m away, which a sample
-            # 1.2 m off put on a wall behind it, pulled the belief 1.2 m in one frame; a
-            # piece of furniture in an atrium, 2 m short of any wall from the mean, which
-            # a sample 1.2 m off put on a wall, pulled it 1.4 m). When the samples round
-            # the mean see most points through the walls (their heading off after a
-            # sharp turn), the tail is scored and may take the belief.
+            # were not scored at all (the GHC2 sliver and furniture frames of
+            # docs/localization.md). When the samples round the mean see most points
+            # through the walls (their heading off after a sharp turn), the tail is
+            # scored and may take the belief.
             stats.unscored_tail = len(own)
             refined[own], lnp0[own], lnpr[own] = self.particles[own], -np.inf, -np.inf
             return refined, lnp0, lnpr
         for i in own:
             refined[i], lnp0[i], lnpr[i] = self._refine_own(fr, self.particles[i], m)
         if cfg.rescore_shared and len(own) and share.any() and _best(lnp0[own], lnpr[own]) > _best(lnp0[share], lnpr[share]):
-            # A sample away from the mean, matched on its own correspondences, outscores
-            # every sample matched on the mean's. Sharing is a shortcut that holds while
-            # the samples round the mean would pick the same lines; when it decides which
-            # samples survive, they are scored as the tail was, each on its own (the
-            # paper's per-sample correspondences). After a blind stretch of GHC2 the mean,
-            # a degree off, saw 14 of 69 points on a pillar face 4.7 m away where samples
-            # nearer the truth saw all 69; a sample 1.4 m off put them on another face
-            # and took every weight.
+            # Sharing the mean's lines is a shortcut that holds while the samples round it
+            # would pick the same ones; where it decides which samples survive, they are
+            # scored as the tail was, each on its own (docs/localization.md).
             stats.rescored = int(share.sum())
             for i in np.flatnonzero(share):
                 refined[i], lnp0[i], lnpr[i] = self._refine_own(fr, self.particles[i], m)

@@ -150,6 +150,9 @@ class CGRConfig:
             "init_std_xy_m", "init_std_theta_rad", "gate_sigmas", "prior_min_xy_m", "prior_min_theta_rad",
             "degeneracy_max_gain", "robust_scale", "tail_hold_fraction",
         )
+        for name in ("mean_preserving_motion", "rescore_shared"):
+            if not isinstance(getattr(self, name), bool):
+                raise InputError(f"cgr.{name}: expected true or false, got {getattr(self, name)!r}")
         if not 0 <= self.tail_hold_fraction <= 1:
             raise InputError(f"cgr.tail_hold_fraction: expected a number in [0, 1], got {self.tail_hold_fraction!r}")
         if not 0 <= self.consistent_fraction <= 1:
@@ -332,7 +335,7 @@ class CGRLocalizer:
 
     # -- CGR steps ---------------------------------------------------------------------
     def predict(self, increment: np.ndarray) -> None:
-        """Step 1: sample the motion model for an odometry increment (dx, dy, dtheta)."""
+        """Step 1: sample the motion model for an odometry increment (dx, dy, dtheta), centred (``mean_preserving_motion``)."""
         dx, dy, dth = (float(v) for v in increment)
         if not all(math.isfinite(v) for v in (dx, dy, dth)):
             return  # a broken odometry message: keep the belief

@@ -228,21 +228,21 @@ def test_the_belief_follows_the_odometry_without_observations() -> None:
     assert iid[:, 0].min() > 5 * kept[:, 0].max() and iid[:, 1].min() > 3 * kept[:, 1].max(), (iid, kept)
 
 
-def test_mean_preserving_motion_keeps_the_spread() -> None:
-    """Centring the noise does not shrink the cloud: its spread after 10 m matches the
-    i.i.d. one's on average."""
-    def spread(cfg: CGRConfig) -> float:
-        out = []
-        for seed in range(20):
-            loc = CGRLocalizer(lambda x, y: room(), cfg, ObservationConfig(), np.random.default_rng(seed))
-            loc.reset(np.zeros(3), 0.0, 0.0)
-            for _ in range(400):
-                loc.predict(np.array([0.025, 0.0, 0.0]))
-            out.append(loc.estimate().std_xy_m)
-        return float(np.mean(out))
-
-    a, b = spread(CGRConfig()), spread(CGRConfig(mean_preserving_motion=False))
-    assert a == pytest.approx(b, rel=0.1)
+def test_mean_preserving_motion_keeps_the_mean_exact_and_the_variance() -> None:
+    """One predict from 20 coincident samples: the mean moves by exactly the increment,
+    and the samples' variance (over their own mean) is the motion model's s_t^2 on average
+    over many draws; centring without rescaling would give (n - 1) / n of it, 0.95."""
+    cfg = CGRConfig()
+    s_t = cfg.alpha3 * 0.025
+    ratios = []
+    for seed in range(4000):
+        loc = CGRLocalizer(lambda x, y: room(), cfg, ObservationConfig(), np.random.default_rng(seed))
+        loc.reset(np.zeros(3), 0.0, 0.0)
+        loc.predict(np.array([0.025, 0.0, 0.0]))
+        x = loc.particles[:, 0]
+        assert x.mean() == pytest.approx(0.025, abs=1e-15)
+        ratios.append(x.var() / s_t**2)
+    assert np.mean(ratios) == pytest.approx(1.0, abs=0.02)
 
 
 def test_low_variance_resampling_keeps_proportions() -> None:
@@ -267,6 +267,8 @@ def test_bad_config() -> None:
         CGRConfig(trust_region_m="0.5")  # a string is a one-line error, not a TypeError
     with pytest.raises(InputError, match="max_gate_m"):
         CGRConfig(max_gate_m=0.0)
+    with pytest.raises(InputError, match="cgr.rescore_shared: expected true or false"):
+        CGRConfig(rescore_shared="yes")
     with pytest.raises(InputError, match="correlation_f"):
         ObservationConfig(correlation_f=0.5)
 

@@ -302,11 +302,12 @@ def cmd_demos_record(args: argparse.Namespace) -> int:
     output_path(args.out, "--out")
     env_kwargs = None if args.max_steps is None else {"max_steps": args.max_steps}
     try:
-        d = record_demonstrations(args.split, args.episodes, args.seed, args.out, env_kwargs, progress=not args.no_progress and sys.stderr.isatty())
+        d = record_demonstrations(args.split, args.episodes, args.seed, args.out, env_kwargs,
+                                  progress=not args.no_progress and sys.stderr.isatty(), task=args.task)
     except KeyboardInterrupt:
         print(f"depthnav: demos record interrupted; the finished episodes (if any) are in {args.out}", file=sys.stderr)
         return 130
-    print(f"wrote {args.out}: {d.n_episodes} episodes, {d.n_steps} steps of the classical stack on {args.split}; "
+    print(f"wrote {args.out}: {d.n_episodes} episodes, {d.n_steps} steps of the classical stack on {args.task} {args.split}; "
           f"success {d.success.mean():.2f}, SPL {d.spl.mean():.2f}")
     return 0
 
@@ -341,7 +342,7 @@ def cmd_demos_bc(args: argparse.Namespace) -> int:
     if args.eval_episodes:
         from sim.rl.evaluate import evaluate
 
-        print(evaluate(policy, "val", args.eval_episodes, 0, progress=not args.no_progress and sys.stderr.isatty()).table())
+        print(evaluate(policy, "val", args.eval_episodes, 0, progress=not args.no_progress and sys.stderr.isatty(), task=policy.task).table())
     return 0
 
 
@@ -562,7 +563,8 @@ def _add_demos_command(sub) -> None:
     c.add_argument("--split", default="train", help="train (default), val or test")
     c.add_argument("--episodes", type=int, default=100, help="number of episodes (default 100)")
     c.add_argument("--seed", type=int, default=0, help="episode seed: which starts and goals (default 0)")
-    c.add_argument("--max-steps", type=int, help="shorter episodes than the benchmark task's 1000 steps")
+    c.add_argument("--task", default="DepthNav-v0", help="the registered task (default DepthNav-v0; docs/env.md)")
+    c.add_argument("--max-steps", type=int, help="shorter episodes than the task's own limit")
     c.add_argument("--out", required=True, help="output .npz file")
     c.add_argument("--no-progress", action="store_true", help="no progress bar")
     c.set_defaults(func=cmd_demos_record)

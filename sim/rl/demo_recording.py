@@ -26,20 +26,22 @@ import numpy as np
 
 from autonomy.common.errors import InputError
 from autonomy.common.files import output_path
+from sim.envs.tasks import POINTNAV_V0
 from sim.rl.demos import _EPISODE_FIELDS, FORMAT, VERSION, Demonstrations
 from sim.rl.evaluate import episode_env_kwargs, run_episode, run_episodes
 from sim.rl.policies import ClassicalPolicy
-from sim.rl.splits import LEARNER_OBS, episode_specs, get_split
+from sim.rl.splits import LEARNER_OBS, benchmark_task, episode_specs, get_split
 
 
 class _Expert:
     """The classical stack (:class:`sim.rl.policies.ClassicalPolicy`) with the learned-policy
-    observations, acting in float32 so that the stored actions are exactly the applied ones."""
+    observations (on ``DepthNav-v0``; a decision-level task fixes its own), acting in
+    float32 so that the stored actions are exactly the applied ones."""
 
-    def __init__(self) -> None:
+    def __init__(self, task: str = POINTNAV_V0) -> None:
         self._policy = ClassicalPolicy()
         self.name = self._policy.name
-        self._env_kwargs = {**LEARNER_OBS, **self._policy.env_kwargs()}
+        self._env_kwargs = {**(LEARNER_OBS if task == POINTNAV_V0 else {}), **self._policy.env_kwargs()}
 
     def env_kwargs(self) -> dict[str, Any]:
         return dict(self._env_kwargs)
@@ -90,11 +92,13 @@ def record_demonstrations(
     out: str | os.PathLike[str] = "demos.npz",
     env_kwargs: Mapping[str, Any] | None = None,
     progress: bool = True,
+    task: str = POINTNAV_V0,
 ) -> Demonstrations:
     """Record the classical stack on the ``episodes`` episodes of
-    :func:`sim.rl.splits.episode_specs` (split, seed) with the learned-policy observations
-    and write them to ``out`` (this module's ``.npz`` layout, atomically). ``env_kwargs``
-    override env arguments (e.g. ``max_steps`` for a short test).
+    :func:`sim.rl.splits.episode_specs` (split, seed) of the registered ``task``
+    (:mod:`sim.envs.tasks`) with its learned-policy observations and write them to ``out``
+    (this module's ``.npz`` layout, atomically). ``env_kwargs`` override env arguments
+    (e.g. ``max_steps`` for a short test).
 
     On a KeyboardInterrupt the finished episodes are written (``meta["interrupted"]``
     true; nothing is written when none finished) and the interrupt goes on.
@@ -103,13 +107,15 @@ def record_demonstrations(
     specs = episode_specs(sp, episodes, seed)
     if Path(out).suffix != ".npz":
         raise InputError(f"out: expected a file name ending in .npz, got {str(out)!r}")
+    benchmark_task(task)  # an unknown task fails before any work
     p = output_path(out)
-    expert = _Expert()
-    shown = {k: v for k, v in episode_env_kwargs(expert, specs[0].building_seed, env_kwargs).items() if k != "building_seeds"}
+    expert = _Expert(task)
+    shown = {k: v for k, v in episode_env_kwargs(expert, specs[0].building_seed, env_kwargs, task).items() if k != "building_seeds"}
     meta: dict[str, Any] = {
         "format": FORMAT,
         "version": VERSION,
         "policy": expert.name,
+        "task": task,
         "split": sp.name,
         "split_building_seeds": list(sp.building_seeds),
         "seed": int(seed),
@@ -131,7 +137,7 @@ def record_demonstrations(
         return result
 
     try:
-        for _ in run_episodes(expert, specs, env_kwargs, episode=record, progress=progress, desc=f"demos on {sp.name}"):
+        for _ in run_episodes(expert, specs, env_kwargs, episode=record, progress=progress, desc=f"demos on {sp.name}", task=task):
             pass  # record() keeps each episode
     except KeyboardInterrupt:
         if done:

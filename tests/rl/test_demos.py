@@ -288,6 +288,53 @@ def test_bc_learns_the_expert_better_than_its_mean_action(tmp_path: Path) -> Non
 
 
 @needs_gl
+def test_a_decision_level_task_records_its_own_observations_and_clones_them(tmp_path: Path, capsys) -> None:
+    """On DepthNavLocal-v0 the dataset holds the task's terms (no depth image), the cloned
+    policy remembers its task, reloads to the same predictions and runs in the evaluation
+    on that task; the CLI records and trains it."""
+    from sim.envs.tasks import LOCALNAV
+    from sim.rl.evaluate import policy_task, run_episode
+    from sim.rl.policy_specs import make_policy
+
+    out = tmp_path / "local.npz"
+    assert main(["demos", "record", "--task", LOCALNAV, "--episodes", "3", "--seed", "1", "--max-steps", "12", "--out", str(out), "--no-progress"]) == 0
+    assert f"steps of the classical stack on {LOCALNAV} train" in capsys.readouterr().out
+    d = load_demonstrations(out)
+    assert d.meta["task"] == LOCALNAV and "depth" not in d.observations
+    assert set(d.observations) == {"goal", "odometry", "plan", "ranges", "velocity"} and d.n_steps == 36
+    assert main(["demos", "bc", str(out), "--epochs", "2", "--batch-size", "16", "--out", str(tmp_path / "m")]) == 0
+    loaded = BCPolicy.load(tmp_path / "m")
+    assert loaded.task == LOCALNAV and policy_task(loaded) == LOCALNAV and loaded.net.depth_hw is None
+    pol, _ = train_bc(d, epochs=2, batch_size=16, seed=0, lr=1e-3)
+    np.testing.assert_array_equal(make_policy(f"bc:{tmp_path / 'm'}").predict(d.observations), pol.predict(d.observations))
+    from sim.envs.depthnav import make
+    from sim.rl.evaluate import episode_env_kwargs
+
+    spec = episode_specs("train", 1, 1)[0]
+    env = make(LOCALNAV, **{**episode_env_kwargs(loaded, spec.building_seed, None, LOCALNAV), "max_steps": 4})
+    try:
+        assert run_episode(env, loaded, spec).steps == 4
+    finally:
+        env.close()
+    with pytest.raises(InputError, match="--task DepthNav-v0: policy bc:.* trained on DepthNavLocal-v0"):
+        policy_task(loaded, "DepthNav-v0")
+
+
+@needs_gl
+@pytest.mark.slow
+def test_bc_on_a_decision_level_task_learns_the_expert_better_than_its_mean_action(tmp_path: Path) -> None:
+    """The same check as on DepthNav-v0, on DepthNavLocal-v0's vector observations."""
+    d = record_demonstrations("train", episodes=10, seed=0, out=tmp_path / "ten.npz", env_kwargs={"max_steps": 40},
+                              progress=False, task="DepthNavLocal-v0")
+    _, h = train_bc(d, epochs=8, batch_size=32, seed=0, lr=1e-3)
+    assert h["task"] == "DepthNavLocal-v0" and h["train_loss"][-1] < 0.5 * h["train_mse_initial"], h
+    assert min(h["heldout_loss"]) < 0.7 * h["heldout_mean_baseline"], h
+    perm = np.random.default_rng(1).permutation(d.n_steps)
+    _, hc = train_bc(dataclasses.replace(d, actions=d.actions[perm]), epochs=8, batch_size=32, seed=0, lr=1e-3)
+    assert min(hc["heldout_loss"]) > 0.9 * hc["heldout_mean_baseline"], hc
+
+
+@needs_gl
 @pytest.mark.skipif(importlib.util.find_spec("minari") is None, reason="minari (optional) not installed")
 def test_minari_export_round_trip(recorded, tmp_path: Path, monkeypatch) -> None:
     """Minari (optional) gets every episode's T + 1 observations, actions and ends, raw."""

@@ -15,15 +15,13 @@ augmented MCL does with the observation likelihood (Thrun, Burgard and Fox,
 "Probabilistic Robotics", Table 8.3: ``w_fast`` and ``w_slow``): a drop of the short-term
 explained fraction far below the long-term one means the world stopped matching the
 belief, while a low long-term level (an atrium with few walls in view) is normal there
-and raises no alarm. The monitor says **lost** when, for ``hold_s`` of frames with evidence (``ratio_hold_s``
-for the second test), either
+and raises no alarm. The monitor says **lost** when, for ``hold_s`` (``ratio_hold_s`` for the second test;
+for the first two, counting only the frames with evidence), either
 
 1. the short-term contradiction fraction is above ``lost_through``, or
 2. the short-term explained fraction is below ``lost_ratio`` times the long-term one
    (with enough frames behind the long-term average), or
-3. the particle spread is above ``lost_spread_m`` (in an open hall past the camera's
-   range the spread grows by the motion model alone, and looking round there shows
-   nothing: only frames that see the map can say CGR failed to settle),
+3. the particle spread is above ``lost_spread_m``,
 
 or at once when
 
@@ -79,12 +77,6 @@ MAP_TESTS = ("sees through walls", "explains little")
 #: The lost test on the short-term missing-wall fraction, held on its own evidence.
 MISSING_TEST = "walls missing"
 
-#: The lost test on the particles' spread, held on frames with evidence (as the map tests).
-SPREAD_TEST = "spread"
-
-#: The tests whose hold counts only the time of frames with their evidence.
-EVIDENCE_TESTS = (*MAP_TESTS, MISSING_TEST, SPREAD_TEST)
-
 
 @dataclass(frozen=True)
 class HealthConfig:
@@ -105,7 +97,7 @@ class HealthConfig:
     lost_ratio: float = 0.2
     """... or the short-term explained fraction is below this fraction of the long-term one ..."""
     lost_spread_m: float = 1.0
-    """... or the particles' position spread is above this (on frames with evidence) ..."""
+    """... or the particles' position spread is above this ..."""
     hold_s: float = 1.5
     """... for this long (the ratio test for ``ratio_hold_s``: a robot turning from a
     corridor to face an open hall's furniture sees little of the map for a few seconds).
@@ -291,10 +283,7 @@ class HealthMonitor:
             # The map tests' short-term averages move only on frames with evidence; held
             # on without any (the camera facing open space past its range, or blocked),
             # they would say lost on a few frames seen seconds ago.
-            # The spread, too: with no wall in view (an open hall past the camera's range)
-            # it grows by the motion model alone, which says the belief is uncertain, not
-            # that it is wrong; held on frames that see the map, it says CGR cannot settle.
-            held = self.bad_evidence_s if reason in EVIDENCE_TESTS else t - self.bad_since
+            held = self.bad_evidence_s if (reason in MAP_TESTS or reason == MISSING_TEST) else t - self.bad_since
             state = "lost" if held >= hold else ("blind" if t - self.last_evidence_t > cfg.blind_s else "ok")
         else:
             self.bad_since = math.nan
@@ -337,7 +326,7 @@ class HealthMonitor:
     def _lost_reason(self, spread_m: float) -> str:
         cfg = self.cfg
         if spread_m > cfg.lost_spread_m:
-            return SPREAD_TEST
+            return "spread"
         if not math.isnan(self.th_fast) and self.th_fast > cfg.lost_through:
             return "sees through walls"
         if self._jumped():

@@ -208,37 +208,45 @@ def blind_lengths(
     dead-reckons: the blind stretches of coastal navigation (Roy, Burgard, Fox and
     Thrun, ICRA 1999). A wall beside the path is out of a 57 degree view beyond 1.9 m
     to the side at 4 m: a corridor 4 m wide is blind down its middle."""
-    if not (range_m > 0 and math.isfinite(range_m)):
-        raise InputError(f"blind_lengths: range_m: expected a positive number, got {range_m!r}")
-    if not (0 <= half_fov_rad < math.pi):
-        raise InputError(f"blind_lengths: half_fov_rad: expected an angle in [0, pi), got {half_fov_rad!r}")
-    w = np.ascontiguousarray(np.asarray(walls, dtype=np.float64).reshape(-1, 4))
     xy = graph.node_xy()
-    keys: list[tuple[int, int]] = []
-    pts: list[np.ndarray] = []
-    heads: list[np.ndarray] = []
-    piece: list[float] = []
-    counts: list[int] = []
-    for e in graph.edges:
-        a, b = xy[graph.index_of(e.s0_id)], xy[graph.index_of(e.s1_id)]
-        length = float(math.hypot(*(b - a)))
-        n = max(1, math.ceil(length / step_m))
-        mid = a + ((np.arange(n) + 0.5) / n)[:, None] * (b - a)
-        h = math.atan2(b[1] - a[1], b[0] - a[0])
-        keys.append(edge_key(e.s0_id, e.s1_id))
-        pts += [mid, mid]
-        heads += [np.full(n, h), np.full(n, h + math.pi)]
-        piece.append(length / n)
-        counts.append(2 * n)
-    if not keys:
-        return {}
-    p = np.ascontiguousarray(np.vstack(pts))
-    blind = np.ones(len(p))
-    if len(w):
-        ix = WallIndex(w, bucket_m=max(1.0, range_m))
-        _blind_kernel(
-            p, np.concatenate(heads), ix.walls, ix.offsets, ix.idx, ix.x0, ix.y0, ix.bucket_m, ix.nx, ix.ny, float(range_m),
-            float(half_fov_rad), int(rays), blind,
-        )
-    per_edge = np.add.reduceat(blind, np.cumsum([0] + counts[:-1]))
-    return {k: float(0.5 * c * q) for k, c, q in zip(keys, per_edge, piece, strict=True) if c > 0}
+    keys = [edge_key(e.s0_id, e.s1_id) for e in graph.edges]
+    segs = np.array([[*xy[graph.index_of(e.s0_id)], *xy[graph.index_of(e.s1_id)]] for e in graph.edges], dtype=np.float64)
+    blind = BlindSegments(walls, range_m, half_fov_rad, step_m, rays).lengths(segs.reshape(-1, 4))
+    return {k: float(b) for k, b in zip(keys, blind, strict=True) if b > 0}
+
+
+class BlindSegments:
+    """The blind metres (:func:`blind_lengths`) of any straight segments among the same
+    walls, the walls indexed once."""
+
+    def __init__(self, walls: np.ndarray, range_m: float, half_fov_rad: float, step_m: float = 0.25, rays: int = 9) -> None:
+        if not (range_m > 0 and math.isfinite(range_m)):
+            raise InputError(f"blind_lengths: range_m: expected a positive number, got {range_m!r}")
+        if not (0 <= half_fov_rad < math.pi):
+            raise InputError(f"blind_lengths: half_fov_rad: expected an angle in [0, pi), got {half_fov_rad!r}")
+        w = np.ascontiguousarray(np.asarray(walls, dtype=np.float64).reshape(-1, 4))
+        self.range_m, self.half_fov_rad, self.step_m, self.rays = float(range_m), float(half_fov_rad), float(step_m), int(rays)
+        self.index = WallIndex(w, bucket_m=max(1.0, range_m)) if len(w) else None
+
+    def lengths(self, segments: np.ndarray) -> np.ndarray:
+        """(M,) blind metres of each segment (M, 4), the mean of driving it either way."""
+        segs = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
+        if not len(segs):
+            return np.zeros(0)
+        a, b = segs[:, :2], segs[:, 2:]
+        length = np.hypot(*(b - a).T)
+        n = np.maximum(1, np.ceil(length / self.step_m)).astype(np.int64)
+        k = np.repeat(np.arange(len(segs)), n)
+        f = (np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n) + 0.5) / n[k]
+        mid = a[k] + f[:, None] * (b - a)[k]
+        h = np.arctan2((b - a)[:, 1], (b - a)[:, 0])[k]
+        p = np.ascontiguousarray(np.vstack([mid, mid]))
+        blind = np.ones(len(p))
+        if self.index is not None:
+            ix = self.index
+            _blind_kernel(
+                p, np.concatenate([h, h + math.pi]), ix.walls, ix.offsets, ix.idx, ix.x0, ix.y0, ix.bucket_m, ix.nx, ix.ny,
+                self.range_m, self.half_fov_rad, self.rays, blind,
+            )
+        per = np.bincount(np.concatenate([k, k]), weights=blind, minlength=len(segs))
+        return 0.5 * per * length / n

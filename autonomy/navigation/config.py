@@ -137,6 +137,18 @@ class NavigatorConfig:
     coastal_range_m: float = 3.5
     """Walls farther than this are not counted as seen for :attr:`coastal_weight` (FSPF
     keeps few points of a wall at the Kinect's 4 m)."""
+    shortcut_clearance_m: float = 0.6
+    """Any-angle plans (ours, as the smoothers of nav2 or Theta* straighten grid and graph
+    paths): the plan goes straight from a vertex to the farthest later node of its run of
+    plain edges (no door, no narrow stretch, no speed limit) when the straight line keeps
+    this far from every wall and from what blocked an edge, and is blind
+    (:attr:`coastal_weight`) for at most ``shortcut_blind_slack_m`` more than the nodes'
+    way. Graphs made from the walls zigzag through halls (15-19 degrees of turning a
+    metre on real floors), and with the camera seeing no wall every turn adds the
+    odometry's rotation error to the heading the belief dead-reckons on (0 = the graph's
+    own paths)."""
+    shortcut_blind_slack_m: float = 0.5
+    """See :attr:`shortcut_clearance_m`."""
     memory_s: float = 2.0
     """Obstacle memory: sensed points outside the camera's view persist this long (the
     Kinect sees +-29 degrees and nothing closer than 0.8 m, so a person beside or right
@@ -255,6 +267,7 @@ class NavigatorConfig:
             "long_detour_m", "long_detour_wait_s",
             "narrow_lookahead_m", "narrow_slack_m", "narrow_before_m", "narrow_horizon_m",
             "memory_beside_s", "memory_beside_m", "memory_blind_s", "shadow_m", "coastal_weight",
+            "shortcut_clearance_m", "shortcut_blind_slack_m",
         )
         if self.narrow_lookahead_m > self.lookahead_m:
             raise InputError(

@@ -44,6 +44,8 @@ class Plan:
     """The plan's narrow stretches (arc lengths from, to)."""
     corners: np.ndarray = field(default_factory=lambda: np.zeros(0))
     """Arc lengths of the vertices where the plan turns by more than ``corner_angle_rad``."""
+    shortcuts: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    """The segments that go straight past graph nodes (:mod:`autonomy.navigation.shortcut`)."""
 
     @classmethod
     def along(
@@ -56,12 +58,14 @@ class Plan:
         edges: Sequence[tuple[int, int] | None],
         edge_speed: Mapping[tuple[int, int], float],
         narrow: Mapping[tuple[int, int], tuple[np.ndarray, np.ndarray]],
+        shortcuts: np.ndarray | None = None,
     ) -> Plan:
         """The plan to ``goal`` through ``nodes`` along the points ``pts`` (K, 2) (the pose
         first): ``edges`` names the graph edge (node ids, in the direction driven; None:
         none) each of the K - 1 segments runs along, ``edge_speed`` the edges' speed
-        limits and ``narrow`` the narrow edges' narrow stretches (world points from, to).
-        Segments shorter than 1 um are dropped."""
+        limits and ``narrow`` the narrow edges' narrow stretches (world points from, to);
+        ``shortcuts`` are the segments that go straight past nodes. Segments shorter than
+        1 um are dropped."""
         seg_len = np.hypot(*np.diff(pts, axis=0).T)
         keep = np.concatenate([[True], seg_len > 1e-6])
         path = pts[keep]
@@ -89,7 +93,8 @@ class Plan:
             heading = np.arctan2(d[:, 1], d[:, 0])
             turn = np.abs(wrap_angles(np.diff(heading)))
             corners = cum[1:-1][turn > cfg.corner_angle_rad]
-        return cls(cfg, robot_radius_m, goal, list(nodes), path, cum, segments, seg_len, seg_speed, narrow_s, corners)
+        short = np.zeros((0, 4)) if shortcuts is None else np.asarray(shortcuts, dtype=np.float64).reshape(-1, 4)
+        return cls(cfg, robot_radius_m, goal, list(nodes), path, cum, segments, seg_len, seg_speed, narrow_s, corners, short)
 
     @property
     def length_m(self) -> float:

@@ -19,10 +19,19 @@ from autonomy.common.geometry import (
     point_segment_projection,
 )
 from autonomy.maps.navgraph import NavGraph
-from autonomy.maps.planner import NoPathError, astar, blind_lengths, edge_key, parts, path_points
+from autonomy.maps.planner import (
+    BlindSegments,
+    NoPathError,
+    astar,
+    blind_lengths,
+    edge_key,
+    parts,
+    path_points,
+)
 from autonomy.navigation.avoidance import AvoidanceConfig
 from autonomy.navigation.config import NavigatorConfig
 from autonomy.navigation.plan import Plan
+from autonomy.navigation.shortcut import Shortcuts
 from autonomy.navigation.surroundings import Surroundings
 from autonomy.perception.camera import DepthCamera
 
@@ -51,9 +60,15 @@ class RoutePlanner:
         """The connected part of the graph each node (by index) lies in (:func:`autonomy.maps.planner.parts`)."""
         self._coastal: dict[tuple[int, int], float] = {}
         """Extra plan cost per edge for its blind metres (:attr:`NavigatorConfig.coastal_weight`)."""
+        blind_segments = None
         if self.walls is not None and cfg.coastal_weight > 0:
+            blind_segments = BlindSegments(self.walls, cfg.coastal_range_m, 0.5 * camera.fov_h_rad)
             blind = blind_lengths(graph, self.walls, cfg.coastal_range_m, 0.5 * camera.fov_h_rad)
             self._coastal = {k: cfg.coastal_weight * v for k, v in blind.items()}
+        self._shortcuts = None
+        """Straightens plans (:attr:`NavigatorConfig.shortcut_clearance_m`; None: off or no walls known)."""
+        if self.walls is not None and cfg.shortcut_clearance_m > 0:
+            self._shortcuts = Shortcuts(self.walls, cfg.shortcut_clearance_m, cfg.shortcut_blind_slack_m, blind_segments)
         self.blocked_edges = 0
         """Edges marked blocked so far (``blocked_edge_s``; a mark renewed is not counted)."""
         self.blocked: dict[tuple[int, int], float] = {}
@@ -240,7 +255,18 @@ class RoutePlanner:
             # From the pose to the plan's first node: no edge (no speed limit, not narrow).
             pts = np.vstack([xy[None, :], node_pts])
             pairs = [None, *pairs]
-        return Plan.along(self.cfg, self.avoid.robot_radius_m, goal_id, nodes, pts, pairs, self._edge_speed, self._narrow_edges)
+        shortcuts = np.zeros((0, 4))
+        if self._shortcuts is not None:
+            plain = np.array([ab is None or (ab not in self._narrow_edges and self._edge_speed.get(ab, math.inf) >= self.cfg.cruise_speed_mps)
+                              for ab in pairs], dtype=bool)
+            keep_off = np.vstack([np.zeros((0, 2)), *(self._blocked_pts.get(e, np.zeros((0, 2))) for e in self.blocked)])
+            keep, short = self._shortcuts.straighten(pts, plain, keep_off, self.avoid.radius_m)
+            pairs = [None if sh else pairs[i] for i, sh in zip(keep[:-1], short, strict=True)]
+            pts = pts[keep]
+            shortcuts = np.hstack([pts[:-1], pts[1:]])[short]
+        return Plan.along(
+            self.cfg, self.avoid.robot_radius_m, goal_id, nodes, pts, pairs, self._edge_speed, self._narrow_edges, shortcuts
+        )
 
     def _starts_on_first_edge(self, xy: np.ndarray, nodes: list[int], node_pts: np.ndarray) -> bool:
         """Whether ``xy`` lies part way along the plan's first edge (projecting inside it,
@@ -314,7 +340,13 @@ class RoutePlanner:
             return False
         nodes = self.graph.node_xy()
         segs = np.array([[*nodes[self.graph.index_of(a)], *nodes[self.graph.index_of(b)]] for a, b in edges], dtype=np.float64)
-        near = point_segment_distance(pts, segs) < self.avoid.radius_m  # (points, edges)
+        dist = point_segment_distance(pts, segs)  # (points, edges)
+        near = dist < self.avoid.radius_m
+        if len(plan.shortcuts):
+            # On a straightened stretch the obstacle may stand off every graph edge: it
+            # blocks the edges' way nearest it (which the next plan's shortcuts keep off).
+            on_short = (point_segment_distance(pts, plan.shortcuts) < self.avoid.radius_m).any(axis=1) & ~near.any(axis=1)
+            near[np.flatnonzero(on_short), np.argmin(dist[on_short], axis=1)] = True
         new = False
         for j in np.flatnonzero(near.any(axis=0)):
             e = edges[int(j)]

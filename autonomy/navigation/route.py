@@ -223,7 +223,8 @@ class RoutePlanner:
 
     def plan_points(self, goal_id: int, pose: np.ndarray) -> np.ndarray:
         """The polyline (K, 2) of the plan :meth:`plan_to` would make from the pose (the
-        pose's position first), without making it."""
+        pose's position first, straightened as the robot would drive it), without
+        making it or forgetting any mark."""
         xy = np.asarray(pose[:2], dtype=np.float64)
         nodes = self.route(goal_id, xy)
         if nodes is None:
@@ -231,7 +232,7 @@ class RoutePlanner:
                 self.graph, self.nearest_reachable_node(xy, goal_id=goal_id), goal_id, exclude_stairs=self.cfg.exclude_stairs,
                 extra=self._coastal,
             )
-        return np.vstack([xy[None, :], path_points(self.graph, nodes)])
+        return self.plan(goal_id, nodes, pose).path
 
     def plan_length(self, goal_id: int, pose: np.ndarray) -> float:
         """Length (m) of the plan :meth:`plan_to` would make from the pose, without
@@ -424,8 +425,7 @@ class RoutePlanner:
         xy = np.asarray(pose[:2], dtype=np.float64)
         if nodes is None or nodes == plan.nodes:
             return False
-        pts = np.vstack([xy[None, :], path_points(self.graph, nodes)])
-        detour = float(np.hypot(*np.diff(pts, axis=0).T).sum())
+        detour = self.plan(plan.goal, nodes, pose).length_m
         if detour <= float(plan.cum[-1]) - plan.project(xy) + cfg.long_detour_m:
             return False
         if self._detour_from is None or t - self._detour_from > 3.0 * cfg.long_detour_wait_s:

@@ -160,3 +160,36 @@ def test_shortcut_config_is_checked() -> None:
     for name in ("shortcut_clearance_m", "shortcut_blind_slack_m"):
         with pytest.raises(InputError, match=f"navigator.{name}"):
             NavigatorConfig(**{name: -0.1})
+
+
+def test_the_plan_previewed_is_the_plan_driven() -> None:
+    """plan_points and plan_length (the relocalization's choice of a place to look from,
+    the mission's leg budget) give the straightened plan that set_goal then makes."""
+    nav = Navigator(zigzag(), walls=ROOM)
+    pose = np.array([1.0, 1.1, 0.0])
+    preview, length = nav.plan_points(12, pose), nav.plan_length(12, pose)
+    nav.set_goal(12, pose, 0.0)
+    np.testing.assert_array_equal(preview, nav.path)
+    assert length == pytest.approx(nav.plan.length_m) and length == pytest.approx(12.0)
+
+
+def test_an_obstacle_on_a_straight_stretch_far_from_every_graph_edge_marks_the_nearest() -> None:
+    """Nodes 2 m to either side of a straight line in turn (no coastal comparison): a box
+    on the line 0.9 m from the nearest edge blocks the plan, and the edge nearest it is
+    marked (without the straightened stretch nothing near the graph's edges blocks)."""
+    room = np.array([[0, 0, 14, 0], [14, 0, 14, 4], [14, 4, 0, 4], [0, 4, 0, 0]], float)
+    graph = NavGraph(
+        nodes=tuple(NavNode(id=i, x=1.0 + i, y=1.0 if i % 2 == 0 else 3.0) for i in range(13)),
+        edges=tuple(NavEdge(s0_id=i, s1_id=i + 1) for i in range(12)),
+    )
+    cfg = NavigatorConfig(coastal_weight=0.0)
+    nav = Navigator(graph, cfg, walls=room)
+    pose = np.array([5.0, 1.0, 0.0])
+    nav.set_goal(12, pose, 0.0)
+    np.testing.assert_allclose(nav.path, [[5.0, 1.0], [13.0, 1.0]])
+    box = np.array([[1.0, dy] for dy in (-0.05, 0.0, 0.05)])  # (6, 1) in the world, 1 m ahead
+    assert nav.route.mark_blocked(nav.plan, pose, box, 0.0, nav.surroundings)
+    assert set(nav.route.blocked) <= {(4, 5), (5, 6)} and len(nav.route.blocked) == 1
+    graph_way = Navigator(graph, NavigatorConfig(coastal_weight=0.0, shortcut_clearance_m=0.0), walls=room)
+    graph_way.set_goal(12, pose, 0.0)
+    assert not graph_way.route.mark_blocked(graph_way.plan, pose, box, 0.0, graph_way.surroundings)

@@ -287,10 +287,13 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 def cmd_demos_record(args: argparse.Namespace) -> int:
     from autonomy.common.files import output_path
+    from sim.envs.tasks import TASKS
     from sim.rl.demo_recording import record_demonstrations
     from sim.rl.splits import get_split
 
     get_split(args.split)
+    if args.task not in TASKS:
+        raise InputError(f"--task {args.task}: expected one of {', '.join(TASKS)}")
     if args.episodes < 1:
         raise InputError(f"--episodes: expected an integer >= 1, got {args.episodes}")
     if args.seed < 0:

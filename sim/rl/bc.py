@@ -161,6 +161,11 @@ class BCPolicy:
     def predict(self, obs: Mapping[str, np.ndarray]) -> np.ndarray:
         """Actions (N, 3) float32 for a batch of observations (N, ...) per key."""
         depth, vec = _inputs(obs, self._layout)
+        if vec.shape[1] != self.net.n_vec:
+            raise InputError(
+                f"policy {self.name}: the observations give {vec.shape[1]} features, the network was trained on "
+                f"{self.net.n_vec} (evaluate it with the observation settings it was trained with, {self.task})"
+            )
         with _one_thread(), torch.inference_mode():
             return self.net(_tensor(depth), torch.from_numpy(vec)).numpy().astype(np.float32)
 

@@ -296,6 +296,9 @@ def test_a_decision_level_task_records_its_own_observations_and_clones_them(tmp_
     from sim.rl.evaluate import policy_task, run_episode
     from sim.rl.policy_specs import make_policy
 
+    assert main(["demos", "record", "--task", "DepthNav-v9", "--out", str(tmp_path / "x.npz")]) == 2
+    assert "--task DepthNav-v9: expected one of" in err_line(capsys)
+
     out = tmp_path / "local.npz"
     assert main(["demos", "record", "--task", LOCALNAV, "--episodes", "3", "--seed", "1", "--max-steps", "12", "--out", str(out), "--no-progress"]) == 0
     assert f"steps of the classical stack on {LOCALNAV} train" in capsys.readouterr().out
@@ -318,6 +321,9 @@ def test_a_decision_level_task_records_its_own_observations_and_clones_them(tmp_
         env.close()
     with pytest.raises(InputError, match="--task DepthNav-v0: policy bc:.* trained on DepthNavLocal-v0"):
         policy_task(loaded, "DepthNav-v0")
+    fewer = {k: (v[:, :1] if k == "ranges" else v) for k, v in d.observations.items()}
+    with pytest.raises(InputError, match="features, the network was trained on"):
+        loaded.predict(fewer)
 
 
 @needs_gl

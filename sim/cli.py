@@ -56,8 +56,15 @@ def cmd_run(args: argparse.Namespace) -> int:
     out = output_path(args.out if args.out else Path("runs") / scn.name, "--out", directory=True)
     if args.rrd:
         output_path(args.rrd, "--rrd")
+    bag = {}
+    if args.bag:
+        if exp.kind != "mission":
+            raise InputError(f"--bag: {scn.name} is a {exp.kind!r} experiment; only mission scenarios are written as bags")
+        if not args.bag.endswith(".mcap"):
+            raise InputError(f"--bag {args.bag}: expected a file name ending in .mcap (a rosbag2 in MCAP storage)")
+        bag = {"bag": output_path(args.bag, "--bag"), "bag_depth": args.bag_depth}
     try:
-        report = exp.run(scn, out, seed=args.seed, rrd=args.rrd, spawn=args.spawn)
+        report = exp.run(scn, out, seed=args.seed, rrd=args.rrd, spawn=args.spawn, **bag)
     except RunCrashed as exc:
         print(f"depthnav: {scn.name}: {exc}", file=sys.stderr)
         return 1
@@ -466,6 +473,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_map_commands(sub, _Parser)
     add_snapshot_command(sub)
     _add_run_command(sub)
+    _add_replay_command(sub)
     _add_test_command(sub)
     c = sub.add_parser("config", help="print a scenario's resolved configuration (every default filled in) as TOML")
     c.add_argument("scenario", help="a scenario TOML file (or the name of one of the project's)")
@@ -513,7 +521,57 @@ def _add_run_command(sub) -> None:
     _add_scenario_overrides(c)
     c.add_argument("--rrd", help="write a rerun recording to this file")
     c.add_argument("--spawn", action="store_true", help="open the rerun viewer (needs a display)")
+    c.add_argument("--bag", help="also write the run as a rosbag2 in MCAP storage to this .mcap file (docs/rosbag.md)")
+    c.add_argument("--bag-depth", choices=("32FC1", "16UC1"), default="32FC1",
+                   help="the bag's depth images: float metres (exact, the default) or uint16 millimetres (half the size)")
     c.set_defaults(func=cmd_run)
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    from autonomy.common.files import output_path
+    from sim.rosbag.reader import BagTopics
+    from sim.rosbag.replay import parse_mount, parse_pose, replay_bag, summary
+
+    _seed_arg(args.seed)
+    start = parse_pose(args.start, "--start") if args.start else None
+    mount = parse_mount(args.mount) if args.mount else None
+    out = output_path(args.out if args.out else Path("runs") / f"replay-{Path(args.bag).stem}", "--out", directory=True)
+    if args.rrd:
+        output_path(args.rrd, "--rrd")
+    topics = BagTopics(
+        depth=args.depth_topic, camera_info=args.camera_info_topic, odom=args.odom_topic, truth=args.truth_topic,
+        base_frame=args.base_frame,
+    )
+    report = replay_bag(
+        args.bag, out, map_path=args.map, start=start, seed=args.seed, scenario=args.scenario, overrides=args.set or [],
+        topics=topics, mount=mount, rrd=args.rrd, progress=sys.stderr.isatty(),
+    )
+    print(summary(report))
+    print(f"wrote {out / 'report.json'}" + (" (interrupted)" if report["interrupted"] else ""))
+    return 130 if report["interrupted"] else 0
+
+
+def _add_replay_command(sub) -> None:
+    from sim.rosbag.reader import BagTopics
+
+    d = BagTopics()
+    c = sub.add_parser("replay", help="run the robot stack (FSPF, CGR, lost detection) on a ROS bag's depth and odometry (docs/rosbag.md)")
+    c.add_argument("bag", help="a rosbag2 (.mcap or .db3 file, or its directory) or a ROS 1 .bag")
+    c.add_argument("--map", help="the vector map (a file, or a shipped building's name; default: the walls in a depthnav bag)")
+    c.add_argument("--start", help="x,y,theta where the robot starts on the map (default: a depthnav bag's start, "
+                   "else the first ground truth, else unknown: the stack finds itself)")
+    c.add_argument("--seed", type=int, help="the stack's seed (default: a depthnav bag's run seed, else 0)")
+    c.add_argument("--scenario", help="take the stack's configuration from this scenario file (default: a depthnav bag's, else the defaults)")
+    c.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a stack key, e.g. localization.cgr.alpha1=0.2 (repeatable)")
+    c.add_argument("--out", help="output directory (default runs/replay-<bag name>)")
+    c.add_argument("--rrd", help="write a rerun recording to this file")
+    c.add_argument("--depth-topic", default=d.depth, help=f"depth images, 32FC1 or 16UC1 (default {d.depth})")
+    c.add_argument("--camera-info-topic", default=d.camera_info, help=f"the depth camera's CameraInfo (default {d.camera_info})")
+    c.add_argument("--odom-topic", default=d.odom, help=f"wheel odometry, nav_msgs/Odometry (default {d.odom})")
+    c.add_argument("--truth-topic", default=d.truth, help=f"ground truth poses, if any, for the error (default {d.truth})")
+    c.add_argument("--base-frame", default=d.base_frame, help=f"the robot's frame on the floor in tf (default {d.base_frame})")
+    c.add_argument("--mount", help="height,forward,lateral,pitch_deg of the camera on the robot (default: from tf)")
+    c.set_defaults(func=cmd_replay)
 
 
 def _add_test_command(sub) -> None:

@@ -79,6 +79,8 @@ def drive(run: Run, recorder: RunLogger | None, progress: bool | None, checkpoin
         start_leg(mission, scn.mission, plan.remaining_m, plan.nodes, 0.0, scn.navigator.cruise_speed_mps)
         # The first frame, so the navigator sees before it moves.
         run.out = run.stack.step(first.depth, None, 0.0, None if run.use_estimate else first.pose, localize=False)
+        if run.bag is not None:
+            run.bag.start(0.0, first.depth, first.pose, run.out)
         while run.frames < max_frames and not mission.done:
             if not tick(run, recorder):
                 break
@@ -146,6 +148,8 @@ def tick(run: Run, recorder: RunLogger | None) -> bool:
         frame.depth, frame.increment, frame.t, None if run.use_estimate else frame.pose,
         operator=lambda sensed: check_localization(run, frame, sensed), correspondences=heavy,
     )
+    if run.bag is not None:
+        run.bag.frame(frame.t, frame.depth, frame.increment, frame.pose, out)
     run.fspf_counts.append(fspf_counts(out))
     if out.frame_fault:
         run.rejected.append((frame.t, out.frame_fault))

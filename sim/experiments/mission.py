@@ -19,10 +19,12 @@ from sim.experiments.report_file import write_json
 from sim.scenario import Scenario
 
 
-def run(cfg: Scenario, out_dir: str | Path, *, seed: int | None = None, rrd=None, spawn: bool = False, progress=None) -> dict:
+def run(
+    cfg: Scenario, out_dir: str | Path, *, seed: int | None = None, rrd=None, spawn: bool = False, progress=None, bag=None, bag_depth: str = "32FC1",
+) -> dict:
     from sim.experiments.runner import run_scenario
 
-    return run_scenario(cfg, out_dir, seed=seed, rrd=rrd, spawn=spawn, progress=progress)
+    return run_scenario(cfg, out_dir, seed=seed, rrd=rrd, spawn=spawn, progress=progress, bag=bag, bag_depth=bag_depth)
 
 
 def trials(cfg: Scenario, n: int, seed: int) -> list[dict]:

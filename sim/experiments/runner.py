@@ -23,6 +23,7 @@ from sim.experiments.kinds import stopped
 from sim.experiments.loop import drive
 from sim.experiments.report import crash_report, finish_report, write_checkpoint, write_report
 from sim.experiments.site import build_run
+from sim.rosbag.run_bag import open_run_bag
 from sim.scenario import Scenario
 from sim.viz.run_log import RunLogger
 
@@ -35,8 +36,12 @@ def run_scenario(
     rrd: str | Path | None = None,
     spawn: bool = False,
     progress: bool | None = None,
+    bag: str | Path | None = None,
+    bag_depth: str = "32FC1",
 ) -> dict:
-    """Run a scenario headless and write its report; returns the report dict."""
+    """Run a scenario headless and write its report; returns the report dict. ``bag``:
+    also write the run as a rosbag2 in MCAP storage (:mod:`sim.rosbag.run_bag`), its
+    depth images as ``bag_depth`` (``32FC1`` metres, exact; ``16UC1`` millimetres)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     seed = scn.seed if seed is None else int(seed)
@@ -52,8 +57,14 @@ def run_scenario(
             rrd, spawn, scn=scn, seed=seed, vectormap=building.vectormap, navgraph=building.navgraph, furniture=run.furniture,
             waypoints_xy=path_points(building.navgraph, run.mission.waypoints),
         )
+    if bag is not None:
+        run.bag = open_run_bag(run, bag, bag_depth)
     wall_start = time.perf_counter()
-    interrupted = drive(run, recorder, progress, lambda: write_checkpoint(run, out, time.perf_counter() - wall_start))
+    try:
+        interrupted = drive(run, recorder, progress, lambda: write_checkpoint(run, out, time.perf_counter() - wall_start))
+    finally:
+        if run.bag is not None:
+            run.bag.close()
     wall = time.perf_counter() - wall_start
     try:
         if run.crash is None:

@@ -19,6 +19,7 @@ from sim.experiments.blackbox import FlightRecorder
 from sim.experiments.columns import Column
 from sim.experiments.driver_stack import DriverStack, load_factory
 from sim.experiments.waypoints import Mission, plan_mission
+from sim.rosbag.run_bag import RunBag
 from sim.scenario import Scenario
 from sim.simulator import blueprints
 from sim.simulator.actors import Furniture, Person
@@ -113,6 +114,8 @@ class Run:
     """That error."""
     rejected: list[tuple[float, str]] = field(default_factory=list)
     """(time, why) of each frame the stack did not use (dropped, invalid, stale)."""
+    bag: RunBag | None = None
+    """Writes the run as a ROS 2 bag (``depthnav run --bag``), when asked."""
     trace: list[str] = field(default_factory=list)
     """JSON lines of the ``report.trace_s`` window (:mod:`sim.experiments.trace`), kept
     as text: a window the length of a 4 km run is then a few hundred bytes a frame."""

@@ -22,7 +22,10 @@ scene's lines. The pixel **expects a wall** at the planar depth z of that hit wh
 between ``min_range + margin_m`` and ``max_range - margin_m`` (a pose a few decimetres
 off moves a wall across the range's ends), the ray does not meet the floor first, and it
 meets the wall less than ``max_incidence_rad`` from the wall's normal and at least
-``end_margin_m`` from a free end of its line (one no other line joins). Of those that
+``end_margin_m`` from a free end of its line (one no other line joins) or from a
+silhouette (a ray ``end_margin_m`` to either side at the wall's distance meets nothing,
+or something more than ``tol_m`` farther off the wall's line: a pillar's side seen
+edge-on, where a belief a decimetre or two off moves the pillar across the ray). Of those that
 returned a depth, a pixel **sees past** the wall when every valid depth within
 ``window_px`` of it in its row is farther than ``z + tol_m + tol_per_m2 z^2`` (a pose a
 little off moves a wall's end by a pixel or two; the Kinect's depth noise grows with
@@ -51,6 +54,8 @@ __all__ = ["MissingWallsConfig", "missing_walls"]
 BEARING_BINS = 512
 #: Lines whose end points lie this close continue one wall (:func:`_free_ends`).
 END_JOIN_M = 0.02
+#: A point this close to a line's extension lies on the same wall (:func:`_near_silhouette`).
+SAME_WALL_M = 0.05
 
 
 @dataclass(frozen=True)
@@ -75,8 +80,11 @@ class MissingWallsConfig:
     """Every valid depth within this many pixels in the row must be past the wall."""
     end_margin_m: float = 0.3
     """A ray that meets its line less than this from an end where no other line joins
-    (a wall's free end) expects nothing: a belief a few centimetres off moves such an
-    end across the rays beside it, and past it the camera sees the floor (0 = every ray)."""
+    (a wall's free end), or from a silhouette (a pillar's side, a corner seen edge-on),
+    expects nothing: a belief a few centimetres off moves such an edge across the rays
+    beside it, and past it the camera sees the floor (0 = every ray). A 0.5 m pillar 3.5 m
+    ahead then gives no evidence: seen from a belief 13 cm and 1.4 degrees off, 55 % of
+    its pixels saw past it, and the robot stopped to look round (a real floor)."""
     min_returned: int = 10
     """Frames with fewer pixels expecting a wall that returned carry no evidence."""
 
@@ -129,11 +137,14 @@ def _missing_kernel(depth, lines, px, py, pth, rot, trans, fx, fy, cx, cy, su, s
             ex = lines[bj, 2] - lines[bj, 0]
             ey = lines[bj, 3] - lines[bj, 1]
             L = math.sqrt(ex * ex + ey * ey)
-            if L <= 0.0 or abs(dx * ey - dy * ex) / L < cos_max:
+            cos_inc = abs(dx * ey - dy * ex) / L if L > 0.0 else 0.0
+            if cos_inc < cos_max:
                 continue  # grazing: the camera may drop it
             along = ((ox + t * dx - lines[bj, 0]) * ex + (oy + t * dy - lines[bj, 1]) * ey) / L
             if (free[bj, 0] and along < end_m) or (free[bj, 1] and along > L - end_m):
                 continue  # near the wall's end: a small pose error moves the end across the ray
+            if end_m > 0.0 and _near_silhouette(lines, offsets, ids, ox, oy, dx, dy, t, bj, end_m, tol_m):
+                continue  # beside a pillar's side or a corner seen edge-on: the same
             n_exp += 1
             far = z + tol_m + tol_q * z * z
             returned = False
@@ -150,6 +161,32 @@ def _missing_kernel(depth, lines, px, py, pth, rot, trans, fx, fy, cx, cy, su, s
                 if not short:
                     n_past += 1
     return n_exp, n_ret, n_past
+
+
+@numba.njit(cache=True)
+def _near_silhouette(lines, offsets, ids, ox, oy, dx, dy, t, bj, end_m, tol_m):  # pragma: no cover - numba
+    """Whether a ray that meets line ``bj`` at distance ``t`` lies within ``end_m`` of a
+    silhouette: one of the two rays ``end_m`` to either side of it at that distance
+    meets nothing, or meets something more than ``tol_m`` farther that does not lie on
+    ``bj``'s wall (within ``SAME_WALL_M`` of its line, extended: a wall the map draws in
+    pieces, seen obliquely). A pillar's sides and a corner seen edge-on are such edges
+    though no line ends there."""
+    ax, ay = lines[bj, 0], lines[bj, 1]
+    ex, ey = lines[bj, 2] - ax, lines[bj, 3] - ay
+    L = math.sqrt(ex * ex + ey * ey)
+    a = end_m / t
+    ca, sa = math.cos(a), math.sin(a)
+    for sgn in (-1.0, 1.0):
+        ddx = ca * dx - sgn * sa * dy
+        ddy = sgn * sa * dx + ca * dy
+        j, t2 = ray_hit_indexed(lines, offsets, ids, ox, oy, ddx, ddy)
+        if j < 0:
+            return True
+        if t2 > t + tol_m:
+            hx, hy = ox + t2 * ddx - ax, oy + t2 * ddy - ay
+            if abs(hx * ey - hy * ex) / L > SAME_WALL_M:
+                return True
+    return False
 
 
 @numba.njit(cache=True)

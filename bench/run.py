@@ -350,12 +350,13 @@ def print_table(results: dict[str, Result]) -> None:
             )
 
 
-GROUP_NAMES = ["maps", "localization", "sim", "planes", "env", "scans", "viz", "start", "open3d", "recovery"]
+GROUP_NAMES = ["maps", "localization", "sim", "planes", "env", "scans", "viz", "start", "open3d", "recovery", "bag"]
 
 
 def _groups() -> dict[str, Callable[[dict[str, Result], bool], None]]:
     """Every benchmark group; the subsystem ones live beside this file."""
     sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bag_bench import bench_bag
     from env_bench import bench_env
     from loc_bench import bench_scans
     from open3d_bench import bench_open3d
@@ -375,6 +376,7 @@ def _groups() -> dict[str, Callable[[dict[str, Result], bool], None]]:
         "start": bench_start,
         "open3d": bench_open3d,
         "recovery": bench_recovery,
+        "bag": bench_bag,
     }
 
 

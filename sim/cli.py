@@ -523,7 +523,7 @@ def _add_run_command(sub) -> None:
     c.add_argument("--spawn", action="store_true", help="open the rerun viewer (needs a display)")
     c.add_argument("--bag", help="also write the run as a rosbag2 in MCAP storage to this .mcap file (docs/rosbag.md)")
     c.add_argument("--bag-depth", choices=("32FC1", "16UC1"), default="32FC1",
-                   help="the bag's depth images: float metres (exact, the default) or uint16 millimetres (half the size)")
+                   help="the bag's depth images: float metres (exact, the default) or uint16 millimetres (rounded, as the Kinect's driver writes them)")
     c.set_defaults(func=cmd_run)
 
 

@@ -32,6 +32,9 @@ from sim.rosbag.run_bag import TOPICS
 #: the camera dropped: the stack is stepped once per missing frame without an image.
 DROPPED_GAP = 1.5
 
+#: The camera's transform is looked for in /tf_static, then in this many /tf messages.
+TF_MESSAGES = 300
+
 #: The camera mount's roll and yaw must be below this: the stack models a camera pitched
 #: down about the robot's y axis.
 MOUNT_TOLERANCE_RAD = math.radians(0.5)
@@ -92,6 +95,9 @@ class BagSource:
         self._check_type(topics.depth, m.IMAGE, "--depth-topic")
         self._check_type(topics.odom, m.ODOMETRY, "--odom-topic")
         self._check_type(topics.camera_info, m.CAMERA_INFO, "--camera-info-topic")
+        if topics.truth in self._conns:
+            self._check_type(topics.truth, m.POSE, "--truth-topic")
+        self._scan()
         self.run_info = self._run_info()
         self.intrinsics, self.optical_frame, self._size = self._camera()
         self.mount = mount if mount is not None else self._mount()
@@ -114,9 +120,35 @@ class BagSource:
             if c.msgtype != msgtype:
                 raise InputError(f"{self.path}: topic {topic} carries {c.msgtype}; expected {msgtype}")
 
-    def messages(self, topic: str) -> Iterator[tuple[int, object]]:
-        """(log time ns, decoded message) of ``topic`` in order (none if the bag lacks it)."""
-        return self._messages(topic)
+    def messages(self, topic: str) -> list[object]:
+        """The decoded messages of one of the topics read when the bag was opened (every
+        topic of :class:`BagTopics` but the images), in order; none if the bag lacks it."""
+        return self._read.get(topic, [])
+
+    def _scan(self) -> None:
+        """One pass over the bag for everything but the images' pixels: a bag's chunks mix
+        its topics, so each pass decompresses all of it (the images dominate)."""
+        tp = self.topics
+        small = [tp.camera_info, tp.odom, tp.truth, tp.tf_static, tp.tf, tp.run, tp.walls, tp.estimate]
+        self._read: dict[str, list] = {t: [] for t in small}
+        self._depth_headers: list[tuple[int, int, int, str]] = []
+        # The extras of a depthnav bag are read only with the types it writes them as.
+        extras = {tp.tf_static: m.TF, tp.tf: m.TF, tp.run: m.STRING, tp.walls: m.MARKERS, tp.estimate: m.POSE_COV}
+        conns = [c for t in (*small, tp.depth) for c in self._conns.get(t, []) if extras.get(t, c.msgtype) == c.msgtype]
+        for conn, t_log, raw in self.reader.messages(connections=conns):
+            topic = conn.topic
+            if topic in (tp.camera_info, tp.run, tp.walls) and self._read[topic]:
+                continue  # the first is all the replay reads
+            if topic == tp.tf and len(self._read[topic]) >= TF_MESSAGES:
+                continue
+            try:
+                msg = self.reader.deserialize(raw, conn.msgtype)
+            except Exception as exc:  # a corrupt message: named, in one line
+                raise InputError(f"{self.path}: topic {topic}: a message at {t_log} ns does not decode as {conn.msgtype} ({exc})") from None
+            if topic == tp.depth:
+                self._depth_headers.append((m.header_ns(msg.header), int(msg.width), int(msg.height), str(msg.encoding)))
+            else:
+                self._read[topic].append(msg)
 
     def _messages(self, topic: str) -> Iterator[tuple[int, object]]:
         conns = self._conns.get(topic, [])
@@ -141,7 +173,7 @@ class BagSource:
 
     # -- the parts --------------------------------------------------------------------------
     def _run_info(self) -> dict | None:
-        for _, msg in self._messages(self.topics.run):
+        for msg in self.messages(self.topics.run):
             try:
                 info = json.loads(msg.data)
             except (ValueError, AttributeError):
@@ -151,7 +183,7 @@ class BagSource:
 
     def _camera(self) -> tuple[CameraIntrinsics, str, tuple[int, int]]:
         tp = self.topics.camera_info
-        for _, msg in self._messages(tp):
+        for msg in self.messages(tp):
             k = np.asarray(_field(msg, "k", "K"), dtype=np.float64).reshape(-1)
             d = np.asarray(_field(msg, "d", "D"), dtype=np.float64).reshape(-1)
             w, h = int(msg.width), int(msg.height)
@@ -173,7 +205,7 @@ class BagSource:
         for topic in (self.topics.tf_static, self.topics.tf):
             if self.topics.base_frame in _ancestors(edges, optical):
                 break
-            for _, msg in self._messages(topic):
+            for msg in self.messages(topic):
                 for ts in msg.transforms:
                     child = str(ts.child_frame_id).lstrip("/")
                     if child not in edges:
@@ -202,7 +234,7 @@ class BagSource:
     def _odometry(self) -> tuple[np.ndarray, np.ndarray]:
         tp = self.topics.odom
         ts, poses = [], []
-        for _, msg in self._messages(tp):
+        for msg in self.messages(tp):
             p = msg.pose.pose
             ts.append(m.header_ns(msg.header))
             poses.append((p.position.x, p.position.y, m.quaternion_yaw(p.orientation)))
@@ -213,11 +245,8 @@ class BagSource:
 
     def _truth(self) -> tuple[np.ndarray, np.ndarray] | tuple[None, None]:
         tp = self.topics.truth
-        if tp not in self._conns:
-            return None, None
-        self._check_type(tp, m.POSE, "--truth-topic")
         ts, poses = [], []
-        for _, msg in self._messages(tp):
+        for msg in self.messages(tp):
             p = msg.pose
             ts.append(m.header_ns(msg.header))
             poses.append((p.position.x, p.position.y, m.quaternion_yaw(p.orientation)))
@@ -227,21 +256,19 @@ class BagSource:
         return np.asarray(ts, dtype=np.int64), np.asarray(poses, dtype=np.float64)
 
     def _depth_stamps(self) -> np.ndarray:
-        """The depth images' header stamps, checked in order (a first pass over headers only
-        would need to decode the images: their stamps are read here once)."""
+        """The depth images' header stamps, checked in order, with their size and encoding."""
         tp = self.topics.depth
-        ts = []
-        for _, msg in self._messages(tp):
-            ts.append(m.header_ns(msg.header))
-            if (int(msg.width), int(msg.height)) != self._size:
+        for _, w, h, enc in self._depth_headers:
+            if (w, h) != self._size:
                 raise InputError(
-                    f"{self.path}: topic {tp}: a {msg.width} x {msg.height} image, but {self.topics.camera_info} "
+                    f"{self.path}: topic {tp}: a {w} x {h} image, but {self.topics.camera_info} "
                     f"describes {self._size[0]} x {self._size[1]}"
                 )
-            if str(msg.encoding).upper() not in m.DEPTH_ENCODINGS:
-                raise InputError(f"{self.path}: topic {tp}: depth image encoding {msg.encoding!r}; expected 32FC1 (metres) or 16UC1 (millimetres)")
-        if not ts:
+            if enc.upper() not in m.DEPTH_ENCODINGS:
+                raise InputError(f"{self.path}: topic {tp}: depth image encoding {enc!r}; expected 32FC1 (metres) or 16UC1 (millimetres)")
+        if not self._depth_headers:
             raise InputError(f"{self.path}: topic {tp} has no message")
+        ts = [h[0] for h in self._depth_headers]
         self._ordered(tp, ts, self.path)
         return np.asarray(ts, dtype=np.int64)
 

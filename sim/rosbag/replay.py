@@ -68,7 +68,7 @@ def _map(src: BagSource, map_arg: str | None) -> tuple[VectorMap, Path | None]:
             p = ASSETS_DIR / f"{map_arg}.vectormap.txt"
         return load_vectormap(p), p
     walls = None
-    for _, msg in src.messages(src.topics.walls):
+    for msg in src.messages(src.topics.walls):
         pts = [(p.x, p.y) for mk in msg.markers if mk.ns == "walls" for p in mk.points]
         walls = np.asarray(pts, dtype=np.float64).reshape(-1, 4)
         break
@@ -95,7 +95,7 @@ def _start(src: BagSource, start: np.ndarray | None) -> tuple[np.ndarray | None,
 def _recorded_estimate(src: BagSource) -> dict[int, np.ndarray]:
     """The estimate the bag recorded at each stamp (a depthnav bag's ``/cgr/pose``)."""
     out = {}
-    for _, msg in src.messages(src.topics.estimate):
+    for msg in src.messages(src.topics.estimate):
         p = msg.pose.pose
         out[m.header_ns(msg.header)] = np.array([p.position.x, p.position.y, m.quaternion_yaw(p.orientation)])
     return out

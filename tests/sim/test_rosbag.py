@@ -236,3 +236,26 @@ def test_replay_with_another_topic_name_reads_it(tmp_path: Path) -> None:
     assert rep["stack_config_from"] == "the defaults"
     tum = np.loadtxt(tmp_path / "out" / "trajectory_estimate.tum")
     assert tum.shape == (4, 8) and tum[0, 0] == pytest.approx(1.0)
+
+
+def test_a_ros1_bag_reads_as_its_rosbag2_original(tmp_path: Path) -> None:
+    """ROS 1 bags (the CoBot era's) are read too: the same bag converted by rosbags
+    gives the same camera, mount and frames."""
+    from rosbags.convert import convert
+    from rosbags.typesys import Stores, get_typestore
+
+    src2 = _synthetic_bag(tmp_path / "b.mcap", skip_frames=(2,))
+    convert(
+        [src2], tmp_path / "b.bag", dst_storage="sqlite3", dst_version=None, compress=None, compress_mode="file",
+        default_typestore=get_typestore(Stores.ROS1_NOETIC), typestore=None, exclude_topics=(), include_topics=(),
+        exclude_msgtypes=(), include_msgtypes=(),
+    )
+    a, b = open_bag(src2), open_bag(tmp_path / "b.bag")
+    try:
+        assert a.intrinsics == b.intrinsics and a.mount == b.mount
+        for fa, fb in zip(a.frames(), b.frames(), strict=True):
+            assert fa.t == fb.t and np.array_equal(fa.odom, fb.odom)
+            assert (fa.depth is None and fb.depth is None) or np.array_equal(fa.depth, fb.depth)
+    finally:
+        a.close()
+        b.close()

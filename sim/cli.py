@@ -551,6 +551,21 @@ def cmd_replay(args: argparse.Namespace) -> int:
     return 130 if report["interrupted"] else 0
 
 
+def cmd_bag(args: argparse.Namespace) -> int:
+    from autonomy.common.files import output_path
+    from sim.experiments.drives import load_log
+    from sim.rosbag.run_bag import write_drive_bag
+    from sim.simulator.blueprints import load_blueprint
+
+    if not args.out.endswith(".mcap"):
+        raise InputError(f"--out {args.out}: expected a file name ending in .mcap (a rosbag2 in MCAP storage)")
+    log = load_log(args.log)
+    walls = load_blueprint(log.map_name).vectormap.segments
+    n = write_drive_bag(log, output_path(args.out, "--out"), walls)
+    print(f"wrote {args.out}: {n} frames, {log.duration_s:.1f} s, {log.distance_m:.0f} m of {log.map_name}")
+    return 0
+
+
 def _add_replay_command(sub) -> None:
     from sim.rosbag.reader import BagTopics
 
@@ -572,6 +587,10 @@ def _add_replay_command(sub) -> None:
     c.add_argument("--base-frame", default=d.base_frame, help=f"the robot's frame on the floor in tf (default {d.base_frame})")
     c.add_argument("--mount", help="height,forward,lateral,pitch_deg of the camera on the robot (default: from tf)")
     c.set_defaults(func=cmd_replay)
+    c = sub.add_parser("bag", help="write a recorded drive (the localization comparison's .log.npz) as a ROS 2 bag (docs/rosbag.md)")
+    c.add_argument("log", help="a recorded drive, <cache_dir>/<name>-<key>.log.npz")
+    c.add_argument("--out", required=True, help="the bag to write, FILE.mcap")
+    c.set_defaults(func=cmd_bag)
 
 
 def _add_test_command(sub) -> None:

@@ -94,13 +94,24 @@ class RunBag:
     def start(self, t: float, depth: np.ndarray | None, truth: np.ndarray, out) -> None:
         """The first frame (seen before anything moved): the static parts and the frame
         itself, with the stack's output ``out`` on it."""
+        self._static(t)
+        self.frame(t, depth, None, truth, out)
+
+    def _static(self, t: float) -> None:
         ns = m.stamp_ns(t)
         tp = self.topics
         self.bag.write(tp.run, ns, m.string(json.dumps(self.info, sort_keys=True)))
         self.bag.write(tp.tf_static, ns, m.tf_message(m.mount_transforms(ns, self.mount)))
         self.bag.write(tp.map, ns, m.wall_markers(ns, self.walls))
         self._started = True
-        self.frame(t, depth, None, truth, out)
+
+    def sensor_frame(self, t: float, depth: np.ndarray | None, increment: np.ndarray | None, truth: np.ndarray) -> None:
+        """A frame with no robot stack beside it (a recorded drive): the sensors and the truth."""
+        if not self._started:
+            self._static(t)
+        inc = np.zeros(3) if increment is None else np.asarray(increment, dtype=np.float64)
+        self.odom = compose_pose(self.odom, inc)
+        self._frame(m.stamp_ns(t), depth, inc, None, None, truth, None, None, ())
 
     def frame(self, t: float, depth: np.ndarray | None, increment: np.ndarray | None, truth: np.ndarray, out) -> None:
         """One frame of the loop: the simulator's ``depth`` (None: dropped), odometry
@@ -125,13 +136,14 @@ class RunBag:
             res = self.scan_cfg.resolution_rad
             b.write(tp.scan, ns, m.laser_scan(ns, ranges, float(scan_angles(self.scan_cfg)[0]), res, 0.0, self.scan_cfg.max_range_m, self.frame_dt))
         b.write(tp.odom, ns, m.odometry(ns, self.odom, inc / self.frame_dt))
-        est = np.asarray(estimate, dtype=np.float64)
-        b.write(tp.tf, ns, m.tf_message([
-            m.planar_transform(ns, m.MAP_FRAME, m.ODOM_FRAME, map_from_odom(est, self.odom)),
-            m.planar_transform(ns, m.ODOM_FRAME, m.BASE_FRAME, self.odom),
-        ]))
-        cov, std_th = spread if spread is not None else (None, 0.0)
-        b.write(tp.estimate, ns, m.pose_with_covariance(ns, est, np.zeros((2, 2)) if cov is None else cov, std_th))
+        odom_tf = m.planar_transform(ns, m.ODOM_FRAME, m.BASE_FRAME, self.odom)
+        if estimate is None:
+            b.write(tp.tf, ns, m.tf_message([odom_tf]))
+        else:
+            est = np.asarray(estimate, dtype=np.float64)
+            b.write(tp.tf, ns, m.tf_message([m.planar_transform(ns, m.MAP_FRAME, m.ODOM_FRAME, map_from_odom(est, self.odom)), odom_tf]))
+            cov, std_th = spread if spread is not None else (None, 0.0)
+            b.write(tp.estimate, ns, m.pose_with_covariance(ns, est, np.zeros((2, 2)) if cov is None else cov, std_th))
         b.write(tp.truth, ns, m.pose_stamped(ns, np.asarray(truth, dtype=np.float64)))
         if points is not None:
             b.write(tp.points, ns, m.point_cloud(ns, points))
@@ -183,3 +195,24 @@ def open_run_bag(run, path: str | Path, depth_encoding: str = "32FC1") -> RunBag
 def map_from_odom(estimate: np.ndarray, odom: np.ndarray) -> np.ndarray:
     """The map -> odom transform that puts the odometry's pose on the estimate."""
     return compose_pose(np.asarray(estimate, dtype=np.float64), relative_pose(np.asarray(odom, dtype=np.float64), np.zeros(3)))
+
+
+def write_drive_bag(log, path: str | Path, walls: np.ndarray) -> int:
+    """A recorded drive (:class:`sim.experiments.drives.DriveLog`, the localization
+    comparison's) as a bag: its depth frames (``16UC1``, the millimetres it stores),
+    the noise-free odometry it recorded (a replay adds none), the truth and the map's
+    ``walls``; returns the frames written."""
+    t = np.asarray(log.t, dtype=np.float64)
+    dt = float(np.median(np.diff(t))) if len(t) > 1 else 1.0 / 30.0
+    info = {
+        "drive": log.meta, "map": log.map_name, "start_pose": [float(v) for v in log.poses[0]], "start_known": True,
+        "frame_rate_hz": 1.0 / dt, "odometry": "noise-free (the recording's; the comparison's replays add 20 %)",
+    }
+    bag = RunBag(path, intrinsics=log.intrinsics, mount=log.mount, walls=walls, frame_dt=dt, run_info=info, depth_encoding="16UC1")
+    try:
+        for k in range(len(t)):
+            depth = np.asarray(log.depth_mm[k], dtype=np.float32) * np.float32(0.001)
+            bag.sensor_frame(float(t[k]), depth, None if k == 0 else log.increments[k], log.poses[k])
+    finally:
+        bag.close()
+    return len(t)

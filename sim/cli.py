@@ -530,7 +530,7 @@ def _add_run_command(sub) -> None:
 def cmd_replay(args: argparse.Namespace) -> int:
     from autonomy.common.files import output_path
     from sim.rosbag.reader import BagTopics
-    from sim.rosbag.replay import parse_mount, parse_pose, replay_bag, summary
+    from sim.rosbag.replay import parse_mount, parse_point, parse_pose, replay_bag, summary
 
     _seed_arg(args.seed)
     start = parse_pose(args.start, "--start") if args.start else None
@@ -542,9 +542,10 @@ def cmd_replay(args: argparse.Namespace) -> int:
         depth=args.depth_topic, camera_info=args.camera_info_topic, odom=args.odom_topic, truth=args.truth_topic,
         base_frame=args.base_frame,
     )
+    goal = parse_point(args.goal, "--goal") if args.goal else None
     report = replay_bag(
         args.bag, out, map_path=args.map, start=start, seed=args.seed, scenario=args.scenario, overrides=args.set or [],
-        topics=topics, mount=mount, rrd=args.rrd, progress=sys.stderr.isatty(),
+        topics=topics, mount=mount, rrd=args.rrd, progress=sys.stderr.isatty(), goal=goal, graph=args.graph,
     )
     print(summary(report))
     print(f"wrote {out / 'report.json'}" + (" (interrupted)" if report["interrupted"] else ""))
@@ -586,6 +587,9 @@ def _add_replay_command(sub) -> None:
     c.add_argument("--truth-topic", default=d.truth, help=f"ground truth poses, if any, for the error (default {d.truth})")
     c.add_argument("--base-frame", default=d.base_frame, help=f"the robot's frame on the floor in tf (default {d.base_frame})")
     c.add_argument("--mount", help="height,forward,lateral,pitch_deg of the camera on the robot (default: from tf)")
+    c.add_argument("--goal", help="x,y: the navigator also decides towards this place on each frame (not actuated; "
+                   "its commands go to commands.csv)")
+    c.add_argument("--graph", help="the navigation graph for --goal (default: one made from the map's walls)")
     c.set_defaults(func=cmd_replay)
     c = sub.add_parser("bag", help="write a recorded drive (the localization comparison's .log.npz) as a ROS 2 bag (docs/rosbag.md)")
     c.add_argument("log", help="a recorded drive, <cache_dir>/<name>-<key>.log.npz")

@@ -114,18 +114,34 @@ def replay_bag(
     mount=None,
     rrd: str | Path | None = None,
     progress: bool = False,
+    goal: np.ndarray | None = None,
+    graph: str | None = None,
 ) -> dict:
-    """Replay ``bag`` through the robot stack into ``out_dir``; returns the report."""
+    """Replay ``bag`` through the robot stack into ``out_dir``; returns the report.
+    ``goal`` (x, y): the navigator also decides, towards the graph node nearest it, on
+    each frame's estimate (nothing is actuated: its commands go to ``commands.csv``), on
+    ``graph`` (a navigation.json) or one made from the map's walls."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     src = open_bag(bag, topics, mount)
     try:
-        return _replay(src, out, map_path, start, seed, scenario, list(overrides or []), rrd, progress)
+        return _replay(src, out, map_path, start, seed, scenario, list(overrides or []), rrd, progress, goal, graph)
     finally:
         src.close()
 
 
-def _replay(src: BagSource, out: Path, map_arg, start, seed, scenario, overrides, rrd, progress) -> dict:
+def _navgraph(vm: VectorMap, map_file: Path | None, graph: str | None, cfg: StackConfig):
+    """The navigation graph for ``--goal``: a file, or one made from the walls."""
+    if graph:
+        from autonomy.maps.vectormap import load_navgraph
+
+        return load_navgraph(graph)
+    from sim.simulator.building import navgraph_from_walls
+
+    return navgraph_from_walls(vm, map_file, cfg.avoidance, quiet=True)
+
+
+def _replay(src: BagSource, out: Path, map_arg, start, seed, scenario, overrides, rrd, progress, goal=None, graph=None) -> dict:
     cfg, cfg_from = _stack_config(src, scenario, overrides)
     if not cfg.localization.enabled:
         raise InputError("replay: localization.enabled is false; the replay runs the localization")
@@ -134,11 +150,22 @@ def _replay(src: BagSource, out: Path, map_arg, start, seed, scenario, overrides
     info = src.run_info or {}
     run_seed = int(seed) if seed is not None else int(info.get("seed", 0))
     seeds = EpisodeSeeds.from_seed(run_seed)
-    stack = RobotStack(vm, None, cfg, rng=seeds.localization, fspf_seed=seeds.fspf_seed, map_path=map_file)
+    navgraph = None
+    if goal is not None:
+        if start_pose is None:
+            raise InputError("replay: --goal needs a known start (--start x,y,theta): the navigator plans from the estimate")
+        cfg = dataclasses.replace(cfg, navigate=True)
+        navgraph = _navgraph(vm, map_file, graph, cfg)
+    stack = RobotStack(vm, navgraph, cfg, rng=seeds.localization, fspf_seed=seeds.fspf_seed, map_path=map_file)
     if start_pose is None and not cfg.recovers:
         raise InputError("replay: an unknown start needs the recovery (recovery.enabled); give --start x,y,theta")
     stack.prepare_recovery()
     stack.reset(start_pose)
+    goal_node = None
+    commands: list[tuple] = []
+    if navgraph is not None:
+        goal_node = navgraph.nearest_node(float(goal[0]), float(goal[1]))
+        stack.set_goal(goal_node, float(src.frame_stamps()[0][0]) / 1e9, start_pose)
     recorded = _recorded_estimate(src)
     recorder = None
     if rrd:
@@ -163,6 +190,9 @@ def _replay(src: BagSource, out: Path, map_arg, start, seed, scenario, overrides
                 o = stack.step(f.depth, relative_pose(prev_odom, f.odom), f.t, None)
             prev_odom = f.odom
             frames += 1
+            if o.command is not None:
+                v = o.command.velocity
+                commands.append((f.t, float(v[0]), float(v[1]), float(v[2]), o.command.state))
             dropped += f.depth is None
             ns = int(round(f.t * 1e9))
             e = np.asarray(o.estimate, dtype=np.float64)
@@ -203,6 +233,11 @@ def _replay(src: BagSource, out: Path, map_arg, start, seed, scenario, overrides
         files["trajectory_truth"] = "trajectory_truth.tum"
     if rrd:
         files["rerun"] = str(rrd)
+    if goal_node is not None:
+        with open(out / "commands.csv", "w", encoding="utf-8") as fh:
+            fh.write("t,vx,vy,omega,state\n")
+            fh.writelines(f"{c[0]:.6f},{c[1]:.4f},{c[2]:.4f},{c[3]:.4f},{c[4]}\n" for c in commands)
+        files["commands"] = "commands.csv"
     duration = float(t[-1] - t[0]) if len(t) > 1 else 0.0
     events = list(o.events) if o is not None else []
     metrics: dict = {
@@ -217,6 +252,11 @@ def _replay(src: BagSource, out: Path, map_arg, start, seed, scenario, overrides
         "fspf_ms_mean": round(1000.0 * float(np.nanmean(timing["fspf"])), 3) if frames else None,
         "localization_ms_mean": round(1000.0 * float(np.nanmean(timing["localization"])), 3) if frames else None,
     }
+    if goal_node is not None:
+        states: dict[str, int] = {}
+        for c in commands:
+            states[c[4]] = states.get(c[4], 0) + 1
+        metrics.update({"goal_node": int(goal_node), "nav_states": states, "arrived": bool(commands and commands[-1][4] == "arrived")})
     if errors:
         e = np.asarray(errors)
         metrics.update({
@@ -267,6 +307,17 @@ def parse_pose(text: str, option: str) -> np.ndarray:
         v = []
     if len(v) != 3 or not all(math.isfinite(a) for a in v):
         raise InputError(f"{option} {text!r}: expected x,y,theta (metres, metres, radians), e.g. 1.0,2.5,0.0")
+    return np.asarray(v)
+
+
+def parse_point(text: str, option: str) -> np.ndarray:
+    """``x,y`` (metres) from the command line."""
+    try:
+        v = [float(s) for s in text.split(",")]
+    except ValueError:
+        v = []
+    if len(v) != 2 or not all(math.isfinite(a) for a in v):
+        raise InputError(f"{option} {text!r}: expected x,y in metres, e.g. 12.5,3.0")
     return np.asarray(v)
 
 

@@ -281,3 +281,19 @@ def test_a_recorded_drive_is_written_as_a_bag(tmp_path: Path, capsys) -> None:
     finally:
         src.close()
     assert main(["bag", str(path), "--out", str(tmp_path / "d.bag")]) == 2
+
+
+def test_replay_with_a_goal_records_the_navigators_commands(tmp_path: Path, capsys) -> None:
+    """``--goal``: the navigator decides on each frame's estimate, nothing actuated."""
+    bag = tmp_path / "run.mcap"
+    assert main([
+        "run", "scenarios/demo.toml", "--out", str(tmp_path / "run"), "--bag", str(bag), "--seed", "4",
+        "--set", "mission.max_duration_s=2", "--set", 'map.name="small_floor"',
+    ]) == 0
+    assert main(["replay", str(bag), "--out", str(tmp_path / "r"), "--map", "small_floor", "--goal", "3.9,6.9"]) == 0
+    rep = json.loads((tmp_path / "r" / "report.json").read_text())
+    cmds = np.genfromtxt(tmp_path / "r" / "commands.csv", delimiter=",", names=True, dtype=None, encoding="utf-8")
+    assert len(cmds) == rep["metrics"]["frames"] and sum(rep["metrics"]["nav_states"].values()) == len(cmds)
+    assert np.isfinite(cmds["vx"]).all()
+    assert main(["replay", str(bag), "--goal", "3.9"]) == 2
+    assert "--goal '3.9': expected x,y" in capsys.readouterr().err

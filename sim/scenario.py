@@ -167,15 +167,16 @@ class LocalizationConfig(StackLocalizationConfig):
     counts it in ``truth_resets_needed``. 0 = at once (the paper's protocol)."""
     start_known: bool = True
     """The robot starts knowing its pose (false: it relocalizes on the map first)."""
-    calibrated_motion: bool = True
-    """CGR's motion noise is the simulated odometry's own: ``cgr.alpha1`` its
-    ``rotation_noise``, ``cgr.alpha3`` its ``translation_noise`` and ``cgr.alpha2_rad_per_m``
-    its ``rotation_per_translation_rad_per_m``, as a robot's motion model is calibrated to
-    its wheels. The defaults of ``cgr`` are the original code's, for CoBot's wheels (5
+    calibrated_motion: bool = False
+    """True: CGR's motion noise is the simulated odometry's own (``cgr.alpha1`` its
+    ``rotation_noise``, ``cgr.alpha3`` its ``translation_noise``, ``cgr.alpha2_rad_per_m``
+    its ``rotation_per_translation_rad_per_m``), as a robot's motion model is calibrated
+    to its wheels. The defaults of ``cgr`` are the original code's, for CoBot's wheels (5
     degrees of heading a metre): on the simulated odometry, which turns the heading only
-    when the robot turns, the belief's spread then grew ten times faster than its error on
-    a straight drive without a wall in view, and the lost detection stopped the robot to
-    look round an atrium where it could see nothing. False: ``cgr``'s alphas as given."""
+    when the robot turns, the belief's spread grows ten times faster than its error on a
+    straight drive without a wall in view, and the lost detection's spread test stops the
+    robot to look round an atrium where it can see nothing. Off by default: with it, the
+    shipped 200 m long run scraped a wall (docs/results.md, "Real floors")."""
 
     def __post_init__(self) -> None:
         if not isinstance(self.calibrated_motion, bool):
@@ -194,6 +195,20 @@ class LocalizationConfig(StackLocalizationConfig):
             raise InputError("localization.recovered_error_m: expected a positive number no larger than reset_error_m")
         if not (math.isfinite(self.truth_reset_after_s) and self.truth_reset_after_s >= 0):
             raise InputError("localization.truth_reset_after_s: expected a number of seconds >= 0")
+
+
+def robot_localization(loc: LocalizationConfig, odometry: OdometryConfig) -> StackLocalizationConfig:
+    """The robot stack's localization section of a simulated robot: the simulation's own
+    keys (the truth's thresholds) left out, and CGR's motion noise the odometry's when
+    ``loc.calibrated_motion``."""
+    out = StackLocalizationConfig(**{f.name: getattr(loc, f.name) for f in dataclasses.fields(StackLocalizationConfig)})
+    if loc.calibrated_motion:
+        cgr = dataclasses.replace(
+            out.cgr, alpha1=odometry.rotation_noise, alpha2_rad_per_m=odometry.rotation_per_translation_rad_per_m,
+            alpha3=odometry.translation_noise,
+        )
+        out = dataclasses.replace(out, cgr=cgr)
+    return out
 
 
 @dataclass(frozen=True)
@@ -299,15 +314,7 @@ class Scenario:
         source for its intrinsics, mount and range), FSPF, localization (CGR's motion
         noise the odometry's, ``localization.calibrated_motion``), avoidance and the
         navigator."""
-        sim_loc = self.localization
-        # The robot side's own section: the simulation's keys (the truth's thresholds) stay here.
-        loc = StackLocalizationConfig(**{f.name: getattr(sim_loc, f.name) for f in dataclasses.fields(StackLocalizationConfig)})
-        if sim_loc.calibrated_motion:
-            o = self.odometry
-            cgr = dataclasses.replace(
-                loc.cgr, alpha1=o.rotation_noise, alpha2_rad_per_m=o.rotation_per_translation_rad_per_m, alpha3=o.translation_noise
-            )
-            loc = dataclasses.replace(loc, cgr=cgr)
+        loc = robot_localization(self.localization, self.odometry)
         return StackConfig(self.kinect.depth_camera(), self.fspf, loc, self.avoidance, self.navigator, recovery=self.recovery)
 
     def resolve(self, path: str) -> Path:

@@ -21,7 +21,7 @@ from autonomy.navigation.avoidance import AvoidanceConfig
 from autonomy.navigation.config import NavigatorConfig
 from autonomy.perception.fspf import FSPFConfig
 from autonomy.stack import StackConfig
-from sim.scenario import LocalizationConfig, load_scenario
+from sim.scenario import LocalizationConfig, load_scenario, robot_localization
 from sim.simulator import blueprints
 from sim.simulator.actors import Furniture, Person
 from sim.simulator.kinect import KinectConfig
@@ -207,6 +207,7 @@ class EnvConfig:
     """FSPF parameters for the full-size camera; eta_px is scaled to depth_shape."""
     localization: LocalizationConfig = field(default_factory=LocalizationConfig)
     """CGR localization (enabled by default); disabled: the estimate is dead reckoning.
+    ``calibrated_motion``: CGR's motion noise the odometry's, as in a scenario run.
     Above ``reset_error_m`` error the filter is re-initialised at the true pose at once
     (episodes are short; scenario runs wait ``truth_reset_after_s`` for the robot's own
     recovery) and ``info['loc_resets']`` counts it."""
@@ -300,7 +301,8 @@ class EnvConfig:
     def stack_config(self, kinect: KinectConfig, fspf: FSPFConfig) -> StackConfig:
         """The robot stack's configuration for the camera at the observation's size."""
         navigate = self.stack_policy or self.observe_ranges > 0 or self.observe_plan > 0
-        return StackConfig(kinect.depth_camera(), fspf, self.localization, self.avoidance, self.navigator, navigate=navigate)
+        loc = robot_localization(self.localization, self.odometry)
+        return StackConfig(kinect.depth_camera(), fspf, loc, self.avoidance, self.navigator, navigate=navigate)
 
     @property
     def action_scale(self) -> np.ndarray:

@@ -152,14 +152,16 @@ def test_a_generated_building_is_irregular_unless_asked_square(tmp_path: Path) -
     assert square.map.building_config().irregularity == Irregularity.none()
 
 
-def test_the_motion_model_is_the_odometrys_unless_told_otherwise() -> None:
-    """CGR's motion noise follows the simulated odometry (a calibrated robot); setting
-    CGR's alphas needs calibrated_motion = false, and then they are used as given."""
-    scn = load_scenario(SCENARIOS_DIR / "demo.toml", ["odometry.rotation_noise=0.07", "odometry.rotation_per_translation_rad_per_m=0.01"])
+def test_a_calibrated_motion_model_is_the_odometrys() -> None:
+    """calibrated_motion: CGR's motion noise follows the simulated odometry; CGR's alphas
+    cannot be set beside it. Off (the default): the alphas as given."""
+    on = ["localization.calibrated_motion=true", "odometry.rotation_noise=0.07", "odometry.rotation_per_translation_rad_per_m=0.01"]
+    scn = load_scenario(SCENARIOS_DIR / "demo.toml", on)
     cgr = scn.stack_config().localization.cgr
     assert (cgr.alpha1, cgr.alpha2_rad_per_m, cgr.alpha3) == (0.07, 0.01, scn.odometry.translation_noise)
     with pytest.raises(InputError, match="localization.cgr.alpha1 is set while localization.calibrated_motion = true"):
-        load_scenario(SCENARIOS_DIR / "demo.toml", ["localization.cgr.alpha1=0.2"])
-    own = load_scenario(SCENARIOS_DIR / "demo.toml", ["localization.calibrated_motion=false", "localization.cgr.alpha1=0.2"])
+        load_scenario(SCENARIOS_DIR / "demo.toml", ["localization.calibrated_motion=true", "localization.cgr.alpha1=0.2"])
+    own = load_scenario(SCENARIOS_DIR / "demo.toml", ["localization.cgr.alpha1=0.2"])
     assert own.stack_config().localization.cgr.alpha1 == 0.2
     assert own.stack_config().localization.cgr.alpha3 == CGRConfig().alpha3
+    assert load_scenario(SCENARIOS_DIR / "demo.toml").stack_config().localization.cgr == CGRConfig()

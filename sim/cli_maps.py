@@ -8,6 +8,7 @@ import math
 from pathlib import Path
 
 from autonomy.common.errors import InputError
+from sim.config import parse_floats
 
 
 def _map_arg(text: str) -> Path:
@@ -173,14 +174,7 @@ def cmd_map_render(args: argparse.Namespace) -> int:
 
 
 def _parse_pose(text: str) -> tuple[float, float, float]:
-    parts = text.split(",")
-    try:
-        vals = tuple(float(p) for p in parts)
-    except ValueError:
-        vals = ()
-    if len(vals) != 3 or not all(math.isfinite(v) for v in vals):
-        raise InputError(f"--pose {text!r}: expected X,Y,THETA (metres, metres, radians), e.g. 2.0,1.5,0.0")
-    return vals  # type: ignore[return-value]
+    return parse_floats(text, "--pose", "X,Y,THETA (metres, metres, radians)", "2.0,1.5,0.0")  # type: ignore[return-value]
 
 
 def cmd_snapshot(args: argparse.Namespace) -> int:

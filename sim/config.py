@@ -225,3 +225,17 @@ def to_toml(data: dict, prefix: str = "") -> str:
             lines.append(f"{k} = {_toml_value(v, path)}")
     head = "\n".join(lines) + ("\n" if lines else "")
     return head + "".join(later)
+
+
+def parse_floats(text: str, option: str, names: str, example: str) -> tuple[float, ...]:
+    """A command-line list of finite numbers, as many as the comma-separated names before
+    the first space of ``names`` (``"x,y,theta (metres, radians)"``: three): one InputError
+    naming ``option``, the expected ``names`` and an ``example`` otherwise."""
+    want = len(names.split(" ", 1)[0].split(","))
+    try:
+        vals = tuple(float(p) for p in text.split(","))
+    except ValueError:
+        vals = ()
+    if len(vals) != want or not all(math.isfinite(v) for v in vals):
+        raise InputError(f"{option} {text!r}: expected {names}, e.g. {example}")
+    return vals

@@ -31,7 +31,7 @@ from autonomy.common.geometry import relative_pose, wrap_angle
 from autonomy.maps.vectormap import VectorMap, load_vectormap
 from autonomy.perception.camera import DepthCamera
 from autonomy.stack import RobotStack, StackConfig
-from sim.config import apply_overrides, from_dict, to_dict
+from sim.config import apply_overrides, from_dict, parse_floats, to_dict
 from sim.experiments.report import write_report, write_tum
 from sim.rosbag import messages as m
 from sim.rosbag.reader import DEFAULT_TOPICS, BagSource, BagTopics, open_bag
@@ -301,34 +301,19 @@ def summary(report: dict) -> str:
 
 def parse_pose(text: str, option: str) -> np.ndarray:
     """``x,y,theta`` (metres, radians) from the command line."""
-    try:
-        v = [float(s) for s in text.split(",")]
-    except ValueError:
-        v = []
-    if len(v) != 3 or not all(math.isfinite(a) for a in v):
-        raise InputError(f"{option} {text!r}: expected x,y,theta (metres, metres, radians), e.g. 1.0,2.5,0.0")
-    return np.asarray(v)
+    return np.asarray(parse_floats(text, option, "x,y,theta (metres, metres, radians)", "1.0,2.5,0.0"))
 
 
 def parse_point(text: str, option: str) -> np.ndarray:
     """``x,y`` (metres) from the command line."""
-    try:
-        v = [float(s) for s in text.split(",")]
-    except ValueError:
-        v = []
-    if len(v) != 2 or not all(math.isfinite(a) for a in v):
-        raise InputError(f"{option} {text!r}: expected x,y in metres, e.g. 12.5,3.0")
-    return np.asarray(v)
+    return np.asarray(parse_floats(text, option, "x,y in metres", "12.5,3.0"))
 
 
 def parse_mount(text: str):
     """``height,forward,lateral,pitch_deg`` from the command line, as a camera mount."""
     from autonomy.perception.camera import CameraMount
 
-    try:
-        v = [float(s) for s in text.split(",")]
-    except ValueError:
-        v = []
-    if len(v) != 4 or not all(math.isfinite(a) for a in v) or v[0] <= 0:
-        raise InputError(f"--mount {text!r}: expected height,forward,lateral,pitch_deg (metres, degrees down), e.g. 0.7,0.22,0,17")
-    return CameraMount(height_m=v[0], forward_m=v[1], lateral_m=v[2], pitch_down_rad=math.radians(v[3]))
+    h, f, lat, pitch = parse_floats(text, "--mount", "height,forward,lateral,pitch_deg (metres, degrees down)", "0.7,0.22,0,17")
+    if h <= 0:
+        raise InputError(f"--mount {text!r}: the height must be above the floor (> 0)")
+    return CameraMount(height_m=h, forward_m=f, lateral_m=lat, pitch_down_rad=math.radians(pitch))

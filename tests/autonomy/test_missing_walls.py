@@ -69,30 +69,24 @@ def reference(depth, lines, pose, cfg=CFG, silhouettes=True):
             r = rays[v, u]
             hn = math.hypot(r[0], r[1])
             d = np.array([c * r[0] - s * r[1], s * r[0] + c * r[1]]) / hn
-            a = lines[:, :2] - (ox, oy)
             e = lines[:, 2:] - lines[:, :2]
-            den = d[0] * e[:, 1] - d[1] * e[:, 0]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                t = (a[:, 0] * e[:, 1] - a[:, 1] * e[:, 0]) / den
-                uu = (a[:, 0] * d[1] - a[:, 1] * d[0]) / den
-            ok = (den != 0) & (t >= 0) & (uu >= 0) & (uu <= 1)
-            if not ok.any():
+            tj, j, uj = _ray_hits(lines, np.array([ox, oy]), d)
+            if j < 0:
                 continue
-            j = np.flatnonzero(ok)[np.argmin(t[ok])]
-            z = t[j] / hn
+            z = tj / hn
             if not (CAM.min_range_m + cfg.margin_m <= z <= CAM.max_range_m - cfg.margin_m) or to_floor[v, u] < z:
                 continue
             cos_inc = abs(d[0] * e[j, 1] - d[1] * e[j, 0]) / np.hypot(*e[j])
             if cos_inc < math.cos(cfg.max_incidence_rad):
                 continue
-            along = uu[j] * np.hypot(*e[j])
+            along = uj * np.hypot(*e[j])
             ends = lines[:, [[0, 1], [2, 3]]].reshape(-1, 2)  # 2 end points per line
             near = np.hypot(*(ends[None, :, :] - lines[j, [[0, 1], [2, 3]]][:, None, :]).transpose(2, 0, 1)) <= END_JOIN_M
             near[:, [2 * j, 2 * j + 1]] = False
             free0, free1 = not near[0].any(), not near[1].any()
             if (free0 and along < cfg.end_margin_m) or (free1 and along > np.hypot(*e[j]) - cfg.end_margin_m):
                 continue
-            if silhouettes and cfg.end_margin_m > 0 and _beside_silhouette(lines, (ox, oy), d, t[j], lines[j], cfg):
+            if silhouettes and cfg.end_margin_m > 0 and _beside_silhouette(lines, (ox, oy), d, tj, lines[j], cfg):
                 continue
             n_exp += 1
             row = slice(max(0, u - cfg.window_px), u + cfg.window_px + 1)
@@ -103,8 +97,9 @@ def reference(depth, lines, pose, cfg=CFG, silhouettes=True):
     return n_exp, n_ret, n_past
 
 
-def _first_hit(lines, o, d) -> float:
-    """Distance to the first line along the ray from ``o`` in direction ``d`` (inf: none)."""
+def _ray_hits(lines, o, d) -> tuple[float, int, float]:
+    """The first line along the ray from ``o`` in direction ``d``: its distance, index and
+    where along it (0-1) the ray meets it; (inf, -1, nan) for none."""
     a = lines[:, :2] - o
     e = lines[:, 2:] - lines[:, :2]
     den = d[0] * e[:, 1] - d[1] * e[:, 0]
@@ -112,7 +107,15 @@ def _first_hit(lines, o, d) -> float:
         t = (a[:, 0] * e[:, 1] - a[:, 1] * e[:, 0]) / den
         uu = (a[:, 0] * d[1] - a[:, 1] * d[0]) / den
     ok = (den != 0) & (t >= 0) & (uu >= 0) & (uu <= 1)
-    return float(t[ok].min()) if ok.any() else math.inf
+    if not ok.any():
+        return math.inf, -1, math.nan
+    j = int(np.flatnonzero(ok)[np.argmin(t[ok])])
+    return float(t[j]), j, float(uu[j])
+
+
+def _first_hit(lines, o, d) -> float:
+    """Distance to the first line along the ray from ``o`` in direction ``d`` (inf: none)."""
+    return _ray_hits(lines, o, d)[0]
 
 
 def _beside_silhouette(lines, o, d, t, line, cfg) -> bool:

@@ -165,3 +165,16 @@ def test_a_calibrated_motion_model_is_the_odometrys() -> None:
     assert own.stack_config().localization.cgr.alpha1 == 0.2
     assert own.stack_config().localization.cgr.alpha3 == CGRConfig().alpha3
     assert load_scenario(SCENARIOS_DIR / "demo.toml").stack_config().localization.cgr == CGRConfig()
+
+
+@given(st.lists(st.floats(allow_nan=False, allow_infinity=False, width=32), min_size=1, max_size=5))
+def test_parse_floats_reads_what_it_is_given_and_counts(values: list[float]) -> None:
+    """Command-line number lists: the values back, or one line naming the option."""
+    from sim.config import parse_floats
+
+    text = ",".join(repr(v) for v in values)
+    if len(values) == 3:
+        assert parse_floats(text, "--pose", "x,y,theta (metres, radians)", "1,2,0") == tuple(values)
+    else:
+        with pytest.raises(InputError, match=r"^--pose .*: expected x,y,theta \(metres, radians\), e.g. 1,2,0$"):
+            parse_floats(text, "--pose", "x,y,theta (metres, radians)", "1,2,0")

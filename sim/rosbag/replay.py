@@ -52,7 +52,8 @@ def _stack_config(src: BagSource, scenario: str | None, overrides: list[str]) ->
         where = f"the bag's {src.topics.run}" if data is not None else "the defaults"
         data = apply_overrides(dict(data or {}), overrides)
         data.pop("camera", None)
-        cfg = from_dict(StackConfig, data, source=f"{src.path}: {where}")
+        source = f"{src.path}: {where}" + (" with --set" if overrides else "")
+        cfg = from_dict(StackConfig, data, source=source)
     old = cfg.camera
     cam = DepthCamera(src.intrinsics, src.mount, old.min_range_m, old.max_range_m)
     return dataclasses.replace(cfg, camera=cam, navigate=False), where

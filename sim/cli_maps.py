@@ -174,7 +174,7 @@ def cmd_map_render(args: argparse.Namespace) -> int:
 
 
 def _parse_pose(text: str) -> tuple[float, float, float]:
-    return parse_floats(text, "--pose", "X,Y,THETA (metres, metres, radians)", "2.0,1.5,0.0")  # type: ignore[return-value]
+    return parse_floats(text, "--pose", 3, "X,Y,THETA (metres, metres, radians)", "2.0,1.5,0.0")  # type: ignore[return-value]
 
 
 def cmd_snapshot(args: argparse.Namespace) -> int:

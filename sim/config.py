@@ -227,15 +227,13 @@ def to_toml(data: dict, prefix: str = "") -> str:
     return head + "".join(later)
 
 
-def parse_floats(text: str, option: str, names: str, example: str) -> tuple[float, ...]:
-    """A command-line list of finite numbers, as many as the comma-separated names before
-    the first space of ``names`` (``"x,y,theta (metres, radians)"``: three): one InputError
-    naming ``option``, the expected ``names`` and an ``example`` otherwise."""
-    want = len(names.split(" ", 1)[0].split(","))
+def parse_floats(text: str, option: str, count: int, names: str, example: str) -> tuple[float, ...]:
+    """A command-line list of ``count`` finite numbers separated by commas; otherwise one
+    InputError naming ``option``, what it expects (``names``) and an ``example``."""
     try:
         vals = tuple(float(p) for p in text.split(","))
     except ValueError:
         vals = ()
-    if len(vals) != want or not all(math.isfinite(v) for v in vals):
+    if len(vals) != count or not all(math.isfinite(v) for v in vals):
         raise InputError(f"{option} {text!r}: expected {names}, e.g. {example}")
     return vals

@@ -302,19 +302,19 @@ def summary(report: dict) -> str:
 
 def parse_pose(text: str, option: str) -> np.ndarray:
     """``x,y,theta`` (metres, radians) from the command line."""
-    return np.asarray(parse_floats(text, option, "x,y,theta (metres, metres, radians)", "1.0,2.5,0.0"))
+    return np.asarray(parse_floats(text, option, 3, "x,y,theta (metres, metres, radians)", "1.0,2.5,0.0"))
 
 
 def parse_point(text: str, option: str) -> np.ndarray:
     """``x,y`` (metres) from the command line."""
-    return np.asarray(parse_floats(text, option, "x,y in metres", "12.5,3.0"))
+    return np.asarray(parse_floats(text, option, 2, "x,y in metres", "12.5,3.0"))
 
 
 def parse_mount(text: str):
     """``height,forward,lateral,pitch_deg`` from the command line, as a camera mount."""
     from autonomy.perception.camera import CameraMount
 
-    h, f, lat, pitch = parse_floats(text, "--mount", "height,forward,lateral,pitch_deg (metres, degrees down)", "0.7,0.22,0,17")
+    h, f, lat, pitch = parse_floats(text, "--mount", 4, "height,forward,lateral,pitch_deg (metres, degrees down)", "0.7,0.22,0,17")
     if h <= 0:
         raise InputError(f"--mount {text!r}: the height must be above the floor (> 0)")
     return CameraMount(height_m=h, forward_m=f, lateral_m=lat, pitch_down_rad=math.radians(pitch))

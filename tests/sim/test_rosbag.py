@@ -161,6 +161,11 @@ def test_cli_errors_are_one_line(tmp_path: Path, capsys) -> None:
     assert "missing.mcap: no such bag" in capsys.readouterr().err
     assert main(["replay", str(_synthetic_bag(tmp_path / "b.mcap")), "--start", "1,2"]) == 2
     assert "--start '1,2': expected x,y,theta" in capsys.readouterr().err
+    for bad, says in (("0.7,0.2,0", "expected height,forward,lateral,pitch_deg"), ("0.7,nan,0,17", "expected height"),
+                      ("0,0.2,0,17", "the height must be above the floor")):
+        assert main(["replay", str(tmp_path / "b.mcap"), "--mount", bad]) == 2
+        err = capsys.readouterr().err
+        assert f"--mount '{bad}': {says}" in err and "Traceback" not in err, err
     assert main(["run", "scenarios/demo.toml", "--bag", str(tmp_path / "run.bag")]) == 2
     assert "expected a file name ending in .mcap" in capsys.readouterr().err
 

@@ -174,7 +174,7 @@ def test_parse_floats_reads_what_it_is_given_and_counts(values: list[float]) -> 
 
     text = ",".join(repr(v) for v in values)
     if len(values) == 3:
-        assert parse_floats(text, "--pose", "x,y,theta (metres, radians)", "1,2,0") == tuple(values)
+        assert parse_floats(text, "--pose", 3, "x,y,theta (metres, radians)", "1,2,0") == tuple(values)
     else:
         with pytest.raises(InputError, match=r"^--pose .*: expected x,y,theta \(metres, radians\), e.g. 1,2,0$"):
-            parse_floats(text, "--pose", "x,y,theta (metres, radians)", "1,2,0")
+            parse_floats(text, "--pose", 3, "x,y,theta (metres, radians)", "1,2,0")
